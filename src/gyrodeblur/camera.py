@@ -1,0 +1,91 @@
+"""Pinhole camera intrinsics (pixels, OpenCV convention)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["Camera"]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole intrinsics in pixels for an image of ``width`` x ``height``.
+
+    Pixel centres are at integer coordinates (OpenCV): the top-left pixel's centre is
+    ``(0, 0)`` and the exact image centre is ``((width - 1) / 2, (height - 1) / 2)``.
+    The camera frame is x right, y down, z forward; no lens distortion is modelled.
+
+    Attributes
+    ----------
+    fx, fy : float
+        Focal lengths in pixels.
+    cx, cy : float
+        Principal point in pixels.
+    width, height : int
+        Image size the intrinsics are valid for.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self):
+        for name in ("fx", "fy", "cx", "cy"):
+            v = getattr(self, name)
+            if not np.isfinite(v):
+                raise InputError(f"camera.{name}", f"must be a finite number, got {v!r}")
+        if self.fx <= 0 or self.fy <= 0:
+            raise InputError("camera", f"focal lengths must be positive (fx={self.fx}, fy={self.fy})")
+        if int(self.width) < 2 or int(self.height) < 2:
+            raise InputError("camera", f"image size {self.width}x{self.height} is too small")
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+
+    @property
+    def K(self) -> np.ndarray:
+        """Intrinsic matrix (3x3, float64)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def K_inv(self) -> np.ndarray:
+        """Inverse intrinsic matrix (3x3, float64)."""
+        return np.array([[1.0 / self.fx, 0.0, -self.cx / self.fx],
+                         [0.0, 1.0 / self.fy, -self.cy / self.fy],
+                         [0.0, 0.0, 1.0]])
+
+    @classmethod
+    def centred(cls, width: int, height: int, fx: float, fy: float | None = None) -> "Camera":
+        """Intrinsics with the principal point at the exact image centre."""
+        return cls(fx, fx if fy is None else fy, (width - 1) / 2, (height - 1) / 2, width, height)
+
+    def scaled_to(self, width: int, height: int, *, source: str | None = None,
+                  tolerance: float = 0.01) -> "Camera":
+        """The same camera for an image resized to ``width`` x ``height``.
+
+        Pixel edges scale, centres follow: ``c' = s (c + 0.5) - 0.5``, ``f' = s f``.
+
+        Raises
+        ------
+        InputError
+            If the aspect ratio differs by more than ``tolerance`` (relative), naming
+            ``source`` (the photo).
+        """
+        if (width, height) == (self.width, self.height):
+            return self
+        sx, sy = width / self.width, height / self.height
+        if abs(sx / sy - 1) > tolerance:
+            raise InputError(source, f"photo is {width}x{height} but the capture's camera is "
+                                     f"{self.width}x{self.height}: the aspect ratio differs")
+        return Camera(self.fx * sx, self.fy * sy, sx * (self.cx + 0.5) - 0.5,
+                      sy * (self.cy + 0.5) - 0.5, width, height)
+
+    def with_focal_scale(self, scale: float) -> "Camera":
+        """Focal lengths multiplied by ``scale`` (principal point unchanged)."""
+        return replace(self, fx=self.fx * scale, fy=self.fy * scale)

@@ -1,0 +1,316 @@
+"""The capture description: when the photo was exposed, by which camera, with which gyro log.
+
+JSON schema (stable; other tools write it)::
+
+    {
+      "exposure_start": 1012.345678,   # s, camera clock: the first row starts exposing
+      "exposure_time": 0.030,          # s each row integrates light
+      "readout_time": 0.030,           # s from the first row's start to the last row's
+                                       # start (rolling shutter; 0 = global shutter)
+      "camera": {"fx": 819.2, "fy": 819.2, "cx": 511.5, "cy": 381.5,
+                 "width": 1024, "height": 764},          # pixels, OpenCV convention
+      "gyro": {"path": "gyro.gcsv",    # relative to the JSON file
+               "format": "gcsv",       # gcsv | csv | android
+               "orientation": "XYZ",   # log axes -> camera axes (letters or 3x3 matrix)
+               "time_offset": 0.0}     # s: camera_time = gyro_time + time_offset
+    }
+
+Optional keys in ``gyro``: ``bias`` (``[bx, by, bz]`` rad/s in the camera frame, or
+``"auto"``), ``max_gap`` (s, default 0.05) and, for ``csv``, ``time_unit``, ``rate_unit``,
+``time_column``, ``rate_columns``. Row ``y`` starts exposing at
+``exposure_start + readout_time * y / height``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+
+from .axes import axes_to_letters, parse_axes
+from .camera import Camera
+from .errors import InputError
+from .gyrolog import GyroLog, check_coverage, read_gyro_log
+from .orientation import Orientation
+
+__all__ = ["Capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"]
+
+CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
+#: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
+BIAS_GUARD = 0.05
+
+
+@dataclass(frozen=True)
+class Capture:
+    """Everything needed to turn a gyro log into the PSFs of one photo.
+
+    Attributes
+    ----------
+    exposure_start : float
+        Camera-clock seconds at which row 0 starts exposing; the reference time of the
+        orientation (restored photos are referenced to it).
+    exposure_time : float
+        Seconds each row integrates light (> 0).
+    readout_time : float
+        Seconds between the first and the last row's start (>= 0; 0 = global shutter).
+    camera : Camera
+        Intrinsics in pixels.
+    log : GyroLog
+        The gyro samples on the gyro clock, in the log's axes.
+    axes : ndarray (3, 3)
+        Proper rotation with ``w_camera = axes @ w_log``.
+    time_offset : float
+        Seconds: ``camera_time = gyro_time + time_offset``.
+    bias : ndarray (3,)
+        Gyro bias in rad/s, camera frame, subtracted from every sample.
+    gyro_spec : dict
+        The JSON ``gyro`` block as given (path, format, csv options), for saving.
+    source : str or None
+        The JSON file, for messages.
+    max_gap : float
+        Largest allowed gap between gyro samples inside the exposure (s).
+    """
+
+    exposure_start: float
+    exposure_time: float
+    readout_time: float
+    camera: Camera
+    log: GyroLog
+    axes: np.ndarray = field(default_factory=lambda: np.eye(3))
+    time_offset: float = 0.0
+    bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gyro_spec: dict = field(default_factory=dict)
+    source: str | None = None
+    max_gap: float = 0.05
+
+    def __post_init__(self):
+        src = self.source
+        for name in ("exposure_start", "exposure_time", "readout_time", "time_offset"):
+            v = float(getattr(self, name))
+            if not np.isfinite(v):
+                raise InputError(src, f"{name} must be a finite number")
+            object.__setattr__(self, name, v)
+        if self.exposure_time <= 0:
+            raise InputError(src, f"exposure_time must be positive, got {self.exposure_time}")
+        if self.readout_time < 0:
+            raise InputError(src, f"readout_time must be >= 0, got {self.readout_time}")
+        object.__setattr__(self, "axes", parse_axes(self.axes, source=src))
+        bias = np.asarray(self.bias, dtype=np.float64).reshape(-1)
+        if bias.shape != (3,) or not np.all(np.isfinite(bias)):
+            raise InputError(src, "gyro bias must be three finite numbers (rad/s)")
+        object.__setattr__(self, "bias", bias)
+        t0, t1 = self.window
+        check_coverage(self.log, t0 - self.time_offset, t1 - self.time_offset,
+                       max_gap=self.max_gap)
+
+    # -- timing -------------------------------------------------------------------------
+    @property
+    def window(self) -> tuple[float, float]:
+        """Camera-clock seconds from the first row's start to the last row's end."""
+        return (self.exposure_start,
+                self.exposure_start + self.readout_time + self.exposure_time)
+
+    def row_start(self, y) -> np.ndarray:
+        """Camera-clock start time (s) of row ``y`` (float rows allowed)."""
+        return self.exposure_start + self.readout_time * np.asarray(y, np.float64) / self.camera.height
+
+    # -- motion -------------------------------------------------------------------------
+    def camera_rates(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, w)``: camera-clock seconds and bias-free rad/s in the camera frame."""
+        return self.log.t + self.time_offset, self.log.omega @ self.axes.T - self.bias
+
+    @cached_property
+    def orientation(self) -> Orientation:
+        """Camera orientation relative to ``exposure_start``."""
+        t, w = self.camera_rates()
+        return Orientation(t, w, self.exposure_start)
+
+    # -- variants -----------------------------------------------------------------------
+    def replace(self, **changes) -> "Capture":
+        """A copy with fields changed (validated again)."""
+        return replace(self, **changes)
+
+    def scaled_to(self, width: int, height: int, *, source: str | None = None) -> "Capture":
+        """The capture for a photo of ``width`` x ``height`` (same aspect ratio)."""
+        cam = self.camera.scaled_to(width, height, source=source)
+        return self if cam is self.camera else replace(self, camera=cam)
+
+    # -- files --------------------------------------------------------------------------
+    def to_dict(self, gyro_path: str | None = None) -> dict:
+        """The JSON description (``gyro_path`` overrides the stored relative path)."""
+        c = self.camera
+        gyro = dict(self.gyro_spec)
+        if gyro_path is not None:
+            gyro["path"] = gyro_path
+        letters = axes_to_letters(self.axes)
+        gyro["orientation"] = letters if letters else np.round(self.axes, 12).tolist()
+        gyro["time_offset"] = self.time_offset
+        if np.any(self.bias != 0):
+            gyro["bias"] = self.bias.tolist()
+        else:
+            gyro.pop("bias", None)
+        return {
+            "exposure_start": self.exposure_start,
+            "exposure_time": self.exposure_time,
+            "readout_time": self.readout_time,
+            "camera": {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy,
+                       "width": c.width, "height": c.height},
+            "gyro": gyro,
+        }
+
+    def save(self, path: str | os.PathLike, gyro_path: str | None = None) -> None:
+        """Write the JSON description to ``path`` (``gyro.path`` kept relative)."""
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump(self.to_dict(gyro_path), fh, indent=2)
+            fh.write("\n")
+
+
+def estimate_bias_outside(log: GyroLog, axes: np.ndarray, t0: float, t1: float,
+                          *, min_samples: int = 20, source: str | None = None) -> np.ndarray:
+    """Gyro bias (rad/s, camera frame) from the samples outside ``[t0, t1]`` (gyro clock).
+
+    Method: the per-axis median of the rates measured more than :data:`BIAS_GUARD`
+    seconds before the exposure starts or after it ends. This is the bias only where
+    the camera was (on average) still outside the exposure, e.g. a log that starts on a
+    table or a tripod; the median resists short movements.
+
+    Raises
+    ------
+    InputError
+        If fewer than ``min_samples`` samples lie outside the window.
+    """
+    out = (log.t < t0 - BIAS_GUARD) | (log.t > t1 + BIAS_GUARD)
+    n = int(out.sum())
+    if n < min_samples:
+        raise InputError(source, f"bias 'auto' needs at least {min_samples} gyro samples "
+                                 f"outside the exposure window, the log has {n}")
+    return np.median(log.omega[out] @ np.asarray(axes).T, axis=0)
+
+
+def _get(d: dict, key: str, source: str, kind=float, required=True):
+    if key not in d or d[key] is None:
+        if required:
+            raise InputError(source, f"missing {key!r}")
+        return None
+    try:
+        return kind(d[key])
+    except (TypeError, ValueError):
+        raise InputError(source, f"{key!r} must be a number, got {d[key]!r}") from None
+
+
+def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | None = None,
+                 image_size: tuple[int, int] | None = None,
+                 exif_hints: dict | None = None, report=None) -> Capture:
+    """Build a :class:`Capture` from a JSON file, options and EXIF hints.
+
+    Parameters
+    ----------
+    path : path-like or None
+        The capture JSON (schema in the module docstring). ``None``: everything comes
+        from ``overrides``.
+    overrides : dict, optional
+        Values that replace the JSON's: ``exposure_start``, ``exposure_time``,
+        ``readout_time``, ``fx``, ``fy``, ``cx``, ``cy``, ``width``, ``height``,
+        ``gyro_path``, ``gyro_format``, ``orientation``, ``time_offset``, ``bias``
+        (3 numbers or ``"auto"``), ``max_gap`` and the csv options. ``None`` values are
+        ignored.
+    image_size : (width, height), optional
+        The photo's size; fills a missing camera size and the principal point (image
+        centre) and rescales the intrinsics to the photo.
+    exif_hints : dict, optional
+        ``exposure_time`` (s) and ``fx`` (pixels at ``image_size``) read from the photo,
+        used only where the JSON and the options leave the value out.
+    report : callable(str), optional
+        Told which values came from EXIF.
+    """
+    data: dict = {}
+    base = "."
+    src = "capture"
+    if path is not None:
+        src = os.fspath(path)
+        try:
+            with open(src, encoding="utf-8") as fh:
+                data = json.load(fh)
+        except FileNotFoundError:
+            raise InputError(src, "capture description not found") from None
+        except json.JSONDecodeError as exc:
+            raise InputError(src, f"not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(src, f"cannot read ({exc})") from None
+        if not isinstance(data, dict):
+            raise InputError(src, "the capture description must be a JSON object")
+        base = os.path.dirname(os.path.abspath(src))
+    ov = {k: v for k, v in (overrides or {}).items() if v is not None}
+    cam_d = dict(data.get("camera") or {})
+    gyro_d = dict(data.get("gyro") or {})
+    for k in ("fx", "fy", "cx", "cy", "width", "height"):
+        if k in ov:
+            cam_d[k] = ov[k]
+    for k in ("exposure_start", "exposure_time", "readout_time"):
+        if k in ov:
+            data[k] = ov[k]
+    for k_ov, k in (("gyro_path", "path"), ("gyro_format", "format"),
+                    ("orientation", "orientation"), ("time_offset", "time_offset"),
+                    ("bias", "bias"), ("max_gap", "max_gap")) + tuple((k, k) for k in CSV_OPTION_KEYS):
+        if k_ov in ov:
+            gyro_d[k] = ov[k_ov]
+            if k_ov == "gyro_path":
+                base = os.getcwd()
+    hints = exif_hints or {}
+    if "exposure_time" not in data and "exposure_time" in hints:
+        data["exposure_time"] = hints["exposure_time"]
+        if report:
+            report(f"exposure_time = {hints['exposure_time']:.6g} s (from EXIF)")
+    if image_size is not None:
+        cam_d.setdefault("width", image_size[0])
+        cam_d.setdefault("height", image_size[1])
+    if "fx" not in cam_d and "fx" in hints and image_size is not None:
+        s = float(cam_d["width"]) / image_size[0]
+        cam_d["fx"] = hints["fx"] * s
+        if report:
+            report(f"fx = {cam_d['fx']:.1f} px (from EXIF focal length)")
+    if "fx" not in cam_d:
+        raise InputError(src, "no focal length: give camera.fx (pixels), --fx, or a photo "
+                              "whose EXIF has FocalLength and FocalLengthIn35mmFilm")
+    cam_d.setdefault("fy", cam_d["fx"])
+    if "width" not in cam_d or "height" not in cam_d:
+        raise InputError(src, "camera.width and camera.height are missing")
+    cam_d.setdefault("cx", (float(cam_d["width"]) - 1) / 2)
+    cam_d.setdefault("cy", (float(cam_d["height"]) - 1) / 2)
+    camera = Camera(*(_get(cam_d, k, src) for k in ("fx", "fy", "cx", "cy")),
+                    int(_get(cam_d, "width", src)), int(_get(cam_d, "height", src)))
+
+    if "path" not in gyro_d:
+        raise InputError(src, "missing gyro.path (or --gyro)")
+    gpath = os.path.join(base, os.fspath(gyro_d["path"]))
+    fmt = gyro_d.get("format")
+    csv_opts = {k: gyro_d[k] for k in CSV_OPTION_KEYS if k in gyro_d}
+    if csv_opts.get("rate_columns") is not None:
+        csv_opts["rate_columns"] = tuple(csv_opts["rate_columns"])
+    log = read_gyro_log(gpath, fmt, **(csv_opts if fmt in (None, "csv") else {}))
+    axes = parse_axes(gyro_d.get("orientation", "XYZ"), source=f"{src} (gyro.orientation)")
+    offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
+    exposure_start = _get(data, "exposure_start", src)
+    exposure_time = _get(data, "exposure_time", src)
+    readout = _get(data, "readout_time", src, required=False)
+    readout = 0.0 if readout is None else readout
+    bias_spec = gyro_d.get("bias")
+    if isinstance(bias_spec, str):
+        if bias_spec != "auto":
+            raise InputError(src, f"gyro.bias must be 3 numbers or 'auto', got {bias_spec!r}")
+        t0 = exposure_start - offset
+        bias = estimate_bias_outside(log, axes, t0, t0 + readout + exposure_time, source=gpath)
+        if report:
+            report("gyro bias (auto, median outside the exposure) = "
+                   + ", ".join(f"{b:+.4f}" for b in bias) + " rad/s")
+    elif bias_spec is None:
+        bias = np.zeros(3)
+    else:
+        bias = bias_spec
+    spec = {k: v for k, v in gyro_d.items() if k not in ("bias",)}
+    spec["path"] = os.fspath(gyro_d["path"])
+    return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
+                   spec, src, float(gyro_d.get("max_gap", 0.05)))

@@ -1,0 +1,379 @@
+"""Gyroscope logs: parsing, validation and coverage checks.
+
+Every supported format is converted here, once, to one representation: a
+:class:`GyroLog` of timestamps in seconds (float64, on the gyro's own clock) and angular
+velocity in rad/s along the log's own three axes. Mapping those axes to the camera frame
+(x right, y down, z forward) is the job of :mod:`gyrodeblur.axes`; aligning the clocks is
+the capture description's ``time_offset``.
+
+Formats
+-------
+``gcsv``
+    Gyroflow's text log (``GYROFLOW IMU LOG`` or ``CAMERA IMU LOG`` first line,
+    ``key,value`` header lines, then a ``t,gx,gy,gz[,...]`` column line and integer or
+    decimal rows). ``t * tscale`` is seconds and ``g * gscale`` is rad/s. The header's
+    ``orientation`` (default ``XYZ``) uses the same letters as the capture's
+    ``gyro.orientation``: the i-th letter names the log column (X=gx, Y=gy, Z=gz;
+    lowercase = negated) that becomes the i-th axis. It is applied while reading, so a
+    ``GyroLog`` from a gcsv file is already in the frame the file's header declares; the
+    capture's own ``orientation`` is applied after it. ``frame_readout_time``
+    (milliseconds) is kept in :attr:`GyroLog.meta`.
+``csv``
+    A CSV file with a header: a time column and three rate columns. Column names and
+    units are options (:func:`read_csv_log`); units are guessed from suffixes such as
+    ``t_ns`` or ``wx_rad_s`` / ``gx_deg_s`` when not given.
+``android``
+    Android sensor-event dumps, one event per line, ``type timestamp_ns x y z``; only
+    type 4 (``TYPE_GYROSCOPE``, rad/s, device axes) is kept.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = [
+    "GyroLog",
+    "read_gyro_log",
+    "read_gcsv",
+    "read_csv_log",
+    "read_android_events",
+    "write_gcsv",
+    "check_coverage",
+    "FORMATS",
+    "TIME_UNITS",
+    "RATE_UNITS",
+]
+
+FORMATS = ("gcsv", "csv", "android")
+#: Seconds per unit of time.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: rad/s per unit of angular rate.
+RATE_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
+#: A median rate above this (rad/s) almost surely means deg/s read as rad/s.
+IMPLAUSIBLE_MEDIAN_RATE = 35.0
+
+
+@dataclass(frozen=True)
+class GyroLog:
+    """Angular-velocity samples.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,), float64
+        Sample times in seconds on the gyro clock, strictly increasing.
+    omega : ndarray, shape (N, 3), float64
+        Angular velocity in rad/s along the log's axes (right-hand rule).
+    source : str or None
+        The file it came from, for error messages.
+    meta : dict
+        Extra header values (e.g. gcsv ``frame_readout_time``).
+    """
+
+    t: np.ndarray
+    omega: np.ndarray
+    source: str | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        t = np.asarray(self.t, dtype=np.float64)
+        w = np.asarray(self.omega, dtype=np.float64)
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "omega", w)
+        _validate(t, w, self.source)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def rotated(self, matrix: np.ndarray) -> "GyroLog":
+        """The same log expressed in another frame: ``omega_new = matrix @ omega``."""
+        m = np.asarray(matrix, dtype=np.float64)
+        return GyroLog(self.t, self.omega @ m.T, self.source, dict(self.meta))
+
+    def window(self, t0: float, t1: float) -> "GyroLog":
+        """Samples with ``t0 <= t <= t1`` (seconds, this log's clock)."""
+        keep = (self.t >= t0) & (self.t <= t1)
+        return GyroLog(self.t[keep], self.omega[keep], self.source, dict(self.meta))
+
+
+def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
+    if t.ndim != 1 or w.shape != (t.size, 3):
+        raise InputError(source, f"expected N times and N x 3 rates, got {t.shape} and {w.shape}")
+    if t.size < 2:
+        raise InputError(source, f"only {t.size} gyro sample(s); at least 2 are needed")
+    bad = ~np.isfinite(t) | ~np.all(np.isfinite(w), axis=1)
+    if bad.any():
+        raise InputError(source, f"NaN or infinite value in gyro sample {int(np.argmax(bad)) + 1}")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise InputError(source, f"timestamps are not increasing (sample {i + 2}: "
+                                 f"{t[i + 1]!r} s after {t[i]!r} s)")
+    med = float(np.median(np.linalg.norm(w, axis=1)))
+    if med > IMPLAUSIBLE_MEDIAN_RATE:
+        raise InputError(source, f"median angular rate {med:.1f} rad/s is implausible for a "
+                                 "hand-held camera; are the rates in deg/s? (set the rate unit)")
+
+
+def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
+                   what: str = "exposure") -> None:
+    """Check that ``log`` covers ``[t0, t1]`` (seconds, the log's clock) without big gaps.
+
+    Raises
+    ------
+    InputError
+        If the first sample is after ``t0``, the last before ``t1``, or two consecutive
+        samples that bracket part of the window are more than ``max_gap`` seconds apart.
+    """
+    src = log.source
+    if log.t[0] > t0 or log.t[-1] < t1:
+        raise InputError(src, f"gyro log covers {log.t[0]:.6f}..{log.t[-1]:.6f} s but the "
+                              f"{what} needs {t0:.6f}..{t1:.6f} s (check time_offset and "
+                              "exposure_start)")
+    i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
+    i1 = min(int(np.searchsorted(log.t, t1, side="left")), len(log.t) - 1)
+    gaps = np.diff(log.t[i0:i1 + 1])
+    if gaps.size and gaps.max() > max_gap:
+        j = i0 + int(np.argmax(gaps))
+        raise InputError(src, f"gap of {gaps.max() * 1e3:.1f} ms in the gyro log at "
+                              f"{log.t[j]:.6f} s, inside the {what} (limit "
+                              f"{max_gap * 1e3:.0f} ms)")
+
+
+# ----------------------------------------------------------------------------- readers
+
+def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options) -> GyroLog:
+    """Read a gyro log in any supported format.
+
+    Parameters
+    ----------
+    path : path-like
+    format : {"gcsv", "csv", "android"} or None
+        ``None`` guesses from the extension (``.gcsv``) or the first line.
+    **options
+        Passed to :func:`read_csv_log` for ``csv``.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise InputError(path, "gyro log not found")
+    if format is None:
+        format = _guess_format(path)
+    if format == "gcsv":
+        return read_gcsv(path)
+    if format == "csv":
+        return read_csv_log(path, **options)
+    if format == "android":
+        return read_android_events(path)
+    raise InputError(path, f"unknown gyro log format {format!r} (known: {', '.join(FORMATS)})")
+
+
+def _guess_format(path: str) -> str:
+    if path.lower().endswith(".gcsv"):
+        return "gcsv"
+    first = _read_lines(path)[:1]
+    if first and first[0].strip().upper() in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
+        return "gcsv"
+    if first and len(first[0].split()) == 5 and "," not in first[0]:
+        return "android"
+    return "csv"
+
+
+def _read_lines(path: str) -> list[str]:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return fh.read().splitlines()
+    except UnicodeDecodeError:
+        raise InputError(path, "not a text file") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror})") from None
+
+
+def read_gcsv(path: str | os.PathLike) -> GyroLog:
+    """Read a Gyroflow ``.gcsv`` log (see the module docstring for the header)."""
+    from .axes import parse_axes
+
+    path = os.fspath(path)
+    lines = _read_lines(path)
+    if not lines or lines[0].strip().upper() not in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
+        raise InputError(path, "not a gcsv log (first line must be 'GYROFLOW IMU LOG' or "
+                               "'CAMERA IMU LOG')")
+    header: dict[str, str] = {}
+    start = None
+    for i, line in enumerate(lines[1:], start=1):
+        parts = [p.strip() for p in line.split(",")]
+        if parts[0] == "t":
+            start = i
+            break
+        if len(parts) >= 2:
+            header[parts[0]] = ",".join(parts[1:])
+    if start is None:
+        raise InputError(path, "no 't,gx,gy,gz' column line in the gcsv header")
+    columns = [c.strip() for c in lines[start].split(",")]
+    try:
+        gi = [columns.index(c) for c in ("gx", "gy", "gz")]
+    except ValueError:
+        raise InputError(path, f"gcsv columns {columns} lack gx, gy, gz") from None
+    try:
+        tscale = float(header.get("tscale", "1"))
+        gscale = float(header.get("gscale", "1"))
+    except ValueError:
+        raise InputError(path, "tscale/gscale are not numbers") from None
+    rows = _parse_numeric_rows(path, lines[start + 1:], len(columns), first_line=start + 2,
+                               sep=",")
+    t = rows[:, 0] * tscale
+    w = rows[:, gi] * gscale
+    meta = {k: v for k, v in header.items() if k not in ("tscale", "gscale")}
+    axes = parse_axes(header.get("orientation", "XYZ"), source=f"{path} (orientation header)")
+    return GyroLog(t, w @ axes.T, path, meta)
+
+
+def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: int,
+                        sep: str | None) -> np.ndarray:
+    out = []
+    for k, line in enumerate(lines):
+        if not line.strip():
+            continue
+        parts = line.split(sep) if sep else line.split()
+        if len(parts) < ncol:
+            raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
+                                   f"got {len(parts)}")
+        try:
+            out.append([float(p) for p in parts[:ncol]])
+        except ValueError:
+            raise InputError(path, f"line {first_line + k}: not a number in {line!r}") from None
+    if not out:
+        raise InputError(path, "no data rows")
+    return np.asarray(out, dtype=np.float64)
+
+
+def _unit_from_name(name: str, units: dict) -> str | None:
+    low = name.lower().replace("/", "_")
+    for unit in sorted(units, key=len, reverse=True):
+        if low.endswith("_" + unit.replace("/", "_")):
+            return unit
+    return None
+
+
+def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = None,
+                 rate_columns: tuple | None = None, time_unit: str | None = None,
+                 rate_unit: str | None = None, delimiter: str = ",") -> GyroLog:
+    """Read a plain CSV gyro log with a header line.
+
+    Parameters
+    ----------
+    path : path-like
+    time_column : str or int, optional
+        Name or index of the time column; default: the first column.
+    rate_columns : three names or indices, optional
+        Default: the three columns after the time column, taken as x, y, z.
+    time_unit : {"s", "ms", "us", "ns"}, optional
+        Default: from the column name's suffix (``t_ns`` -> ns), else an error.
+    rate_unit : {"rad/s", "deg/s"}, optional
+        Default: from the rate columns' suffix (``wx_deg_s`` -> deg/s), else rad/s.
+    delimiter : str
+
+    Examples
+    --------
+    The shared hand-held log (``t_ns,wx_rad_s,wy_rad_s,wz_rad_s``) needs no option at all;
+    explicitly it is ``read_csv_log(p, time_unit="ns", rate_unit="rad/s")``.
+    """
+    path = os.fspath(path)
+    lines = _read_lines(path)
+    if not lines:
+        raise InputError(path, "empty file")
+    header = next(csv.reader([lines[0]], delimiter=delimiter))
+    header = [h.strip() for h in header]
+    if all(_is_number(h) for h in header):
+        raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
+
+    def col(c) -> int:
+        if isinstance(c, int) or (isinstance(c, str) and c.isdigit()):
+            i = int(c)
+            if i >= len(header):
+                raise InputError(path, f"column {i} does not exist (header has {len(header)})")
+            return i
+        if c not in header:
+            raise InputError(path, f"no column named {c!r} (columns: {', '.join(header)})")
+        return header.index(c)
+
+    ti = 0 if time_column is None else col(time_column)
+    if rate_columns is None:
+        ri = [ti + 1, ti + 2, ti + 3]
+        if ri[-1] >= len(header):
+            raise InputError(path, f"need a time column and three rate columns, header has "
+                                   f"{len(header)} columns")
+    else:
+        if len(rate_columns) != 3:
+            raise InputError(path, "rate_columns must name exactly three columns")
+        ri = [col(c) for c in rate_columns]
+    tu = time_unit or _unit_from_name(header[ti], TIME_UNITS)
+    if tu is None:
+        raise InputError(path, f"time unit of column {header[ti]!r} unknown; give it "
+                               "(--time-unit s|ms|us|ns)")
+    if tu not in TIME_UNITS:
+        raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
+    ru = rate_unit or _unit_from_name(header[ri[0]], RATE_UNITS) or "rad/s"
+    if ru not in RATE_UNITS:
+        raise InputError(path, f"unknown rate unit {ru!r} (known: rad/s, deg/s)")
+    ncol = max([ti] + ri) + 1
+    rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=2, sep=delimiter)
+    return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
+                   {"time_unit": tu, "rate_unit": ru})
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def read_android_events(path: str | os.PathLike) -> GyroLog:
+    """Read an Android sensor-event dump (``type timestamp_ns x y z``; gyro = type 4).
+
+    Rates are rad/s in Android device axes (x right, y up, z out of the screen in the
+    device's natural orientation); map them with an explicit axis mapping.
+    """
+    path = os.fspath(path)
+    lines = _read_lines(path)
+    rows = []
+    for k, line in enumerate(lines, start=1):
+        parts = line.split()
+        if not parts:
+            continue
+        if len(parts) != 5:
+            raise InputError(path, f"line {k}: expected 'type timestamp_ns x y z'")
+        if parts[0] != "4":
+            continue
+        try:
+            rows.append([float(p) for p in parts[1:]])
+        except ValueError:
+            raise InputError(path, f"line {k}: not a number in {line!r}") from None
+    if not rows:
+        raise InputError(path, "no gyroscope events (type 4) in the file")
+    a = np.asarray(rows, dtype=np.float64)
+    return GyroLog(a[:, 0] * 1e-9, a[:, 1:], path, {})
+
+
+def write_gcsv(path: str | os.PathLike, log: GyroLog, *, tscale: float = 1e-6,
+               gscale: float = 1e-6, extra_header: dict | None = None) -> None:
+    """Write ``log`` as a Gyroflow gcsv file (integers times ``tscale`` / ``gscale``).
+
+    Time is written relative to nothing (absolute, in ``tscale`` units); the default
+    scales give 1 us and 1e-6 rad/s resolution.
+    """
+    lines = ["GYROFLOW IMU LOG", "version,1.3", "id,gyrodeblur", "orientation,XYZ"]
+    for k, v in (extra_header or {}).items():
+        lines.append(f"{k},{v}")
+    lines += [f"tscale,{tscale!r}", f"gscale,{gscale!r}", "t,gx,gy,gz"]
+    ti = np.round(log.t / tscale).astype(np.int64)
+    gi = np.round(log.omega / gscale).astype(np.int64)
+    lines += [f"{a},{b},{c},{d}" for a, (b, c, d) in zip(ti, gi)]
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write("\n".join(lines) + "\n")
