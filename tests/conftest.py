@@ -1,0 +1,37 @@
+"""Shared fixtures: synthetic captures and the shared test data folder."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture
+from gyrodeblur.gyrolog import GyroLog
+
+SHARED_DATA = Path(os.environ.get("GYRODEBLUR_SHARED_DATA",
+                                  Path(__file__).resolve().parents[1].parent / "shared" / "data"))
+
+
+@pytest.fixture
+def shared_data() -> Path:
+    """``../shared/data`` beside the checkout; tests using it skip when it is absent."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"shared test data not found at {SHARED_DATA}")
+    return SHARED_DATA
+
+
+def constant_rate_capture(rate, *, width=320, height=240, f=300.0, exposure=0.03,
+                          readout=0.0, start=0.05, rate_hz=200.0, duration=0.2) -> Capture:
+    """A capture whose camera turns at a constant ``rate`` (rad/s, camera frame)."""
+    t = np.arange(0.0, duration, 1.0 / rate_hz)
+    w = np.tile(np.asarray(rate, dtype=np.float64), (t.size, 1))
+    return Capture(start, exposure, readout, Camera.centred(width, height, f), GyroLog(t, w))
+
+
+@pytest.fixture
+def make_capture():
+    return constant_rate_capture

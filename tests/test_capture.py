@@ -1,0 +1,101 @@
+import json
+
+import numpy as np
+import pytest
+
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import load_capture
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import GyroLog, write_gcsv
+
+
+@pytest.fixture
+def capture_files(tmp_path):
+    t = 1000.0 + np.arange(400) / 200.0
+    w = np.tile([0.01, 0.3, -0.02], (t.size, 1))
+    write_gcsv(tmp_path / "gyro.gcsv", GyroLog(t, w))
+    doc = {
+        "exposure_start": 1001.0, "exposure_time": 0.03, "readout_time": 0.02,
+        "camera": {"fx": 819.2, "fy": 819.2, "cx": 511.5, "cy": 381.5, "width": 1024, "height": 764},
+        "gyro": {"path": "gyro.gcsv", "format": "gcsv", "orientation": "XYZ", "time_offset": 0.0},
+    }
+    (tmp_path / "cap.json").write_text(json.dumps(doc))
+    return tmp_path, doc
+
+
+def test_load_and_round_trip(capture_files):
+    d, doc = capture_files
+    cap = load_capture(d / "cap.json")
+    assert cap.camera == Camera(819.2, 819.2, 511.5, 381.5, 1024, 764)
+    assert cap.row_start(764) == pytest.approx(1001.02)
+    cap.save(d / "again.json")
+    again = load_capture(d / "again.json")
+    assert again.to_dict() == cap.to_dict()
+    assert json.loads((d / "again.json").read_text())["gyro"]["path"] == "gyro.gcsv"
+
+
+def test_overrides_and_offset(capture_files):
+    d, _ = capture_files
+    cap = load_capture(d / "cap.json", overrides={"time_offset": 0.5, "readout_time": 0.0,
+                                                  "orientation": "Xyz", "fx": 500.0})
+    t, w = cap.camera_rates()
+    assert t[0] == pytest.approx(1000.5)
+    assert np.allclose(w[0], [0.01, -0.3, 0.02])
+    assert cap.camera.fx == 500 and cap.camera.fy == 819.2 and cap.readout_time == 0
+
+
+def test_scaled_to_photo(capture_files):
+    d, _ = capture_files
+    cap = load_capture(d / "cap.json", image_size=(512, 382))
+    assert cap.camera.width == 1024        # the JSON's size wins; scaling is explicit
+    half = cap.scaled_to(512, 382)
+    assert half.camera.fx == pytest.approx(409.6)
+    assert half.camera.cx == pytest.approx(255.5)
+    with pytest.raises(InputError, match="aspect ratio"):
+        cap.scaled_to(512, 512, source="photo.jpg")
+
+
+def test_exif_hints_fill_gaps(capture_files):
+    d, doc = capture_files
+    del doc["exposure_time"]
+    del doc["camera"]
+    (d / "cap.json").write_text(json.dumps(doc))
+    said = []
+    cap = load_capture(d / "cap.json", image_size=(800, 600),
+                       exif_hints={"exposure_time": 0.02, "fx": 640.0}, report=said.append)
+    assert cap.exposure_time == 0.02 and cap.camera.fx == 640 and cap.camera.cx == 399.5
+    assert len(said) == 2 and all("EXIF" in s for s in said)
+
+
+def test_bias_auto(tmp_path):
+    t = np.arange(0, 2, 0.005)
+    w = np.tile([0.02, -0.01, 0.005], (t.size, 1))
+    w[(t > 0.9) & (t < 1.1)] += [0.5, 0.3, 0.0]           # shake during the exposure only
+    write_gcsv(tmp_path / "g.gcsv", GyroLog(t, w))
+    doc = {"exposure_start": 0.95, "exposure_time": 0.05, "readout_time": 0.0,
+           "camera": {"fx": 500, "width": 640, "height": 480},
+           "gyro": {"path": "g.gcsv", "bias": "auto"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    cap = load_capture(tmp_path / "c.json")
+    assert np.allclose(cap.bias, [0.02, -0.01, 0.005], atol=2e-6)
+
+
+@pytest.mark.parametrize("change,match", [
+    ({"exposure_start": 2000.0}, "covers"),
+    ({"exposure_time": -1}, "positive"),
+    ({"gyro": {"path": "missing.gcsv"}}, "not found"),
+    ({"gyro": {"path": "gyro.gcsv", "orientation": "YXZ"}}, "reflection"),
+    ({"gyro": {"path": "gyro.gcsv", "format": "mp4"}}, "unknown gyro log format"),
+])
+def test_bad_captures(capture_files, change, match):
+    d, doc = capture_files
+    doc.update(change)
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=match):
+        load_capture(d / "cap.json")
+
+
+def test_not_json(tmp_path):
+    (tmp_path / "c.json").write_text("{nope")
+    with pytest.raises(InputError, match="c.json: not valid JSON"):
+        load_capture(tmp_path / "c.json")

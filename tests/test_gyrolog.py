@@ -1,0 +1,111 @@
+import numpy as np
+import pytest
+
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import (GyroLog, check_coverage, read_android_events, read_csv_log,
+                                read_gcsv, read_gyro_log, write_gcsv)
+
+
+@pytest.fixture
+def trace():
+    t = 1000.0 + np.arange(50) / 200.0
+    w = np.stack([np.sin(t * 7), 0.3 * np.cos(t * 5), -0.2 + 0.01 * np.arange(50)], axis=1)
+    return GyroLog(t, w)
+
+
+def test_gcsv_round_trip(tmp_path, trace):
+    p = tmp_path / "g.gcsv"
+    write_gcsv(p, trace, tscale=1e-6, gscale=1e-6)
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t, atol=1e-6)
+    assert np.allclose(log.omega, trace.omega, atol=1e-6)
+
+
+def test_gcsv_header_scales_and_orientation(tmp_path):
+    p = tmp_path / "g.gcsv"
+    p.write_text("GYROFLOW IMU LOG\nversion,1.3\nid,test\norientation,YxZ\nframe_readout_time,15.2\n"
+                 "tscale,0.001\ngscale,0.01\nt,gx,gy,gz,ax,ay,az\n0,10,20,30,1,2,3\n5,11,21,31,1,2,3\n")
+    log = read_gcsv(p)
+    assert np.allclose(log.t, [0.0, 0.005])
+    # camera x = log Y, camera y = -log X, camera z = log Z
+    assert np.allclose(log.omega[0], [0.2, -0.1, 0.3])
+    assert log.meta["frame_readout_time"] == "15.2"
+
+
+def test_csv_units_and_columns(tmp_path, trace):
+    p = tmp_path / "g.csv"
+    rows = "\n".join(f"{int(round(a * 1e3))},{b},{c},{d}" for a, (b, c, d) in
+                     zip(trace.t, np.degrees(trace.omega)))
+    p.write_text("time,gx,gy,gz\n" + rows + "\n")
+    log = read_csv_log(p, time_unit="ms", rate_unit="deg/s")
+    assert np.allclose(log.t, trace.t, atol=1e-9)
+    assert np.allclose(log.omega, trace.omega, atol=1e-9)
+    with pytest.raises(InputError, match="time unit"):
+        read_csv_log(p)
+
+
+def test_csv_units_from_suffix(tmp_path, trace):
+    p = tmp_path / "g.csv"
+    rows = "\n".join(f"{int(round(a * 1e9))},{b},{c},{d}" for a, (b, c, d) in zip(trace.t, trace.omega))
+    p.write_text("t_ns,wx_rad_s,wy_rad_s,wz_rad_s\n" + rows + "\n")
+    log = read_gyro_log(p, "csv")
+    assert np.allclose(log.t, trace.t, atol=1e-8)
+
+
+def test_shared_handheld_log_loads(shared_data):
+    log = read_gyro_log(shared_data / "gyro" / "handheld_phone_210hz.csv", "csv", time_unit="ns")
+    assert len(log) > 30000
+    assert 0.2 < np.median(np.linalg.norm(log.omega, axis=1)) < 2.0
+
+
+def test_android_round_trip(tmp_path, trace):
+    p = tmp_path / "events.txt"
+    lines = []
+    for a, (b, c, d) in zip(trace.t, trace.omega):
+        lines.append(f"1 {int(round(a * 1e9))} 9.8 0.1 0.2")
+        lines.append(f"4 {int(round(a * 1e9))} {float(b)!r} {float(c)!r} {float(d)!r}")
+    p.write_text("\n".join(lines) + "\n")
+    log = read_android_events(p)
+    assert np.allclose(log.t, trace.t, atol=1e-9)
+    assert np.allclose(log.omega, trace.omega)
+    assert read_gyro_log(p).t.size == trace.t.size          # format guessed
+
+
+def test_shared_android_log(shared_data):
+    log = read_gyro_log(shared_data / "real" / "shield-tablet" / "sensor_events.txt", "android")
+    assert len(log) == 23
+
+
+@pytest.mark.parametrize("content,match", [
+    ("t_s,x,y,z\n0,0,0,0\n0.01,0,0,0\n0.005,0,0,0\n", "not increasing"),
+    ("t_s,x,y,z\n0,0,0,0\n0.01,nan,0,0\n0.02,0,0,0\n", "NaN"),
+    ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
+    ("t_s,x,y,z\n0,0,0\n", "expected 4 values"),
+    ("t_s,x,y,z\n0,0,0,abc\n", "not a number"),
+    ("", "empty"),
+])
+def test_bad_logs(tmp_path, content, match):
+    p = tmp_path / "bad.csv"
+    p.write_text(content)
+    with pytest.raises(InputError, match=match) as e:
+        read_gyro_log(p, "csv")
+    assert "bad.csv" in str(e.value)
+
+
+def test_missing_file_and_unknown_format(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        read_gyro_log(tmp_path / "nope.csv")
+    p = tmp_path / "x.csv"
+    p.write_text("t_s,x,y,z\n0,0,0,0\n1,0,0,0\n")
+    with pytest.raises(InputError, match="unknown gyro log format"):
+        read_gyro_log(p, "bag")
+
+
+def test_coverage_and_gaps():
+    t = np.concatenate([np.arange(0, 0.1, 0.005), np.arange(0.2, 0.3, 0.005)])
+    log = GyroLog(t, np.zeros((t.size, 3)), "g.csv")
+    check_coverage(log, 0.01, 0.05)
+    with pytest.raises(InputError, match="gap of"):
+        check_coverage(log, 0.05, 0.25)
+    with pytest.raises(InputError, match="covers"):
+        check_coverage(log, 0.25, 0.4)

@@ -1,0 +1,108 @@
+"""PSFs against analytic camera motions."""
+
+import numpy as np
+
+from gyrodeblur.psf import psf_field, render_psf, splat
+
+
+def _support(psf, thresh=1e-4):
+    r = psf.shape[0] // 2
+    ys, xs = np.nonzero(psf > thresh)
+    return xs.min() - r, xs.max() - r, ys.min() - r, ys.max() - r
+
+
+def _centroid(psf):
+    r = psf.shape[0] // 2
+    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+    return (psf * xx).sum(), (psf * yy).sum()
+
+
+def test_zero_motion_gives_delta(make_capture):
+    cap = make_capture([0, 0, 0])
+    p = render_psf(cap, 100, 80)
+    assert p.shape[0] % 2 == 1 and p.shape == p[::-1].shape
+    assert np.isclose(p.sum(), 1)
+    assert p[p.shape[0] // 2, p.shape[1] // 2] > 0.999
+
+
+def test_yaw_streak_length_and_direction(make_capture):
+    f, T, rate = 300.0, 0.03, 1.0
+    cap = make_capture([0, rate, 0], f=f, exposure=T)
+    cx, cy = cap.camera.cx, cap.camera.cy
+    p = render_psf(cap, cx, cy)
+    x0, x1, y0, y1 = _support(p)
+    length = f * np.tan(rate * T)
+    # positive w_y (camera yaws right) moves content towards -x
+    assert x1 == 0 and y0 == 0 and y1 == 0
+    assert abs((x1 - x0) - length) <= 0.5 + 1e-9 or abs(-x0 - np.ceil(length)) == 0
+    # mass centre halfway along the streak
+    mx, _ = _centroid(p)
+    assert abs(mx + length / 2) < 0.1
+    assert np.isclose(p.sum(), 1)
+
+
+def test_yaw_streak_length_exact_by_moments(make_capture):
+    # first moment of a uniform streak of length L is -L/2; tan() makes it slightly non-uniform
+    for rate in (0.5, 2.0):
+        cap = make_capture([0, rate, 0], f=500.0, exposure=0.04)
+        p = render_psf(cap, cap.camera.cx, cap.camera.cy)
+        x0, _, _, _ = _support(p, 1e-6)
+        L = 500 * np.tan(rate * 0.04)
+        assert abs(-x0 - L) < 1.0        # the bilinear splat adds < 1 px at the far end
+
+
+def test_pitch_moves_content_vertically(make_capture):
+    # positive w_x (right-hand rule about x, y down, z forward) turns the optical axis
+    # towards -y: the camera tilts up, so content moves down (+y)
+    cap = make_capture([0.8, 0, 0])
+    mx, my = _centroid(render_psf(cap, cap.camera.cx, cap.camera.cy))
+    assert my > 2 and abs(mx) < 1e-3
+
+
+def test_roll_arcs_grow_with_radius(make_capture):
+    cap = make_capture([0, 0, 2.0], width=400, height=300, f=300.0)
+    cx, cy = cap.camera.cx, cap.camera.cy
+    centre = render_psf(cap, cx, cy)
+    assert centre[centre.shape[0] // 2, centre.shape[1] // 2] > 0.99
+    lengths = []
+    for r in (40, 80, 160):
+        p = render_psf(cap, cx + r, cy)
+        x0, x1, y0, y1 = _support(p)
+        lengths.append(np.hypot(x1 - x0, y1 - y0))
+        # at (cx + r, cy) a roll moves content along y (tangentially)
+        assert (y1 - y0) > (x1 - x0) or r < 80
+    ang = 2.0 * 0.03
+    for r, L in zip((40, 80, 160), lengths):
+        assert abs(L - r * ang) < 1.5
+    assert lengths[0] < lengths[1] < lengths[2]
+
+
+def test_rolling_shutter_changes_with_row(make_capture):
+    glob = make_capture([0.0, 0.8, 0.0], readout=0.0)
+    roll = make_capture([0.0, 0.8, 0.0], readout=0.03)
+    x = glob.camera.cx
+    pg = [render_psf(glob, x, y) for y in (10, 120, 230)]
+    pr = [render_psf(roll, x, y) for y in (10, 120, 230)]
+    # global shutter: same PSF on every row (away from roll, constant rate = same shape)
+    for p in pg[1:]:
+        assert p.shape == pg[0].shape and np.abs(p - pg[0]).max() < 0.02
+    # rolling shutter: later rows start later, so the trace starts further along the motion
+    c = [_centroid(p) for p in pr]
+    w_y, f, dt = 0.8, 300.0, 0.03 * 220 / 240
+    assert c[0][0] > c[1][0] > c[2][0]
+    assert abs((c[0][0] - c[2][0]) - f * np.tan(w_y * dt)) < 0.5
+    # row 10 starts 10/240 of the readout later than row 0
+    shift = _centroid(pg[0])[0] - _centroid(pr[0])[0]
+    assert abs(shift - f * np.tan(w_y * 0.03 * 10 / 240)) < 0.05
+
+
+def test_field_and_splat_properties(make_capture):
+    cap = make_capture([0.2, -0.5, 1.0], readout=0.02)
+    pts = [(10, 10), (300, 20), (160, 120), (20, 230)]
+    field = psf_field(cap, pts)
+    assert len(field.psfs) == 4
+    for p in field.psfs:
+        assert p.dtype == np.float32 and p.shape[0] % 2 == 1 and np.isclose(p.sum(), 1, atol=1e-5)
+    s = splat(np.array([[0.25, -0.5]]))
+    r = s.shape[0] // 2
+    assert np.isclose(s[r, r], 0.75 * 0.5) and np.isclose(s[r - 1, r + 1], 0.25 * 0.5)
