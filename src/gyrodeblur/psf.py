@@ -24,17 +24,18 @@ import numpy as np
 
 from .capture import Capture
 
-__all__ = ["trace", "render_psf", "splat", "PSFField", "psf_field"]
+__all__ = ["trace", "render_psf", "splat", "PSFField", "psf_field", "psf_extent"]
 
 #: Largest allowed distance (px) between consecutive trace samples when rendering.
 MAX_STEP_PX = 0.25
 _MAX_SAMPLES = 1 << 20
 
 
-def trace(capture: Capture, x0: float, y0: float, n: int) -> np.ndarray:
+def trace(capture: Capture, x0: float, y0: float, n: int, row: float | None = None) -> np.ndarray:
     """Positions ``(n, 2)`` (x, y in pixels) of the point seen at ``(x0, y0)`` at the
-    reference time, at the midpoints of ``n`` equal steps of its row's exposure."""
-    t_row = float(capture.row_start(y0))
+    reference time, at the midpoints of ``n`` equal steps of the exposure of row ``row``
+    (default ``y0``, the point's own row)."""
+    t_row = float(capture.row_start(y0 if row is None else row))
     times = t_row + capture.exposure_time * (np.arange(n) + 0.5) / n
     return _project(capture, np.asarray([x0, y0], dtype=np.float64), times)
 
@@ -48,10 +49,11 @@ def _project(capture: Capture, xy: np.ndarray, times: np.ndarray) -> np.ndarray:
     return p[:, :2] / p[:, 2:3]
 
 
-def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float) -> np.ndarray:
+def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float,
+                    row: float | None = None) -> np.ndarray:
     n = 64
     while True:
-        pts = trace(capture, x0, y0, n)
+        pts = trace(capture, x0, y0, n, row)
         step = np.abs(np.diff(pts, axis=0)).max() if n > 1 else 0.0
         if step < max_step or n >= _MAX_SAMPLES:
             return pts
@@ -91,7 +93,7 @@ def splat(offsets: np.ndarray, weights: np.ndarray | None = None,
 
 
 def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_STEP_PX,
-               radius: int | None = None) -> np.ndarray:
+               radius: int | None = None, row: float | None = None) -> np.ndarray:
     """The PSF at pixel ``(x, y)`` (pixels, reference-image coordinates).
 
     Parameters
@@ -103,12 +105,14 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         Largest distance (px) between consecutive trace samples (default 0.25).
     radius : int, optional
         Force the half-size; default: the smallest holding the whole trace (+1 px).
+    row : float, optional
+        Row whose rolling-shutter timing to use (default ``y``).
 
     Returns
     -------
     ndarray, float32, shape (2r+1, 2r+1), sums to 1.
     """
-    pts = _adaptive_trace(capture, float(x), float(y), max_step)
+    pts = _adaptive_trace(capture, float(x), float(y), max_step, row)
     return splat(pts - np.array([x, y]), radius=radius)
 
 
@@ -131,12 +135,15 @@ class PSFField:
 
     @property
     def extents(self) -> np.ndarray:
-        """Per PSF, the larger side (px) of the bounding box of its mass."""
-        out = []
-        for p in self.psfs:
-            ys, xs = np.nonzero(p > p.max() * 1e-3)
-            out.append(max(xs.ptp(), ys.ptp()) + 1)
-        return np.asarray(out)
+        """Per PSF, :func:`psf_extent` (px)."""
+        return np.asarray([psf_extent(p) for p in self.psfs])
+
+
+def psf_extent(psf: np.ndarray, rel_threshold: float = 1e-3) -> int:
+    """The larger side (px) of the bounding box of a PSF's mass (samples above
+    ``rel_threshold`` times its maximum): the blur's size, whatever its offset."""
+    ys, xs = np.nonzero(psf > psf.max() * rel_threshold)
+    return int(max(np.ptp(xs), np.ptp(ys)) + 1)
 
 
 def psf_field(capture: Capture, points, *, grid: tuple | None = None,

@@ -1,0 +1,361 @@
+"""Command-line interface: thin wrappers that parse, call the library and print.
+
+Exit status: 0 on success, 2 for bad input (a one-line message naming the file and the
+problem; nothing written), 1 for anything unexpected.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+
+from .errors import InputError
+
+FRAMES_HELP = ("Frames: image x right, y down, pixel centres at integer coordinates; camera "
+               "x right, y down, z forward; angular rates in rad/s; times in seconds.")
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _pair(text: str, what: str, kind=int, sep="x") -> tuple:
+    parts = text.lower().replace(",", sep).split(sep)
+    try:
+        vals = tuple(kind(p) for p in parts)
+    except ValueError:
+        raise InputError(what, f"expected two numbers like 6{sep}8, got {text!r}") from None
+    if len(vals) != 2:
+        raise InputError(what, f"expected two numbers like 6{sep}8, got {text!r}")
+    return vals
+
+
+def _bias(text: str | None):
+    if text is None or text == "auto":
+        return text
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != 3:
+        raise InputError("--bias", f"expected 'auto' or three rates bx,by,bz in rad/s, got {text!r}")
+    return vals
+
+
+def _add_capture_options(p: argparse.ArgumentParser, required: bool = False) -> None:
+    g = p.add_argument_group("capture", "The capture description (JSON) and options that "
+                             "override its fields. " + FRAMES_HELP)
+    g.add_argument("--capture", required=required, metavar="C.json",
+                   help="capture description (schema: see README)")
+    g.add_argument("--exposure-start", type=float, metavar="S",
+                   help="camera-clock seconds when row 0 starts exposing")
+    g.add_argument("--exposure-time", type=float, metavar="S", help="seconds each row integrates")
+    g.add_argument("--readout-time", type=float, metavar="S",
+                   help="seconds from the first row's start to the last row's (0 = global shutter)")
+    for k in ("fx", "fy", "cx", "cy"):
+        g.add_argument(f"--{k}", type=float, metavar="PX", help=f"intrinsic {k} in pixels")
+    g.add_argument("--gyro", metavar="PATH", help="gyro log (gcsv, csv or android events)")
+    g.add_argument("--gyro-format", choices=("gcsv", "csv", "android"))
+    g.add_argument("--orientation", metavar="AXES",
+                   help="log axes -> camera axes: three letters, e.g. XYZ or Xyz (lowercase = negated)")
+    g.add_argument("--time-offset", type=float, metavar="S",
+                   help="seconds: camera_time = gyro_time + offset")
+    g.add_argument("--bias", metavar="auto|bx,by,bz",
+                   help="gyro bias to subtract, rad/s in the camera frame, or 'auto'")
+    g.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), help="csv time unit")
+    g.add_argument("--rate-unit", choices=("rad/s", "deg/s"), help="csv rate unit")
+    g.add_argument("--max-gap", type=float, metavar="S",
+                   help="largest gap between gyro samples allowed inside the exposure (default 0.05)")
+
+
+def _load_capture(args, photo=None, say=None):
+    from .capture import load_capture
+
+    overrides = {
+        "exposure_start": args.exposure_start, "exposure_time": args.exposure_time,
+        "readout_time": args.readout_time, "fx": args.fx, "fy": args.fy, "cx": args.cx,
+        "cy": args.cy, "gyro_path": args.gyro, "gyro_format": args.gyro_format,
+        "orientation": args.orientation, "time_offset": args.time_offset,
+        "bias": _bias(args.bias), "time_unit": args.time_unit, "rate_unit": args.rate_unit,
+        "max_gap": args.max_gap,
+    }
+    if args.capture is None and args.gyro is None:
+        raise InputError("--capture", "give a capture description (--capture C.json) or --gyro "
+                                      "with the exposure options")
+    size = hints = None
+    if photo is not None:
+        from .imageio import exif_capture_hints
+        size = (photo.pixels.shape[1], photo.pixels.shape[0])
+        hints = exif_capture_hints(photo)
+    cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
+                       report=say)
+    if photo is not None:
+        cap = cap.scaled_to(size[0], size[1], source=photo.path)
+    return cap
+
+
+class _Progress:
+    """A progress bar on stderr, shown only once a run has taken more than a second."""
+
+    def __init__(self, label: str, quiet: bool):
+        self.label, self.quiet, self.t0, self.shown = label, quiet, time.perf_counter(), False
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.quiet or (not self.shown and time.perf_counter() - self.t0 < 1.0):
+            return
+        self.shown = True
+        n = 30 * done // max(total, 1)
+        sys.stderr.write(f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {done}/{total}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.shown:
+            sys.stderr.write("\n")
+
+
+def _write_picture(path: str, rgb_uint8: np.ndarray, overwrite: bool) -> None:
+    from .imageio import write_photo
+    write_photo(path, rgb_uint8.astype(np.float32) / 255.0, overwrite=overwrite)
+
+
+def _check_output(path: str, like, overwrite: bool) -> None:
+    from .imageio import check_destination
+    check_destination(path, like, overwrite)
+
+
+# ----------------------------------------------------------------------------- commands
+
+def cmd_psf(args, say) -> None:
+    from .deblur import plan_psf_field
+    from .psf import render_psf
+    from .psfplot import field_image, psf_image
+
+    cap = _load_capture(args, say=say)
+    if (args.at is None) == (args.grid is None):
+        raise InputError("--at/--grid", "give exactly one of --at X,Y or --grid RxC")
+    out = args.output
+    if not out.lower().endswith((".npy", ".png")):
+        raise InputError(out, "output must end in .npy or .png")
+    _check_output(out, None, args.overwrite)
+    if args.at is not None:
+        x, y = _pair(args.at, "--at", float, sep=",")
+        psf = render_psf(cap, x, y)
+        if out.lower().endswith(".npy"):
+            _atomic_npy(out, psf)
+        else:
+            _write_picture(out, psf_image(psf), args.overwrite)
+        say(f"PSF at ({x:g}, {y:g}): {psf.shape[0]}x{psf.shape[1]} px -> {out}")
+        return
+    grid = _pair(args.grid, "--grid")
+    cam = cap.camera
+    _, field, notes = plan_psf_field(cap, (cam.height, cam.width), grid=grid,
+                                     overlap=args.overlap, max_fraction=np.inf)
+    if out.lower().endswith(".npy"):
+        k = max(p.shape[0] for p in field.psfs)
+        stack = np.zeros((len(field.psfs), k, k), np.float32)
+        for i, p in enumerate(field.psfs):
+            o = (k - p.shape[0]) // 2
+            stack[i, o:o + p.shape[0], o:o + p.shape[1]] = p
+        _atomic_npy(out, stack)
+    else:
+        _write_picture(out, field_image(field, cam.width, cam.height), args.overwrite)
+    e = field.extents
+    say(f"PSF field {grid[0]}x{grid[1]} over {cam.width}x{cam.height}: extent {e.min()}-{e.max()} px -> {out}")
+
+
+def _atomic_npy(path: str, array: np.ndarray) -> None:
+    tmp = path + ".part.npy"
+    try:
+        np.save(tmp, array)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def cmd_simulate(args, say) -> None:
+    from .imageio import read_photo, write_photo
+    from .simulate import quantize_8bit, simulate_blur
+    from .tonecurve import get_transfer_curve
+
+    photo = read_photo(args.sharp)
+    _check_output(args.output, photo, args.overwrite)
+    cap = _load_capture(args, photo, say)
+    curve = get_transfer_curve(args.transfer)
+    t0 = time.perf_counter()
+    blurred = curve.encode(simulate_blur(curve.decode(photo.pixels), cap, snr_db=args.snr_db,
+                                         seed=args.seed))
+    if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
+        blurred = quantize_8bit(blurred)
+    write_photo(args.output, blurred, like=photo, bit_depth=args.bit_depth,
+                overwrite=args.overwrite)
+    h, w = photo.pixels.shape[:2]
+    snr = "no noise" if args.snr_db is None else f"SNR {args.snr_db:g} dB"
+    say(f"simulated {args.sharp} -> {args.output}: {w}x{h}, {snr}, {time.perf_counter() - t0:.2f} s")
+
+
+def cmd_deblur(args, say) -> None:
+    from .deblur import METHODS, deblur, deblur_with_psfs
+    from .imageio import read_photo, write_photo
+    from .psfplot import field_image
+
+    photo = read_photo(args.photo)
+    _check_output(args.output, photo, args.overwrite)
+    if args.save_psf:
+        _check_output(args.save_psf, photo, args.overwrite)
+    options = {}
+    if args.phi is not None:
+        options["phi"] = args.phi
+    grid = _pair(args.grid, "--grid")
+    progress = _Progress("deblurring", args.quiet)
+    h, w = photo.pixels.shape[:2]
+    t0 = time.perf_counter()
+    if args.blind:
+        from .blind import blind_deblur_photo
+        restored, field = blind_deblur_photo(photo.pixels, args.kernel_size, method=args.method,
+                                             transfer=args.transfer, progress=progress, **options)
+        mode_txt, grid_txt = "blind", ""
+    else:
+        cap = _load_capture(args, photo, say)
+        if args.refine:
+            from .calibrate import calibrate
+            cap = calibrate([photo.pixels], cap, say=say).capture
+        restored, report = deblur(photo.pixels, cap, mode=args.mode, grid=grid,
+                                  overlap=args.overlap, method=args.method,
+                                  transfer=args.transfer, progress=progress,
+                                  return_report=True, **options)
+        field = report.field
+        mode_txt = args.mode
+        grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
+    progress.close()
+    write_photo(args.output, restored, like=photo, overwrite=args.overwrite)
+    if args.save_psf:
+        _write_picture(args.save_psf, field_image(field, w, h), args.overwrite)
+    e = field.extents
+    method = args.method or __import__("gyrodeblur.deblur", fromlist=["x"]).DEFAULT_METHOD
+    say(f"deblurred {args.photo} -> {args.output}: {w}x{h}, mode {mode_txt}{grid_txt}, "
+        f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")
+
+
+def cmd_demo(args, say) -> None:
+    from .demo import run_demo
+    run_demo(args.out, say=say)
+
+
+def cmd_calibrate(args, say) -> None:
+    from .calibrate import calibrate_command
+    calibrate_command(args, say, _load_capture)
+
+
+# ----------------------------------------------------------------------------- parser
+
+def build_parser() -> argparse.ArgumentParser:
+    from .deblur import METHODS
+
+    p = argparse.ArgumentParser(
+        prog="gyrodeblur",
+        description="Remove camera-shake blur from photos using the camera's gyroscope log.",
+        epilog=FRAMES_HELP)
+    p.add_argument("--version", action="version",
+                   version=f"gyrodeblur {__import__('gyrodeblur').__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("psf", help="render the PSF at a pixel or a PSF field",
+                       description="Render the point-spread function the gyro log implies: at one "
+                       "pixel (--at X,Y, pixels) or on a patch grid (--grid RxC). Output .npy "
+                       "(float32, sums to 1, odd-sized, centred on the pixel; a grid gives an "
+                       "N x K x K stack, row-major) or .png (a picture). " + FRAMES_HELP)
+    s.add_argument("--at", metavar="X,Y", help="pixel position (x right, y down, pixels)")
+    s.add_argument("--grid", metavar="RxC", help="patch grid, e.g. 6x8")
+    s.add_argument("--overlap", type=float, default=0.25, help="patch overlap fraction (default 0.25)")
+    s.add_argument("-o", "--output", required=True, metavar="OUT.npy|OUT.png")
+    s.add_argument("--overwrite", action="store_true")
+    _add_capture_options(s)
+    s.set_defaults(func=cmd_psf)
+
+    s = sub.add_parser("simulate", help="blur a sharp photo with a gyro log",
+                       description="Synthesise the blurred photo the capture's camera rotation "
+                       "would give, by warping the sharp photo with K R(t) K^-1 row by row "
+                       "(rolling shutter) in linear light and averaging. " + FRAMES_HELP)
+    s.add_argument("sharp", metavar="SHARP")
+    s.add_argument("-o", "--output", required=True, metavar="BLURRED")
+    s.add_argument("--snr-db", type=float, default=None,
+                   help="add Gaussian noise at this SNR (dB, on the blurred image's std)")
+    s.add_argument("--seed", type=int, default=None, help="noise seed")
+    s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
+    s.add_argument("--bit-depth", type=int, choices=(8, 16), help="output bit depth (default: the input's)")
+    s.add_argument("--overwrite", action="store_true")
+    _add_capture_options(s)
+    s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("deblur", help="deblur a photo",
+                       description="Deblur a photo with the PSFs its gyro log implies "
+                       "(space-variant patches by default), or blindly (--blind). The result is "
+                       "referenced to the camera's orientation at exposure start. " + FRAMES_HELP)
+    s.add_argument("photo", metavar="PHOTO")
+    s.add_argument("-o", "--output", required=True, metavar="OUT")
+    s.add_argument("--mode", choices=("variant", "invariant"), default="variant")
+    s.add_argument("--grid", default="6x8", metavar="RxC", help="patch grid (default 6x8)")
+    s.add_argument("--overlap", type=float, default=0.25, help="patch overlap fraction (default 0.25)")
+    s.add_argument("--method", choices=sorted(METHODS), default=None,
+                   help="deconvolution method (default: the best available)")
+    s.add_argument("--phi", type=float, default=None,
+                   help="Wiener inverse SNR (default 0.01, the chapter's)")
+    s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
+    s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
+    s.add_argument("--kernel-size", type=int, default=31, help="blind kernel size, px (odd)")
+    s.add_argument("--refine", action="store_true",
+                   help="self-calibrate time offset, bias, readout, focal length and axes first")
+    s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
+    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_capture_options(s)
+    s.set_defaults(func=cmd_deblur)
+
+    s = sub.add_parser("demo", help="run the bundled demo",
+                       description="Blur a bundled public-domain photo with a bundled gyro trace, "
+                       "deblur it and write the pictures and PSNR/SSIM into a folder.")
+    s.add_argument("--out", default="gyrodeblur-demo", help="output folder (default ./gyrodeblur-demo)")
+    s.set_defaults(func=cmd_demo)
+
+    s = sub.add_parser("calibrate", help="estimate time offset, bias, readout, focal scale and axes",
+                       description="Self-calibrate the capture from blurred photos: time offset, "
+                       "gyro bias, readout time, focal-length scale and the axis mapping. Several "
+                       "photos of one session share offset, mapping and bias. " + FRAMES_HELP)
+    s.add_argument("photos", nargs="+", metavar="PHOTO")
+    s.add_argument("-o", "--output", required=True, metavar="CORRECTED.json")
+    s.add_argument("--fix", default="", metavar="NAMES",
+                   help="comma-separated parameters not to estimate: offset,bias,readout,focal,axes")
+    s.add_argument("--overwrite", action="store_true")
+    _add_capture_options(s, required=True)
+    s.set_defaults(func=cmd_calibrate)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+
+    def say(msg: str) -> None:
+        print(msg)
+
+    def warn(message, category, filename, lineno, file=None, line=None):
+        sys.stderr.write(f"gyrodeblur: warning: {message}\n")
+
+    warnings.showwarning = warn
+    try:
+        args.func(args, say)
+    except InputError as exc:
+        sys.stderr.write(f"gyrodeblur: error: {exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("gyrodeblur: interrupted; nothing written\n")
+        return 130
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
