@@ -41,6 +41,8 @@ __all__ = ["Capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
 BIAS_GUARD = 0.05
+#: Seconds of gyro log integrated on each side of the exposure window.
+ORIENTATION_MARGIN = 0.25
 
 
 @dataclass(frozen=True)
@@ -124,9 +126,18 @@ class Capture:
 
     @cached_property
     def orientation(self) -> Orientation:
-        """Camera orientation relative to ``exposure_start``."""
+        """Camera orientation relative to ``exposure_start``.
+
+        Only the samples within :data:`ORIENTATION_MARGIN` seconds of the exposure window
+        are integrated (a long log would otherwise cost time on every capture).
+        """
         t, w = self.camera_rates()
-        return Orientation(t, w, self.exposure_start)
+        t0, t1 = self.window
+        i0 = max(int(np.searchsorted(t, t0 - ORIENTATION_MARGIN)) - 1, 0)
+        i1 = min(int(np.searchsorted(t, t1 + ORIENTATION_MARGIN)) + 1, t.size)
+        if i1 - i0 < 2:
+            i0, i1 = max(0, i1 - 2), max(i1, 2)
+        return Orientation(t[i0:i1], w[i0:i1], self.exposure_start)
 
     # -- variants -----------------------------------------------------------------------
     def replace(self, **changes) -> "Capture":
