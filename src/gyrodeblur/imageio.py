@@ -1,0 +1,858 @@
+"""Reading and writing photos: JPEG, PNG and TIFF, 8 or 16 bits, with EXIF and ICC.
+
+Inside the library an image is a float32 array in ``[0, 1]`` of shape ``(H, W)`` (grey)
+or ``(H, W, C)`` with ``C`` = 3 (RGB) or 4 (RGBA); 8- and 16-bit integers exist only at
+the file boundary. :func:`read_photo` returns a :class:`Photo` that also remembers the
+stored bit depth, the format and the metadata, so that :func:`write_photo` can give the
+result the input's bit depth, EXIF block and ICC profile (``like=photo``).
+
+Conventions
+-----------
+* Pixels are kept **as stored**: the EXIF Orientation tag is *not* applied (the camera's
+  sensor axes, which the gyro log refers to, are the stored axes). The EXIF block, and
+  with it the Orientation tag, is carried to the output, so viewers still rotate it.
+* Grey+alpha is returned as RGBA (grey copied to R, G, B); alpha is passed through as a
+  4th channel, untouched (not premultiplied, not used). Palette images become RGB, or RGBA
+  when the palette has transparency; 1-bit images become 8-bit grey. PNG colour-key
+  transparency (``tRNS`` on grey/RGB images) is ignored.
+* Floating-point TIFFs are accepted: samples are clipped to ``[0, 1]`` (NaN -> 0) and
+  ``bit_depth`` is reported as 16, so a ``like=`` output keeps the most precision.
+  CMYK, Lab, signed and 32-bit integer images are refused.
+* Only the first frame of a multi-page TIFF or animated PNG is read.
+* ``Photo.exif`` is the EXIF block as a JPEG APP1 segment holds it: ``b"Exif\\0\\0"``
+  followed by a TIFF-structured directory. From JPEG and PNG it is the file's own block,
+  byte for byte. TIFF files keep EXIF in their own tags, so for TIFF the block is
+  rebuilt from the descriptive IFD0 tags (Make, Model, Orientation, ...) and the Exif and
+  GPS sub-directories. XMP, IPTC and PNG text chunks are not carried.
+
+Writing: JPEG stores EXIF (APP1) and ICC (APP2); PNG stores ``eXIf`` and ``iCCP``; TIFF
+stores the ICC profile (tag 34675) and EXIF as IFD0 tags plus Exif/GPS sub-IFDs. Values
+are clipped to ``[0, 1]`` and rounded to the nearest integer. Files are written to a
+temporary file in the destination folder and moved into place with :func:`os.replace`.
+
+Decoders: JPEG and PNG are read with Pillow. Pillow cannot hold 16-bit colour, so
+16-bit RGB(A) PNGs are read by letting Pillow's decoder run twice, once keeping the high
+and once the low byte of each sample (exact; interlaced files included), and written by
+a small numpy + zlib encoder here (all 16-bit PNGs; 8-bit PNGs go through Pillow). TIFFs
+are written with :mod:`tifffile` (Deflate, horizontal predictor) and read with it; what
+it cannot decode (LZW or JPEG compression without ``imagecodecs``, palette images...)
+falls back to Pillow/libtiff, with the same two-pass trick for 16-bit colour and with
+the rotation Pillow applies to TIFFs undone.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import secrets
+import struct
+import sys
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+import tifffile
+from PIL import Image, TiffImagePlugin, UnidentifiedImageError
+
+from gyrodeblur.errors import InputError
+
+__all__ = ["Photo", "read_photo", "write_photo", "exif_capture_hints", "EXTENSIONS"]
+
+#: File extensions :func:`write_photo` understands, and the format each one selects.
+EXTENSIONS: dict[str, str] = {
+    ".jpg": "JPEG",
+    ".jpeg": "JPEG",
+    ".png": "PNG",
+    ".tif": "TIFF",
+    ".tiff": "TIFF",
+}
+
+_EXIF_HEADER = b"Exif\x00\x00"
+_EXIF_IFD, _GPS_IFD, _INTEROP_IFD = 0x8769, 0x8825, 0xA005
+# IFD0 tags that describe the capture rather than the pixel layout; carried into TIFFs.
+_IFD0_ASCII = (270, 271, 272, 305, 306, 315, 33432)  # Description, Make, Model, Software,
+_ORIENTATION = 274  #                                  DateTime, Artist, Copyright
+# Exif sub-IFD tags used by exif_capture_hints.
+_EXPOSURE_TIME, _FOCAL_LENGTH, _FOCAL_35MM = 0x829A, 0x920A, 0xA405
+_FP_XRES, _FP_UNIT = 0xA20E, 0xA210
+_PIXEL_X_DIM, _PIXEL_Y_DIM = 0xA002, 0xA003
+_MM_PER_UNIT = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}  # inch, cm, and the mm/um extension
+_FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)  # 43.27 mm
+
+# Exceptions that Pillow, tifffile and zlib raise for damaged or odd files.
+_DECODE_ERRORS = (OSError, SyntaxError, ValueError, EOFError, struct.error, zlib.error,
+                  IndexError, KeyError, TypeError, MemoryError, RuntimeError,
+                  tifffile.TiffFileError)
+
+
+@dataclass(frozen=True, eq=False)
+class Photo:
+    """A photo as read from a file: float pixels plus what is needed to write it back.
+
+    Parameters
+    ----------
+    pixels : ndarray of float32, shape (H, W) or (H, W, C)
+        Values in ``[0, 1]``; ``C`` is 3 (RGB) or 4 (RGBA, alpha untouched).
+    bit_depth : int
+        8 or 16, the bits per sample stored in the file (16 for float TIFFs).
+    format : str
+        ``"JPEG"``, ``"PNG"`` or ``"TIFF"``.
+    path : str or None
+        The file it was read from.
+    exif : bytes or None
+        EXIF block, ``b"Exif\\0\\0"`` + TIFF-structured data (see the module notes).
+    icc_profile : bytes or None
+        Embedded ICC colour profile, unchanged.
+
+    Notes
+    -----
+    Equality is identity (``eq=False``): comparing pixel arrays element-wise is rarely
+    what ``==`` on photos should mean, and it keeps the instances hashable.
+    """
+
+    pixels: np.ndarray
+    bit_depth: int
+    format: str
+    path: str | None = None
+    exif: bytes | None = None
+    icc_profile: bytes | None = None
+
+    def __post_init__(self):
+        if self.bit_depth not in (8, 16):
+            raise ValueError(f"bit_depth must be 8 or 16, not {self.bit_depth!r}")
+        if self.format not in ("JPEG", "PNG", "TIFF"):
+            raise ValueError(f"format must be JPEG, PNG or TIFF, not {self.format!r}")
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_photo(path: str | os.PathLike) -> Photo:
+    """Read a JPEG, PNG or TIFF photo (8 or 16 bits) into float32 pixels in ``[0, 1]``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file. The format is found from the content, not the extension.
+
+    Returns
+    -------
+    Photo
+        Pixels as stored (EXIF orientation not applied), the stored bit depth, the
+        format, and the EXIF block and ICC profile for :func:`write_photo`.
+
+    Raises
+    ------
+    InputError
+        The file is missing, is not a JPEG/PNG/TIFF image, is damaged or truncated, or
+        holds a colour mode this library does not handle (CMYK, Lab, 32-bit integer).
+    """
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise InputError(p, "file not found")
+    if os.path.isdir(p):
+        raise InputError(p, "is a folder, not an image file")
+    try:
+        fmt, ints, exif, icc = _decode(p)
+    except InputError:
+        raise
+    except PermissionError:
+        raise InputError(p, "cannot read the file: permission denied") from None
+    except UnidentifiedImageError:
+        raise InputError(p, "not a JPEG, PNG or TIFF image (or the file is damaged)") from None
+    except Image.DecompressionBombError as exc:
+        raise InputError(p, f"image too large to read safely ({exc})") from None
+    except _DECODE_ERRORS as exc:
+        raise InputError(p, f"cannot decode the image ({_reason(exc)})") from None
+    pixels, bit_depth = _to_float(p, ints)
+    return Photo(pixels=pixels, bit_depth=bit_depth, format=fmt, path=p,
+                 exif=_normalise_exif(exif), icc_profile=icc or None)
+
+
+def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None]:
+    """(format, samples, EXIF block, ICC profile) of a file; decoder errors propagate."""
+    try:
+        im = Image.open(p)
+    except UnidentifiedImageError:
+        if not _is_tiff(p):
+            raise
+        ints, icc = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot open
+        return "TIFF", ints, None, icc
+    with im:
+        fmt = {"MPO": "JPEG"}.get(im.format, im.format)
+        if fmt not in ("JPEG", "PNG", "TIFF"):
+            raise InputError(p, f"{im.format} images are not supported; use JPEG, PNG or TIFF")
+        if fmt == "TIFF":
+            exif, icc = _tiff_exif(im), im.info.get("icc_profile")
+            ints = _read_tiff_pixels(p, im)
+        else:
+            ints = _read_pillow_pixels(p, im)
+            exif, icc = _pillow_exif(im), im.info.get("icc_profile")
+    return fmt, ints, exif, icc
+
+
+def _reason(exc: BaseException) -> str:
+    """One-line description of a decoder exception."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:200]
+
+
+def _is_tiff(path: str) -> bool:
+    with open(path, "rb") as f:
+        return f.read(4) in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+
+
+def _rawmode(im: Image.Image) -> str:
+    """The rawmode of the first decoder tile (before ``load``), or ``""``."""
+    if not im.tile:
+        return ""
+    args = im.tile[0][3]
+    return args if isinstance(args, str) else str(args[0])
+
+
+def _read_pillow_pixels(path: str, im: Image.Image) -> np.ndarray:
+    """Integer (or float) array of a JPEG/PNG opened by Pillow, colour normalised."""
+    raw = _rawmode(im)
+    if im.format == "PNG" and raw in ("RGB;16B", "RGBA;16B"):
+        return _pillow_16bit_colour(path, im)
+    if im.format == "PNG" and raw == "LA;16B":
+        return _grey_alpha_to_rgba(_pillow_png16_grey_alpha(im))
+    im.load()
+    return _pillow_to_array(path, im)
+
+
+def _pillow_to_array(path: str, im: Image.Image) -> np.ndarray:
+    """Array of a loaded Pillow image of an 8-bit, 16-bit grey or float mode."""
+    mode = im.mode
+    if mode == "1":
+        im = im.convert("L")
+    elif mode in ("P", "PA"):
+        keep_alpha = mode == "PA" or "transparency" in im.info
+        im = im.convert("RGBA" if keep_alpha else "RGB")
+    elif mode in ("RGBX", "YCbCr"):
+        im = im.convert("RGB")
+    elif mode == "RGBa":
+        im = im.convert("RGBA")
+    elif mode == "La":
+        im = im.convert("LA")
+    elif mode == "I" and im.format == "PNG":  # 16-bit grey in older Pillow
+        return np.asarray(im).astype(np.uint16)
+    elif mode not in ("L", "LA", "RGB", "RGBA", "I;16", "I;16L", "I;16B", "I;16N", "F"):
+        raise InputError(path, f"unsupported colour mode {mode}; convert to RGB or grey first")
+    arr = np.asarray(im)
+    if arr.dtype.kind == "u" and arr.dtype.itemsize == 2:
+        arr = arr.astype(np.uint16)  # native byte order
+    if im.mode == "LA":
+        arr = _grey_alpha_to_rgba(arr)
+    return arr
+
+
+def _load_as_stored(im: Image.Image) -> int:
+    """Load a Pillow image; return the EXIF orientation Pillow applied while loading.
+
+    Pillow rotates/flips TIFFs by their Orientation tag on load (and then drops the
+    tag); JPEG and PNG are loaded as stored. The returned value (1: nothing applied) is
+    for :func:`_unorient`.
+    """
+    before = im.tag_v2.get(_ORIENTATION, 1) if im.format == "TIFF" else 1
+    im.load()
+    if im.format == "TIFF" and before in range(2, 9) and _ORIENTATION not in im.tag_v2:
+        return int(before)
+    return 1
+
+
+def _unorient(arr: np.ndarray, orientation: int) -> np.ndarray:
+    """Undo the transpose that EXIF ``orientation`` (1-8) asks a viewer to apply."""
+    undo = {
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1],
+        5: lambda a: a.swapaxes(0, 1),
+        6: lambda a: np.rot90(a, 1),
+        7: lambda a: a[::-1, ::-1].swapaxes(0, 1),
+        8: lambda a: np.rot90(a, -1),
+    }.get(orientation)
+    return arr if undo is None else np.ascontiguousarray(undo(arr))
+
+
+def _grey_alpha_to_rgba(arr: np.ndarray) -> np.ndarray:
+    return arr[..., [0, 0, 0, 1]]
+
+
+def _tile_with_rawmode(tile, rawmode: str):
+    """Copy of a Pillow decoder tile with another rawmode."""
+    args = tile[3]
+    args = rawmode if isinstance(args, str) else (rawmode, *tuple(args)[1:])
+    if hasattr(tile, "_replace"):
+        return tile._replace(args=args)
+    return (tile[0], tile[1], tile[2], args)
+
+
+def _other_byte(rawmode: str) -> str:
+    """Rawmode that picks the other byte of each 16-bit sample (``X;16B`` <-> ``X;16L``)."""
+    if rawmode.endswith(";16N"):
+        rawmode = rawmode[:-1] + ("L" if sys.byteorder == "little" else "B")
+    swap = {";16B": ";16L", ";16L": ";16B"}
+    if rawmode[-4:] not in swap:
+        raise ValueError(f"no 16-bit rawmode: {rawmode}")
+    return rawmode[:-4] + swap[rawmode[-4:]]
+
+
+def _pillow_16bit_colour(path: str, im: Image.Image) -> np.ndarray:
+    """Exact 16-bit RGB(A) samples from Pillow, which itself keeps only the high byte.
+
+    Pillow unpacks a 16-bit colour sample with a rawmode such as ``RGB;16B`` that keeps
+    one byte of it. Decoding a second time with the mirror rawmode (``RGB;16L``) keeps
+    the other byte; the decompression, PNG unfiltering and TIFF predictor run before
+    unpacking, so the two passes see the same bytes. Works for PNG (interlaced too) and
+    for chunky (planar configuration 1) TIFF, raw or through libtiff.
+
+    ``im`` is ``path`` opened and not yet loaded; it is loaded here (the first pass), so
+    its ``info`` is complete afterwards.
+    """
+    other = [_tile_with_rawmode(t, _other_byte(t[3] if isinstance(t[3], str) else t[3][0]))
+             for t in im.tile]
+    orientation = _load_as_stored(im)
+    high = np.asarray(im).astype(np.uint16)
+    with Image.open(path) as second:
+        second.tile = other
+        second.load()
+        low = np.asarray(second).astype(np.uint16)
+    return _unorient((high << 8) | low, orientation)
+
+
+def _pillow_png16_grey_alpha(im: Image.Image) -> np.ndarray:
+    """16-bit grey+alpha PNG as (H, W, 2) uint16 (Pillow would keep 8 bits).
+
+    The 4 bytes of a pixel (grey and alpha, big-endian) are decoded unchanged with the
+    identity rawmode ``RGBA``, which has the same 4-byte pixel stride as ``LA;16B``.
+    ``im`` is the opened PNG, not yet loaded.
+    """
+    im.tile = [_tile_with_rawmode(t, "RGBA") for t in im.tile]
+    im.load()
+    b = np.asarray(im).astype(np.uint16)
+    return np.stack([(b[..., 0] << 8) | b[..., 1], (b[..., 2] << 8) | b[..., 3]], axis=-1)
+
+
+def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
+    """Pixels of a TIFF that Pillow opened (for its tags), as stored.
+
+    tifffile decodes first: it never applies the Orientation tag, and Pillow's own
+    handling of that tag is unreliable (uncompressed grey TIFFs with orientation 5-8
+    come out scrambled in Pillow 13). Pillow decodes what tifffile cannot (LZW or JPEG
+    compression without ``imagecodecs``, palette, min-is-white...), and its rotation is
+    undone.
+    """
+    try:
+        return _read_tiff_tifffile(path)[0]
+    except Exception as exc:
+        tifffile_error = exc
+    tags = im.tag_v2
+    bits = tags.get(258, (1,))
+    bits = bits if isinstance(bits, tuple) else (bits,)
+    if int(tags.get(277, 1)) > 1 and max(bits) > 8:
+        if int(tags.get(284, 1)) != 1 or max(bits) != 16:
+            raise tifffile_error
+        arr = _pillow_16bit_colour(path, im)
+    elif im.mode == "I":  # 32-bit or signed integers; unsigned 16-bit is fine
+        signed = tags.get(339, (1,)) in (2, (2,))
+        if max(bits) != 16 or signed:
+            kind = "signed" if signed else "unsigned"
+            raise InputError(path, f"unsupported samples ({max(bits)}-bit {kind} integers); "
+                             "use 8 or 16 bits")
+        orientation = _load_as_stored(im)
+        arr = _unorient(np.asarray(im).astype(np.uint16), orientation)
+    else:
+        orientation = _load_as_stored(im)
+        arr = _unorient(_pillow_to_array(path, im), orientation)
+    stored = (tags.get(257), tags.get(256))
+    if arr.shape[:2] != stored:
+        raise InputError(path, f"decoded {arr.shape[:2]} pixels, but the file says {stored}")
+    return arr
+
+
+def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
+    """First page of a TIFF with tifffile: (samples as (H, W) or (H, W, C), ICC)."""
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages.first
+        photometric = int(page.photometric)
+        if photometric not in (1, 2):  # MINISBLACK, RGB
+            name = getattr(page.photometric, "name", str(photometric))
+            raise InputError(path, f"unsupported TIFF colour model {name}")
+        arr = page.asarray()
+        axes = page.axes
+        icc_tag = page.tags.get(34675)
+        icc = bytes(icc_tag.value) if icc_tag is not None else None
+    if arr.ndim == 3 and axes.startswith("S"):
+        arr = np.moveaxis(arr, 0, -1)
+    if arr.ndim == 3 and arr.shape[-1] == 1:
+        arr = arr[..., 0]
+    if arr.ndim == 3 and arr.shape[-1] == 2:
+        arr = _grey_alpha_to_rgba(arr)
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (3, 4)):
+        raise InputError(path, f"unsupported TIFF layout (samples of shape {arr.shape})")
+    return arr, icc
+
+
+def _to_float(path: str, arr: np.ndarray) -> tuple[np.ndarray, int]:
+    """Integer samples -> float32 in [0, 1] and the bit depth they had."""
+    if arr.dtype == np.uint8:
+        return arr.astype(np.float32) / np.float32(255), 8
+    if arr.dtype == np.uint16:
+        return arr.astype(np.float32) / np.float32(65535), 16
+    if arr.dtype == np.bool_:
+        return arr.astype(np.float32), 8
+    if arr.dtype.kind == "f":
+        out = np.nan_to_num(arr.astype(np.float32), nan=0.0, posinf=1.0, neginf=0.0)
+        return np.clip(out, 0.0, 1.0), 16
+    kind = {"i": "signed integers", "u": "unsigned integers"}.get(arr.dtype.kind, str(arr.dtype))
+    raise InputError(path, f"unsupported samples ({8 * arr.dtype.itemsize}-bit {kind}); "
+                     "use 8 or 16 bits")
+
+
+# --------------------------------------------------------------------------- EXIF
+
+
+def _normalise_exif(block: bytes | None) -> bytes | None:
+    """EXIF block with the ``Exif\\0\\0`` header, or None when empty."""
+    if not block:
+        return None
+    block = bytes(block)
+    return block if block.startswith(_EXIF_HEADER) else _EXIF_HEADER + block
+
+
+def _pillow_exif(im: Image.Image) -> bytes | None:
+    """The EXIF block of a loaded JPEG/PNG, as stored."""
+    block = im.info.get("exif")
+    if block:
+        return block
+    exif = im.getexif()  # e.g. ImageMagick's "Raw profile type exif" PNG text
+    return exif.tobytes() if len(exif) else None
+
+
+def _tiff_exif(im: Image.Image) -> bytes | None:
+    """EXIF block rebuilt from a TIFF's descriptive tags and Exif/GPS sub-IFDs."""
+    try:
+        src = im.getexif()
+        out = Image.Exif()
+        for tag in (*_IFD0_ASCII, _ORIENTATION):
+            if tag in src:
+                out[tag] = src[tag]
+        sub = _sub_ifds(src)
+        for tag, values in sub.items():
+            out[tag] = values
+        return out.tobytes() if len(out) else None
+    except _DECODE_ERRORS:
+        return None  # damaged metadata is not worth refusing the photo for
+
+
+def _sub_ifds(exif: Image.Exif) -> dict[int, dict]:
+    """Exif and GPS sub-directories of ``exif`` as dicts (Interop nested in Exif)."""
+    out = {}
+    for tag in (_EXIF_IFD, _GPS_IFD):
+        if tag not in exif:
+            continue
+        values = dict(exif.get_ifd(tag))
+        if tag == _EXIF_IFD and _INTEROP_IFD in values:
+            interop = exif.get_ifd(_INTEROP_IFD)
+            if interop:
+                values[_INTEROP_IFD] = dict(interop)
+            else:
+                del values[_INTEROP_IFD]
+        if values:
+            out[tag] = values
+    return out
+
+
+def _load_exif(block: bytes) -> Image.Exif:
+    exif = Image.Exif()
+    exif.load(block)
+    return exif
+
+
+def exif_capture_hints(photo: Photo) -> dict:
+    """Exposure time and focal length in pixels from a photo's EXIF block.
+
+    Parameters
+    ----------
+    photo : Photo
+        A photo from :func:`read_photo` (or any with ``exif`` set).
+
+    Returns
+    -------
+    dict
+        Keys present only when found:
+
+        ``"exposure_time"`` : float
+            Seconds, from ExposureTime.
+        ``"focal_length_mm"`` : float
+            The lens's real focal length, from FocalLength.
+        ``"fx"`` : float
+            Focal length in pixels at this photo's stored width and height.
+
+    Notes
+    -----
+    ``fx`` comes from the first source that is present and valid:
+
+    1. FocalLengthIn35mmFilm :math:`f_{35}` with the **diagonal** convention (the usual
+       crop-factor definition): the photo's diagonal corresponds to the 43.27 mm
+       diagonal of 36 x 24 mm film, so
+
+       .. math:: f_x = f_{35} \\, \\sqrt{W^2 + H^2} \\, / \\, 43.27\\,\\mathrm{mm}.
+
+       For a 3:2 landscape photo this equals :math:`f_{35} W / 36\\,\\mathrm{mm}`; unlike
+       that width rule it also holds for 4:3 sensors and for portrait photos.
+    2. FocalLength :math:`f` (mm) and FocalPlaneXResolution :math:`r` (pixels per
+       FocalPlaneResolutionUnit: 2 = inch, 3 = cm, and 4 = mm, 5 = um as some cameras
+       write): :math:`f_x = f \\, r / \\mathrm{mm\\_per\\_unit}`, scaled by
+       :math:`\\max(W, H) / \\max(X, Y)` when PixelXDimension/PixelYDimension
+       (:math:`X, Y`) record a different size (a resized photo).
+
+    Square pixels are assumed (``fy == fx``). A damaged EXIF block gives ``{}``.
+    """
+    if not photo.exif:
+        return {}
+    try:
+        exif = _load_exif(photo.exif)
+        ifd0 = dict(exif)
+        sub = dict(exif.get_ifd(_EXIF_IFD))
+    except _DECODE_ERRORS:
+        return {}
+
+    def number(tag):
+        value = sub.get(tag, ifd0.get(tag))
+        if isinstance(value, tuple):
+            value = value[0] if value else None
+        try:
+            value = float(value)
+        except (TypeError, ValueError, ZeroDivisionError):
+            return None
+        return value if math.isfinite(value) and value > 0 else None
+
+    hints: dict = {}
+    exposure, focal = number(_EXPOSURE_TIME), number(_FOCAL_LENGTH)
+    if exposure is not None:
+        hints["exposure_time"] = exposure
+    if focal is not None:
+        hints["focal_length_mm"] = focal
+    height, width = photo.pixels.shape[:2]
+    f35 = number(_FOCAL_35MM)
+    xres, unit = number(_FP_XRES), number(_FP_UNIT)
+    if f35 is not None:
+        hints["fx"] = f35 * math.hypot(width, height) / _FULL_FRAME_DIAGONAL_MM
+    elif focal is not None and xres is not None and int(unit or 2) in _MM_PER_UNIT:
+        fx = focal * xres / _MM_PER_UNIT[int(unit or 2)]
+        px, py = number(_PIXEL_X_DIM), number(_PIXEL_Y_DIM)
+        if px is not None and py is not None:
+            fx *= max(width, height) / max(px, py)
+        hints["fx"] = fx
+    return hints
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_photo(
+    path: str | os.PathLike,
+    pixels: np.ndarray,
+    *,
+    like: Photo | None = None,
+    bit_depth: int | None = None,
+    overwrite: bool = False,
+    quality: int = 95,
+) -> str:
+    """Write float pixels in ``[0, 1]`` to a JPEG, PNG or TIFF file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Output file; ``.jpg``/``.jpeg``, ``.png`` or ``.tif``/``.tiff`` selects the format.
+    pixels : ndarray, shape (H, W), (H, W, 1), (H, W, 3) or (H, W, 4)
+        Floating-point samples; clipped to ``[0, 1]`` and rounded to the nearest integer.
+    like : Photo, optional
+        The input photo: its EXIF block and ICC profile are written with the pixels
+        (where the format allows; an ICC profile whose colour space does not fit the
+        channels - e.g. an RGB profile on grey pixels - is left out), its bit depth is
+        the default, and its file is never overwritten.
+    bit_depth : {8, 16}, optional
+        Bits per sample; default ``like.bit_depth``, else 8. JPEG is always 8-bit: an
+        inherited 16 is lowered silently, an explicit ``bit_depth=16`` is an error.
+    overwrite : bool
+        Replace an existing file (never ``like.path``).
+    quality : int
+        JPEG quality, 1-100 (chroma is not subsampled: 4:4:4).
+
+    Returns
+    -------
+    str
+        ``path``, as written.
+
+    Raises
+    ------
+    InputError
+        Unknown extension, missing folder, existing file without ``overwrite``, output
+        is the input photo, alpha channel for JPEG, 16-bit JPEG, or the OS refused the
+        write (permissions, disk full). No partial file is left behind.
+    ValueError
+        ``pixels`` is not a float array of a supported shape or holds NaN, or
+        ``bit_depth``/``quality`` is out of range.
+    """
+    p = os.fspath(path)
+    fmt = EXTENSIONS.get(os.path.splitext(p)[1].lower())
+    if fmt is None:
+        raise InputError(p, "unknown image type; use .jpg, .jpeg, .png, .tif or .tiff")
+    pixels = _check_pixels(pixels)
+    depth = _choose_bit_depth(p, fmt, bit_depth, like)
+    if not 1 <= int(quality) <= 100:
+        raise ValueError(f"quality must be within 1-100, not {quality!r}")
+    channels = 1 if pixels.ndim == 2 else pixels.shape[2]
+    if fmt == "JPEG" and channels == 4:
+        raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
+    _check_destination(p, like, overwrite)
+
+    ints = _to_integers(pixels, depth)
+    exif = _normalise_exif(like.exif) if like is not None else None
+    icc = like.icc_profile if like is not None else None
+    if icc and not _icc_fits(icc, channels):
+        icc = None
+    writer = {"JPEG": _write_jpeg, "PNG": _write_png, "TIFF": _write_tiff}[fmt]
+    _atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality)))
+    return p
+
+
+def _check_pixels(pixels) -> np.ndarray:
+    arr = np.asarray(pixels)
+    if arr.dtype.kind != "f":
+        raise ValueError(f"pixels must be floats in [0, 1], not {arr.dtype}")
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or 0 in arr.shape:
+        raise ValueError(f"pixels must have shape (H, W) or (H, W, 3 or 4), not {arr.shape}")
+    if np.isnan(arr).any():
+        raise ValueError("pixels contain NaN")
+    return arr
+
+
+def _choose_bit_depth(path: str, fmt: str, bit_depth: int | None, like: Photo | None) -> int:
+    if bit_depth is not None and bit_depth not in (8, 16):
+        raise ValueError(f"bit_depth must be 8 or 16, not {bit_depth!r}")
+    if fmt == "JPEG":
+        if bit_depth == 16:
+            raise InputError(path, "JPEG stores 8 bits per sample; write .png or .tif for 16 bits")
+        return 8
+    if bit_depth is not None:
+        return bit_depth
+    return like.bit_depth if like is not None else 8
+
+
+def _check_destination(path: str, like: Photo | None, overwrite: bool) -> None:
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(path, f"folder {folder} does not exist")
+    if like is not None and like.path is not None and _same_file(path, like.path):
+        raise InputError(path, "is the input photo; choose another output file")
+    if os.path.isdir(path):
+        raise InputError(path, "is a folder")
+    if os.path.lexists(path) and not overwrite:
+        raise InputError(path, "exists; pass --overwrite to replace it")
+
+
+def _same_file(a: str, b: str) -> bool:
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)  # hard links, case-insensitive file systems
+    except OSError:
+        return False
+
+
+def _to_integers(pixels: np.ndarray, bit_depth: int) -> np.ndarray:
+    """Clip to [0, 1], scale and round half to even: uint8 or uint16."""
+    top = 255 if bit_depth == 8 else 65535
+    scaled = np.clip(pixels.astype(np.float32, copy=False), 0.0, 1.0) * np.float32(top)
+    return np.rint(scaled).astype(np.uint8 if bit_depth == 8 else np.uint16)
+
+
+def _icc_fits(icc: bytes, channels: int) -> bool:
+    """Whether an ICC profile's data colour space suits grey (1) or RGB(A) pixels."""
+    space = bytes(icc[16:20])
+    if space == b"GRAY":
+        return channels == 1
+    if space == b"RGB ":
+        return channels in (3, 4)
+    return False
+
+
+def _atomic_write(path: str, write) -> None:
+    """Run ``write(file)`` on a temporary file beside ``path``, then move it into place."""
+    folder, name = os.path.split(os.path.abspath(path))
+    tmp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, "xb+") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, OSError) and exc.errno is not None:
+            raise InputError(path, f"cannot write the file: {exc.strerror}") from exc
+        raise
+
+
+def _write_jpeg(f, ints, *, exif, icc, quality) -> None:
+    options = {"quality": quality, "subsampling": 0 if ints.ndim == 3 else -1}
+    if exif:
+        options["exif"] = exif
+    if icc:
+        options["icc_profile"] = icc
+    Image.fromarray(ints).save(f, format="JPEG", **options)
+
+
+def _write_png(f, ints, *, exif, icc, quality) -> None:
+    if ints.dtype == np.uint16:
+        _write_png16(f, ints, exif=exif, icc=icc)
+        return
+    options = {"compress_level": 6}
+    if exif:
+        options["exif"] = exif
+    if icc:
+        options["icc_profile"] = icc
+    Image.fromarray(ints).save(f, format="PNG", **options)
+
+
+def _png_chunk(tag: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+
+def _png_filter(rows: np.ndarray, prior: np.ndarray, bpp: int) -> np.ndarray:
+    """PNG-filter scanlines, picking per row the filter of least sum of |signed bytes|.
+
+    Parameters
+    ----------
+    rows : ndarray of uint8, shape (n, N)
+        Raw scanlines (without filter bytes).
+    prior : ndarray of uint8, shape (N,)
+        The scanline above ``rows[0]`` (zeros for the first one).
+    bpp : int
+        Bytes per complete pixel.
+
+    Returns
+    -------
+    ndarray of uint8, shape (n, N + 1)
+        Filter-type byte followed by the filtered scanline, for each row.
+    """
+    x = rows.astype(np.int16)
+    b = np.concatenate([prior[None].astype(np.int16), x[:-1]])
+    a = np.zeros_like(x)
+    a[:, bpp:] = x[:, :-bpp]
+    c = np.zeros_like(x)
+    c[:, bpp:] = b[:, :-bpp]
+    p = a + b - c
+    pa, pb, pc = np.abs(p - a), np.abs(p - b), np.abs(p - c)
+    paeth = np.where((pa <= pb) & (pa <= pc), a, np.where(pb <= pc, b, c))
+    candidates = np.stack([x, x - a, x - b, x - ((a + b) >> 1), x - paeth]).astype(np.uint8)
+    cost = np.abs(candidates.view(np.int8).astype(np.int32)).sum(axis=2)
+    best = cost.argmin(axis=0)
+    chosen = candidates[best, np.arange(len(rows))]
+    return np.concatenate([best.astype(np.uint8)[:, None], chosen], axis=1)
+
+
+def _write_png16(f, ints: np.ndarray, *, exif, icc) -> None:
+    """16-bit grey, RGB or RGBA PNG with numpy + zlib (Pillow cannot write 16-bit colour)."""
+    height, width = ints.shape[:2]
+    channels = 1 if ints.ndim == 2 else ints.shape[2]
+    colour_type = {1: 0, 3: 2, 4: 6}[channels]
+    raw = np.ascontiguousarray(ints, dtype=">u2").view(np.uint8).reshape(height, -1)
+    f.write(b"\x89PNG\r\n\x1a\n")
+    f.write(_png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 16, colour_type, 0, 0, 0)))
+    if icc:
+        f.write(_png_chunk(b"iCCP", b"ICC Profile\x00\x00" + zlib.compress(icc)))
+    if exif:
+        f.write(_png_chunk(b"eXIf", exif[len(_EXIF_HEADER):]))
+    compressor = zlib.compressobj(6)
+    block = max(1, (1 << 20) // raw.shape[1])  # about 1 MiB of scanlines at a time
+    pending = []
+    prior = np.zeros(raw.shape[1], np.uint8)
+    for start in range(0, height, block):
+        rows = raw[start:start + block]
+        pending.append(compressor.compress(_png_filter(rows, prior, 2 * channels).tobytes()))
+        prior = rows[-1]
+        if sum(map(len, pending)) >= 1 << 20:
+            f.write(_png_chunk(b"IDAT", b"".join(pending)))
+            pending = []
+    pending.append(compressor.flush())
+    f.write(_png_chunk(b"IDAT", b"".join(pending)))
+    f.write(_png_chunk(b"IEND", b""))
+
+
+def _write_tiff(f, ints, *, exif, icc, quality) -> None:
+    """Deflate-compressed TIFF via tifffile; EXIF added afterwards (tifffile cannot)."""
+    channels = 1 if ints.ndim == 2 else ints.shape[2]
+    extratags = []
+    exif_obj = None
+    if exif:
+        try:
+            exif_obj = _load_exif(exif)
+            for tag in _IFD0_ASCII:
+                value = exif_obj.get(tag)
+                if isinstance(value, str) and value:
+                    extratags.append((tag, 2, 0, value.encode("latin-1", "replace"), True))
+            orientation = exif_obj.get(_ORIENTATION)
+            if isinstance(orientation, int) and 1 <= orientation <= 8:
+                extratags.append((_ORIENTATION, 3, 1, orientation, True))
+        except _DECODE_ERRORS:
+            exif_obj, extratags = None, []  # damaged EXIF: write the pixels without it
+    tifffile.imwrite(
+        f, ints,
+        photometric="minisblack" if channels == 1 else "rgb",
+        extrasamples=("unassalpha",) if channels == 4 else None,
+        compression="zlib", predictor=True, iccprofile=icc or None,
+        metadata=None, software=False, byteorder="<", bigtiff=False, extratags=extratags,
+    )
+    if exif_obj is not None:
+        try:
+            sub = _sub_ifds(exif_obj)
+        except _DECODE_ERRORS:
+            sub = {}
+        if sub:
+            _append_tiff_sub_ifds(f, sub)
+
+
+def _append_tiff_sub_ifds(f, sub_ifds: dict[int, dict]) -> None:
+    """Append Exif/GPS sub-IFDs to a classic TIFF and point IFD0 at them.
+
+    tifffile refuses to write the ExifIFD/GPSInfo pointer tags, so the sub-IFDs are
+    serialised (by Pillow) at the end of the file, and IFD0 is copied there too with
+    the two pointer entries added; the header is then pointed at the new IFD0. Strip
+    and tag-data offsets stay valid because nothing already written moves.
+    """
+    f.seek(0)
+    header = f.read(8)
+    order = "<" if header[:2] == b"II" else ">"
+    (ifd0,) = struct.unpack(order + "I", header[4:8])
+    f.seek(ifd0)
+    (count,) = struct.unpack(order + "H", f.read(2))
+    entries = {struct.unpack(order + "H", e[:2])[0]: e
+               for e in (f.read(12) for _ in range(count))}
+    next_ifd = f.read(4)
+    end = f.seek(0, os.SEEK_END)
+    for tag, values in sub_ifds.items():
+        end += end % 2
+        f.seek(end)
+        ifd = TiffImagePlugin.ImageFileDirectory_v2(ifh=header, group=tag)
+        for key, value in values.items():
+            ifd[key] = value
+        f.write(ifd.tobytes(end))
+        entries[tag] = struct.pack(order + "HHII", tag, 4, 1, end)  # LONG offset
+        end = f.tell()
+    end += end % 2
+    f.seek(end)
+    f.write(struct.pack(order + "H", len(entries)))
+    f.write(b"".join(entries[t] for t in sorted(entries)))
+    f.write(next_ifd)
+    f.seek(4)
+    f.write(struct.pack(order + "I", end))

@@ -1,0 +1,502 @@
+"""Tests for gyrodeblur.imageio: round trips, metadata, hints, safe writing, bad files."""
+
+from __future__ import annotations
+
+import errno
+import math
+import os
+import struct
+import zlib
+
+import numpy as np
+import pytest
+import tifffile
+from PIL import Image, ImageCms, TiffImagePlugin
+
+from gyrodeblur import imageio
+from gyrodeblur.errors import InputError
+from gyrodeblur.imageio import Photo, exif_capture_hints, read_photo, write_photo
+
+R = TiffImagePlugin.IFDRational
+SRGB = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def levels(shape, bits, seed=0):
+    """Random integer levels and the floats k / (2**bits - 1) that encode them."""
+    top = 2**bits - 1
+    k = np.random.default_rng(seed).integers(0, top + 1, size=shape)
+    k.flat[:2] = (0, top)
+    return k, (k / top).astype(np.float32)
+
+
+def smooth(shape):
+    """A smooth float image (JPEG-friendly)."""
+    h, w = shape[:2]
+    y, x = np.mgrid[0:h, 0:w] / np.array([h, w]).reshape(2, 1, 1)
+    base = 0.5 + 0.4 * np.sin(2 * x + 3 * y)
+    if len(shape) == 2:
+        return base.astype(np.float32)
+    planes = [base, 1 - base, 0.5 * base + 0.25, np.full_like(base, 0.8)]
+    return np.stack(planes[: shape[2]], axis=-1).astype(np.float32)
+
+
+def exif_block(**extra):
+    """EXIF block with Make/Model/Orientation, ExposureTime, FocalLength and GPS."""
+    exif = Image.Exif()
+    exif[271], exif[272], exif[274] = "Canon", "EOS R5", 6
+    sub = exif.get_ifd(0x8769)
+    sub[0x829A] = R(1, 60)  # ExposureTime
+    sub[0x920A] = R(50, 1)  # FocalLength
+    for tag, value in extra.items():
+        sub[int(tag.removeprefix("x_"), 16)] = value  # x_A405=... -> tag 0xA405
+    exif.get_ifd(0x8825)[1] = "N"
+    return exif.tobytes()
+
+
+def exif_values(block):
+    exif = Image.Exif()
+    exif.load(block)
+    return dict(exif), dict(exif.get_ifd(0x8769)), dict(exif.get_ifd(0x8825))
+
+
+def like(pixels=None, *, exif=None, icc=None, bit_depth=8, fmt="PNG", path=None):
+    pixels = np.zeros((4, 4, 3), np.float32) if pixels is None else pixels
+    return Photo(pixels, bit_depth, fmt, path, exif, icc)
+
+
+def png_chunk(tag, data):
+    return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+
+def reference_png16(path, k, interlace=False, exif=None):
+    """Independent minimal 16-bit PNG encoder (filter 0; optional Adam7; eXIf last)."""
+    h, w, c = k.shape
+    passes = [(0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4),
+              (0, 2, 2, 4), (1, 0, 2, 2), (0, 1, 1, 2)] if interlace else [(0, 0, 1, 1)]
+    data = b""
+    for x0, y0, dx, dy in passes:
+        sub = k[y0::dy, x0::dx]
+        for row in sub:
+            if row.size:
+                data += b"\x00" + row.astype(">u2").tobytes()
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, {3: 2, 4: 6}[c], 0, 0, int(interlace))
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr)
+                + png_chunk(b"IDAT", zlib.compress(data))
+                + (png_chunk(b"eXIf", exif[6:]) if exif else b"") + png_chunk(b"IEND", b""))
+
+
+def reference_png16_decode(path):
+    """Independent slow PNG decoder for small non-interlaced 16-bit files."""
+    blob = open(path, "rb").read()
+    pos, idat, ihdr = 8, b"", None
+    while pos < len(blob):
+        (n,) = struct.unpack(">I", blob[pos:pos + 4])
+        tag, body = blob[pos + 4:pos + 8], blob[pos + 8:pos + 8 + n]
+        if tag == b"IHDR":
+            ihdr = struct.unpack(">IIBBBBB", body)
+        elif tag == b"IDAT":
+            idat += body
+        pos += 12 + n
+    w, h, bits, ctype = ihdr[:4]
+    c = {0: 1, 2: 3, 6: 4}[ctype]
+    bpp, stride = 2 * c, 2 * c * w
+    raw, out, prev, filters = zlib.decompress(idat), [], [0] * stride, set()
+    for r in range(h):
+        ftype, line = raw[r * (stride + 1)], list(raw[r * (stride + 1) + 1:(r + 1) * (stride + 1)])
+        filters.add(ftype)
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b, cc = prev[i], prev[i - bpp] if i >= bpp else 0
+            if ftype == 1:
+                line[i] = (line[i] + a) & 255
+            elif ftype == 2:
+                line[i] = (line[i] + b) & 255
+            elif ftype == 3:
+                line[i] = (line[i] + (a + b) // 2) & 255
+            elif ftype == 4:
+                p = a + b - cc
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - cc)
+                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else cc)) & 255
+        out.append(line)
+        prev = line
+    arr = np.array(out, np.uint8).reshape(h, w * c, 2)
+    return (arr[..., 0].astype(np.uint16) << 8 | arr[..., 1]).reshape(h, w, c), filters
+
+
+# --------------------------------------------------------------------------- round trips
+
+
+@pytest.mark.parametrize("ext", [".png", ".tif"])
+@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("shape", [(13, 17), (13, 17, 3), (13, 17, 4)])
+def test_lossless_round_trip_is_exact(tmp_path, ext, bits, shape):
+    k, pixels = levels(shape, bits)
+    out = write_photo(tmp_path / f"out{ext}", pixels, bit_depth=bits)
+    photo = read_photo(out)
+    assert photo.format == {".png": "PNG", ".tif": "TIFF"}[ext]
+    assert photo.bit_depth == bits and photo.path == out
+    assert photo.pixels.dtype == np.float32 and photo.pixels.shape == shape
+    assert np.array_equal(np.rint(photo.pixels * (2**bits - 1)), k)
+
+
+@pytest.mark.parametrize("shape", [(24, 32), (24, 32, 3)])
+def test_jpeg_round_trip_is_close(tmp_path, shape):
+    pixels = smooth(shape)
+    photo = read_photo(write_photo(tmp_path / "out.jpg", pixels, quality=95))
+    assert photo.format == "JPEG" and photo.bit_depth == 8 and photo.pixels.shape == shape
+    assert np.abs(photo.pixels - pixels).mean() < 0.01
+
+
+def test_values_are_clipped_and_rounded_not_truncated(tmp_path):
+    pixels = np.array([[-0.3, 1.7, 10.4 / 255, 10.6 / 255, 0.5]], np.float32)
+    write_photo(tmp_path / "a.png", pixels)
+    assert np.asarray(Image.open(tmp_path / "a.png")).tolist() == [[0, 255, 10, 11, 128]]
+
+
+def test_16bit_png_is_readable_by_independent_decoders(tmp_path):
+    k, pixels = levels((9, 11, 3), 16, seed=3)
+    k[:, :6] = np.cumsum(np.full((9, 6, 3), 700), axis=1)  # smooth part: non-None filters
+    pixels = (k / 65535).astype(np.float32)
+    write_photo(tmp_path / "a.png", pixels, bit_depth=16)
+    decoded, filters = reference_png16_decode(tmp_path / "a.png")
+    assert np.array_equal(decoded, k) and len(filters) > 1
+    with Image.open(tmp_path / "a.png") as im:  # Pillow keeps the high byte
+        assert np.array_equal(np.asarray(im), k >> 8)
+
+
+@pytest.mark.parametrize("interlace", [False, True])
+@pytest.mark.parametrize("channels", [3, 4])
+def test_reads_16bit_colour_png_from_another_encoder(tmp_path, interlace, channels):
+    k, _ = levels((21, 19, channels), 16, seed=4)
+    reference_png16(tmp_path / "ref.png", k, interlace)
+    photo = read_photo(tmp_path / "ref.png")
+    assert photo.bit_depth == 16
+    assert np.array_equal(np.rint(photo.pixels * 65535), k)
+
+
+def test_reads_exif_placed_after_the_image_data(tmp_path):
+    k, _ = levels((4, 5, 3), 16)
+    reference_png16(tmp_path / "late.png", k, exif=exif_block())
+    assert exif_values(read_photo(tmp_path / "late.png").exif) == exif_values(exif_block())
+
+
+def test_reads_16bit_grey_alpha_png_as_rgba(tmp_path):
+    k, _ = levels((5, 6, 2), 16, seed=5)
+    raw = b"".join(b"\x00" + row.astype(">u2").tobytes() for row in k)
+    ihdr = struct.pack(">IIBBBBB", 6, 5, 16, 4, 0, 0, 0)
+    (tmp_path / "ga.png").write_bytes(b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr)
+                                      + png_chunk(b"IDAT", zlib.compress(raw))
+                                      + png_chunk(b"IEND", b""))
+    photo = read_photo(tmp_path / "ga.png")
+    assert photo.bit_depth == 16 and photo.pixels.shape == (5, 6, 4)
+    assert np.array_equal(np.rint(photo.pixels * 65535), k[..., [0, 0, 0, 1]])
+
+
+def test_16bit_tiff_is_readable_by_tifffile(tmp_path):
+    k, pixels = levels((7, 9, 3), 16)
+    write_photo(tmp_path / "a.tif", pixels, bit_depth=16)
+    assert np.array_equal(tifffile.imread(tmp_path / "a.tif"), k)
+
+
+@pytest.mark.parametrize("byteorder", ["<", ">"])
+def test_16bit_colour_tiff_pillow_fallback_is_exact(tmp_path, byteorder):
+    # the path used when tifffile lacks a codec (LZW without imagecodecs)
+    k, _ = levels((10, 12, 3), 16, seed=6)
+    for compression in (None, "zlib"):
+        tifffile.imwrite(tmp_path / "a.tif", k.astype(np.uint16), photometric="rgb",
+                         byteorder=byteorder, compression=compression, metadata=None)
+        with Image.open(tmp_path / "a.tif") as im:
+            assert np.array_equal(imageio._pillow_16bit_colour(str(tmp_path / "a.tif"), im), k)
+
+
+def test_reads_planar_16bit_tiff(tmp_path):
+    k, _ = levels((3, 8, 10), 16, seed=7)
+    tifffile.imwrite(tmp_path / "p.tif", k.astype(np.uint16), photometric="rgb",
+                     planarconfig="separate", metadata=None)
+    photo = read_photo(tmp_path / "p.tif")
+    assert np.array_equal(np.rint(photo.pixels * 65535), np.moveaxis(k, 0, -1))
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("shape", [(6, 10), (6, 10, 3)])
+def test_tiff_orientation_is_not_applied(tmp_path, bits, shape):
+    k, _ = levels(shape, bits, seed=8)
+    dtype = np.uint8 if bits == 8 else np.uint16
+    tifffile.imwrite(tmp_path / "o.tif", k.astype(dtype), metadata=None,
+                     photometric="rgb" if len(shape) == 3 else "minisblack",
+                     extratags=[(274, 3, 1, 6, True)])
+    photo = read_photo(tmp_path / "o.tif")
+    assert np.array_equal(np.rint(photo.pixels * (2**bits - 1)), k)
+    assert exif_values(photo.exif)[0][274] == 6
+    if bits == 16 and len(shape) == 3:  # the Pillow fallback undoes Pillow's rotation too
+        with Image.open(tmp_path / "o.tif") as im:
+            assert np.array_equal(imageio._pillow_16bit_colour(str(tmp_path / "o.tif"), im), k)
+
+
+@pytest.mark.parametrize("dtype,text", [(np.uint32, "32-bit unsigned"),
+                                        (np.int16, "16-bit signed")])
+def test_unsupported_integer_tiffs_are_refused(tmp_path, dtype, text):
+    tifffile.imwrite(tmp_path / "i.tif", np.zeros((4, 4), dtype), metadata=None)
+    with pytest.raises(InputError, match=f"i.tif.*{text}"):
+        read_photo(tmp_path / "i.tif")
+
+
+@pytest.mark.parametrize("shape,bits", [((6, 10), 8), ((6, 10, 3), 8), ((6, 10), 16)])
+def test_lzw_tiffs_with_orientation(tmp_path, shape, bits):
+    # without imagecodecs tifffile cannot decode LZW, and Pillow (libtiff) takes over
+    k, _ = levels(shape, bits, seed=10)
+    im = Image.fromarray(k.astype(np.uint8 if bits == 8 else np.uint16))
+    exif = Image.Exif()
+    exif[274] = 8
+    im.save(tmp_path / "lzw.tif", compression="tiff_lzw", exif=exif)
+    photo = read_photo(tmp_path / "lzw.tif")
+    assert photo.bit_depth == bits
+    assert np.array_equal(np.rint(photo.pixels * (2**bits - 1)), k)
+
+
+def test_float_tiffs_are_clipped_and_reported_as_16bit(tmp_path):
+    grey = np.array([[-1.0, 0.25, 2.0]], np.float32)
+    tifffile.imwrite(tmp_path / "g.tif", grey, metadata=None)
+    rgb = np.stack([grey, grey, grey], axis=-1)
+    tifffile.imwrite(tmp_path / "c.tif", rgb, photometric="rgb", metadata=None)
+    for name in ("g.tif", "c.tif"):
+        photo = read_photo(tmp_path / name)
+        assert photo.bit_depth == 16 and photo.pixels.dtype == np.float32
+        assert np.allclose(photo.pixels.reshape(-1, 3 if name == "c.tif" else 1)[:, 0],
+                           [0.0, 0.25, 1.0])
+
+
+def test_palette_grey_alpha_and_bilevel_are_normalised(tmp_path):
+    Image.new("P", (4, 3), 1).save(tmp_path / "p.png")
+    p = read_photo(tmp_path / "p.png")
+    assert p.pixels.shape == (3, 4, 3) and p.bit_depth == 8
+    pt = Image.new("P", (4, 3), 1)
+    pt.info["transparency"] = 1
+    pt.save(tmp_path / "pt.png", transparency=1)
+    assert read_photo(tmp_path / "pt.png").pixels.shape == (3, 4, 4)
+    Image.new("LA", (4, 3), (200, 50)).save(tmp_path / "la.png")
+    la = read_photo(tmp_path / "la.png")
+    assert la.pixels.shape == (3, 4, 4)
+    assert np.allclose(la.pixels[0, 0] * 255, [200, 200, 200, 50])
+    Image.new("1", (4, 3), 1).save(tmp_path / "b.png")
+    b = read_photo(tmp_path / "b.png")
+    assert b.pixels.shape == (3, 4) and b.bit_depth == 8 and b.pixels.min() == 1.0
+
+
+# --------------------------------------------------------------------------- metadata
+
+
+@pytest.mark.parametrize("src_ext", [".jpg", ".png", ".tif"])
+@pytest.mark.parametrize("out_ext,bits", [(".jpg", 8), (".png", 8), (".png", 16),
+                                          (".tif", 8), (".tif", 16)])
+def test_exif_and_icc_survive_read_write_read(tmp_path, src_ext, out_ext, bits):
+    block = exif_block()
+    Image.fromarray(np.full((8, 12, 3), 90, np.uint8)).save(
+        tmp_path / f"in{src_ext}", exif=block, icc_profile=SRGB)
+    src = read_photo(tmp_path / f"in{src_ext}")
+    assert src.icc_profile == SRGB
+    assert exif_values(src.exif) == exif_values(block)
+    out = read_photo(write_photo(tmp_path / f"out{out_ext}", src.pixels, like=src,
+                                 bit_depth=None if out_ext == ".jpg" else bits))
+    assert out.icc_profile == SRGB
+    ifd0, sub, gps = exif_values(out.exif)
+    assert {ifd0[t] for t in (271, 272, 274)} == {"Canon", "EOS R5", 6}
+    assert sub[0x829A] == R(1, 60) and sub[0x920A] == 50 and gps[1] == "N"
+
+
+def test_jpeg_and_png_exif_blocks_pass_through_byte_for_byte(tmp_path):
+    block = exif_block()
+    Image.new("RGB", (8, 8)).save(tmp_path / "in.jpg", exif=block)
+    src = read_photo(tmp_path / "in.jpg")
+    assert src.exif == block
+    for name in ("a.jpg", "b.png"):
+        assert read_photo(write_photo(tmp_path / name, src.pixels, like=src)).exif == block
+    assert read_photo(write_photo(tmp_path / "c.png", src.pixels, like=src,
+                                  bit_depth=16)).exif == block
+
+
+def test_icc_profile_of_the_wrong_colour_space_is_left_out(tmp_path):
+    src = like(icc=SRGB)
+    out = read_photo(write_photo(tmp_path / "grey.png", np.zeros((4, 4), np.float32), like=src))
+    assert out.icc_profile is None
+
+
+def test_no_metadata_gives_none(tmp_path):
+    photo = read_photo(write_photo(tmp_path / "a.png", smooth((4, 5, 3))))
+    assert photo.exif is None and photo.icc_profile is None
+
+
+# --------------------------------------------------------------------------- hints
+
+
+def hints_for(shape, **tags):
+    return exif_capture_hints(like(np.zeros(shape, np.float32), exif=exif_block(**tags)))
+
+
+def test_hints_exposure_focal_length_and_35mm_fx():
+    hints = hints_for((40, 60, 3), x_A405=50)  # 3:2 landscape
+    assert hints["exposure_time"] == pytest.approx(1 / 60)
+    assert hints["focal_length_mm"] == pytest.approx(50.0)
+    assert hints["fx"] == pytest.approx(50 / 36 * 60)  # the width rule, for 3:2
+
+
+def test_hints_35mm_uses_the_diagonal_for_other_aspects_and_portrait():
+    hints = hints_for((40, 30), x_A405=26)  # 4:3 portrait
+    assert hints["fx"] == pytest.approx(26 * 50 / math.hypot(36, 24))
+
+
+@pytest.mark.parametrize("unit,mm", [(2, 25.4), (3, 10.0)])
+def test_hints_focal_plane_resolution(unit, mm):
+    hints = hints_for((40, 60), x_A20E=R(4000, 1), x_A210=unit)
+    assert hints["fx"] == pytest.approx(50 * 4000 / mm)
+    scaled = hints_for((40, 60), x_A20E=R(4000, 1), x_A210=unit, x_A002=6000, x_A003=4000)
+    assert scaled["fx"] == pytest.approx(50 * 4000 / mm * 60 / 6000)
+    # an unknown 35mm equivalent (0) does not hide the focal-plane route
+    assert hints_for((40, 60), x_A20E=R(4000, 1), x_A210=unit, x_A405=0)["fx"] == \
+        pytest.approx(hints["fx"])
+
+
+def test_hints_missing_or_damaged_exif():
+    assert "fx" not in hints_for((40, 60))
+    assert exif_capture_hints(like()) == {}
+    assert exif_capture_hints(like(exif=b"Exif\x00\x00garbage")) == {}
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def test_bit_depth_choice(tmp_path):
+    px = smooth((4, 5, 3))
+    src = like(bit_depth=16)
+    assert read_photo(write_photo(tmp_path / "a.png", px, like=src)).bit_depth == 16
+    assert read_photo(write_photo(tmp_path / "b.tif", px, like=src, bit_depth=8)).bit_depth == 8
+    assert read_photo(write_photo(tmp_path / "c.png", px)).bit_depth == 8
+    assert read_photo(write_photo(tmp_path / "d.jpg", px, like=src)).bit_depth == 8
+    with pytest.raises(InputError, match="e.jpg"):
+        write_photo(tmp_path / "e.jpg", px, bit_depth=16)
+    with pytest.raises(InputError, match="alpha"):
+        write_photo(tmp_path / "f.jpg", smooth((4, 5, 4)))
+
+
+def test_bad_pixels_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="float"):
+        write_photo(tmp_path / "a.png", np.zeros((4, 4), np.uint8))
+    with pytest.raises(ValueError, match="shape"):
+        write_photo(tmp_path / "a.png", np.zeros((4, 4, 2), np.float32))
+    with pytest.raises(ValueError, match="NaN"):
+        write_photo(tmp_path / "a.png", np.full((4, 4), np.nan, np.float32))
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("name", ["out.bmp", "out"])
+def test_unknown_extension(tmp_path, name):
+    with pytest.raises(InputError, match=name):
+        write_photo(tmp_path / name, smooth((4, 4)))
+
+
+def test_returns_path_and_leaves_no_temporary_file(tmp_path):
+    assert write_photo(str(tmp_path / "a.png"), smooth((4, 4))) == str(tmp_path / "a.png")
+    assert os.listdir(tmp_path) == ["a.png"]
+
+
+def test_refuses_existing_output_unless_overwrite(tmp_path):
+    out = tmp_path / "a.png"
+    write_photo(out, np.zeros((4, 4), np.float32))
+    with pytest.raises(InputError, match="exists; pass --overwrite to replace it") as info:
+        write_photo(out, np.ones((4, 4), np.float32))
+    assert "a.png" in str(info.value)
+    assert read_photo(out).pixels.max() == 0
+    write_photo(out, np.ones((4, 4), np.float32), overwrite=True)
+    assert read_photo(out).pixels.min() == 1
+
+
+def test_never_overwrites_the_input(tmp_path):
+    (tmp_path / "sub").mkdir()
+    write_photo(tmp_path / "in.png", np.zeros((4, 4), np.float32))
+    src = read_photo(tmp_path / "in.png")
+    os.symlink(tmp_path / "in.png", tmp_path / "link.png")
+    for target in (tmp_path / "in.png", tmp_path / "sub" / ".." / "in.png", tmp_path / "link.png"):
+        with pytest.raises(InputError, match="input"):
+            write_photo(target, np.ones((4, 4), np.float32), like=src, overwrite=True)
+    assert read_photo(tmp_path / "in.png").pixels.max() == 0
+
+
+def test_missing_folder_is_an_input_error_and_writes_nothing(tmp_path):
+    out = tmp_path / "nope" / "a.png"
+    with pytest.raises(InputError, match="does not exist") as info:
+        write_photo(out, smooth((4, 4)))
+    assert str(out) in str(info.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_failed_write_removes_temporary_and_keeps_old_file(tmp_path, monkeypatch):
+    out = tmp_path / "a.png"
+    write_photo(out, np.zeros((4, 4), np.float32))
+    before = out.read_bytes()
+
+    def broken(f, ints, **kwargs):
+        f.write(b"partial")
+        raise RuntimeError("encoder crashed")
+
+    monkeypatch.setattr(imageio, "_write_png", broken)
+    with pytest.raises(RuntimeError):
+        write_photo(out, np.ones((4, 4), np.float32), overwrite=True)
+    assert os.listdir(tmp_path) == ["a.png"] and out.read_bytes() == before
+
+    def full(f, ints, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(imageio, "_write_png", full)
+    with pytest.raises(InputError, match="No space left"):
+        write_photo(tmp_path / "b.png", np.ones((4, 4), np.float32))
+    assert os.listdir(tmp_path) == ["a.png"]
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError, match="missing.png.*not found"):
+        read_photo(tmp_path / "missing.png")
+
+
+def test_text_file_named_png(tmp_path):
+    (tmp_path / "notes.png").write_text("not an image\n")
+    with pytest.raises(InputError, match="notes.png"):
+        read_photo(tmp_path / "notes.png")
+
+
+@pytest.mark.parametrize("name,bits", [("cut.jpg", 8), ("cut.png", 8), ("cut16.png", 16),
+                                       ("cut16.tif", 16)])
+def test_truncated_files(tmp_path, name, bits):
+    full = tmp_path / f"full{os.path.splitext(name)[1]}"
+    _, pixels = levels((64, 64, 3), bits, seed=9)
+    write_photo(full, pixels, bit_depth=bits)
+    data = full.read_bytes()
+    (tmp_path / name).write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=name):
+        read_photo(tmp_path / name)
+
+
+def test_unsupported_formats_and_modes(tmp_path):
+    Image.new("RGB", (4, 4)).save(tmp_path / "a.gif")
+    with pytest.raises(InputError, match="a.gif.*GIF"):
+        read_photo(tmp_path / "a.gif")
+    Image.new("CMYK", (4, 4)).save(tmp_path / "c.jpg")
+    with pytest.raises(InputError, match="c.jpg.*CMYK"):
+        read_photo(tmp_path / "c.jpg")
+    with pytest.raises(InputError, match="folder"):
+        read_photo(tmp_path)
+
+
+def test_photo_is_frozen_with_identity_equality():
+    photo = like()
+    with pytest.raises(AttributeError):
+        photo.bit_depth = 16
+    assert photo == photo and photo != like() and hash(photo) == hash(photo)
+    with pytest.raises(ValueError):
+        like(bit_depth=12)
