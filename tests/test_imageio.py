@@ -425,6 +425,20 @@ def test_never_overwrites_the_input(tmp_path):
     assert read_photo(tmp_path / "in.png").pixels.max() == 0
 
 
+def test_check_destination_is_the_same_check_without_writing(tmp_path):
+    imageio.check_destination(tmp_path / "new.png")
+    with pytest.raises(InputError, match="unknown image type"):
+        imageio.check_destination(tmp_path / "new.gif")
+    (tmp_path / "old.png").write_bytes(b"x")
+    with pytest.raises(InputError, match="exists"):
+        imageio.check_destination(tmp_path / "old.png")
+    imageio.check_destination(tmp_path / "old.png", overwrite=True)
+    with pytest.raises(InputError, match="input"):
+        imageio.check_destination(tmp_path / "old.png", like(path=str(tmp_path / "old.png")),
+                                  overwrite=True)
+    assert sorted(os.listdir(tmp_path)) == ["old.png"]
+
+
 def test_missing_folder_is_an_input_error_and_writes_nothing(tmp_path):
     out = tmp_path / "nope" / "a.png"
     with pytest.raises(InputError, match="does not exist") as info:

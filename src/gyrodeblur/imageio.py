@@ -56,7 +56,8 @@ from PIL import Image, TiffImagePlugin, UnidentifiedImageError
 
 from gyrodeblur.errors import InputError
 
-__all__ = ["Photo", "read_photo", "write_photo", "exif_capture_hints", "EXTENSIONS"]
+__all__ = ["Photo", "read_photo", "write_photo", "check_destination", "exif_capture_hints",
+           "EXTENSIONS"]
 
 #: File extensions :func:`write_photo` understands, and the format each one selects.
 EXTENSIONS: dict[str, str] = {
@@ -598,9 +599,7 @@ def write_photo(
         ``bit_depth``/``quality`` is out of range.
     """
     p = os.fspath(path)
-    fmt = EXTENSIONS.get(os.path.splitext(p)[1].lower())
-    if fmt is None:
-        raise InputError(p, "unknown image type; use .jpg, .jpeg, .png, .tif or .tiff")
+    fmt = _format_of(p)
     pixels = _check_pixels(pixels)
     depth = _choose_bit_depth(p, fmt, bit_depth, like)
     if not 1 <= int(quality) <= 100:
@@ -608,7 +607,7 @@ def write_photo(
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     if fmt == "JPEG" and channels == 4:
         raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
-    _check_destination(p, like, overwrite)
+    check_destination(p, like, overwrite)
 
     ints = _to_integers(pixels, depth)
     exif = _normalise_exif(like.exif) if like is not None else None
@@ -645,7 +644,34 @@ def _choose_bit_depth(path: str, fmt: str, bit_depth: int | None, like: Photo | 
     return like.bit_depth if like is not None else 8
 
 
-def _check_destination(path: str, like: Photo | None, overwrite: bool) -> None:
+def _format_of(path: str) -> str:
+    fmt = EXTENSIONS.get(os.path.splitext(path)[1].lower())
+    if fmt is None:
+        raise InputError(path, "unknown image type; use .jpg, .jpeg, .png, .tif or .tiff")
+    return fmt
+
+
+def check_destination(path: str | os.PathLike, like: Photo | None = None,
+                      overwrite: bool = False) -> None:
+    """Check, before any work, that :func:`write_photo` may write ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The intended output file.
+    like : Photo, optional
+        The input photo, which is never overwritten.
+    overwrite : bool
+        Whether an existing file may be replaced.
+
+    Raises
+    ------
+    InputError
+        Unknown extension, missing folder, ``path`` is a folder or the input photo, or
+        it exists and ``overwrite`` is false.
+    """
+    path = os.fspath(path)
+    _format_of(path)
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise InputError(path, f"folder {folder} does not exist")
