@@ -121,9 +121,9 @@ def _write_picture(path: str, rgb_uint8: np.ndarray, overwrite: bool) -> None:
     write_photo(path, rgb_uint8.astype(np.float32) / 255.0, overwrite=overwrite)
 
 
-def _check_output(path: str, like, overwrite: bool) -> None:
+def _check_output(path: str, like, overwrite: bool, image: bool = True) -> None:
     from .imageio import check_destination
-    check_destination(path, like, overwrite)
+    check_destination(path, like, overwrite, image=image)
 
 
 # ----------------------------------------------------------------------------- commands
@@ -139,7 +139,7 @@ def cmd_psf(args, say) -> None:
     out = args.output
     if not out.lower().endswith((".npy", ".png")):
         raise InputError(out, "output must end in .npy or .png")
-    _check_output(out, None, args.overwrite)
+    _check_output(out, None, args.overwrite, image=out.lower().endswith(".png"))
     if args.at is not None:
         x, y = _pair(args.at, "--at", float, sep=",")
         psf = render_psf(cap, x, y)

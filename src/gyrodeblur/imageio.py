@@ -652,7 +652,7 @@ def _format_of(path: str) -> str:
 
 
 def check_destination(path: str | os.PathLike, like: Photo | None = None,
-                      overwrite: bool = False) -> None:
+                      overwrite: bool = False, *, image: bool = True) -> None:
     """Check, before any work, that :func:`write_photo` may write ``path``.
 
     Parameters
@@ -663,6 +663,9 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
         The input photo, which is never overwritten.
     overwrite : bool
         Whether an existing file may be replaced.
+    image : bool
+        Whether ``path`` must have an image extension (``False`` for other outputs such
+        as ``.npy`` or ``.json``, which get the same folder and overwrite checks).
 
     Raises
     ------
@@ -671,7 +674,8 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
         it exists and ``overwrite`` is false.
     """
     path = os.fspath(path)
-    _format_of(path)
+    if image:
+        _format_of(path)
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise InputError(path, f"folder {folder} does not exist")
