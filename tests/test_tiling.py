@@ -1,0 +1,302 @@
+"""Properties of patch tiling and blending (gyrodeblur.tiling)."""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from gyrodeblur.errors import InputError
+from gyrodeblur.tiling import (
+    MIN_WINDOW,
+    Patch,
+    blend_weights,
+    deconvolve_patchwise,
+    patch_grid,
+    psf_radius,
+)
+from gyrodeblur.wiener import wiener_deconvolve
+
+
+def _line_psf(length, angle, size=None):
+    """Line PSF of ``length`` px at ``angle`` (radians), bilinear splat, centred, odd size."""
+    size = size or (2 * int(np.ceil(length / 2)) + 3)
+    psf = np.zeros((size, size))
+    c = size // 2
+    for t in np.linspace(-length / 2, length / 2, 4 * int(np.ceil(length)) + 1):
+        y, x = c + t * np.sin(angle), c + t * np.cos(angle)
+        y0, x0 = int(np.floor(y)), int(np.floor(x))
+        fy, fx = y - y0, x - x0
+        psf[y0, x0] += (1 - fy) * (1 - fx)
+        psf[y0 + 1, x0] += fy * (1 - fx)
+        psf[y0, x0 + 1] += (1 - fy) * fx
+        psf[y0 + 1, x0 + 1] += fy * fx
+    return psf / psf.sum()
+
+
+def _scene(shape, seed=0, sigma=2.0):
+    rng = np.random.default_rng(seed)
+    sig = (sigma, sigma) + (0,) * (len(shape) - 2)
+    img = ndimage.gaussian_filter(rng.random(shape), sig)
+    img = (img - img.min()) / (img.max() - img.min())
+    yy = np.linspace(0, 1, shape[0])[:, None]
+    if len(shape) == 3:
+        yy = yy[..., None]
+    return (0.1 + 0.5 * img + 0.3 * yy).astype(np.float32)
+
+
+# ---------------------------------------------------------------- patch_grid
+
+@pytest.mark.parametrize("shape, grid, overlap", [
+    ((3000, 4000), (6, 8), 0.25),
+    ((480, 640, 3), (6, 8), 0.25),
+    ((201, 333), (3, 5), 0.25),
+    ((201, 333), (4, 2), 0.5),
+    ((100, 157), (2, 3), 0.0),
+    ((97, 101), (1, 1), 0.25),
+])
+def test_patch_grid_tiles_with_equal_windows_and_exact_overlap(shape, grid, overlap):
+    patches = patch_grid(shape, grid, overlap)
+    rows, cols = grid
+    assert len(patches) == rows * cols
+    sizes = {p.shape for p in patches}
+    assert len(sizes) == 1, sizes
+    h, w = sizes.pop()
+    cover = np.zeros(shape[:2], int)
+    for p in patches:
+        assert 0 <= p.y0 < p.y1 <= shape[0] and 0 <= p.x0 < p.x1 <= shape[1]
+        cover[p.y0:p.y1, p.x0:p.x1] += 1
+    assert cover.min() >= 1
+    # Row-major, first window at the origin, last one flush with the far corner.
+    assert (patches[0].y0, patches[0].x0) == (0, 0)
+    assert (patches[-1].y1, patches[-1].x1) == shape[:2]
+    assert [p.x0 for p in patches[:cols]] == sorted(p.x0 for p in patches[:cols])
+    # Every pair of neighbours overlaps by the same number of pixels, close to `overlap`.
+    for n, size, starts in ((rows, h, [patches[i * cols].y0 for i in range(rows)]),
+                            (cols, w, [patches[j].x0 for j in range(cols)])):
+        if n == 1:
+            continue
+        overlaps = {size - (b - a) for a, b in zip(starts, starts[1:])}
+        assert len(overlaps) == 1, overlaps
+        v = overlaps.pop()
+        assert v >= 0
+        assert abs(v / size - overlap) <= n / size + 1e-9, (v, size)
+
+
+def test_patch_grid_chapter_layout():
+    patches = patch_grid((3000, 4000))
+    assert len(patches) == 48
+    assert patches[0].shape == (630, 640)
+    assert patches[1].x0 == 480  # 160 px = 25 % of 640 overlap
+    assert patches[8].y0 == 630 - 156
+
+
+def test_patch_centre():
+    p = Patch(10, 20, 0, 5)
+    assert p.centre == (14.5, 2.0)
+    assert p.shape == (10, 5)
+    with pytest.raises(AttributeError):
+        p.y0 = 3  # frozen
+
+
+@pytest.mark.parametrize("grid", [(0, 8), (6,), (6, 8, 1), "6x8", (6.0, 8), (True, 8), (-1, 2),
+                                  None])
+def test_bad_grid_raises_input_error(grid):
+    with pytest.raises(InputError, match="--grid"):
+        patch_grid((480, 640), grid=grid)
+
+
+@pytest.mark.parametrize("overlap", [-0.1, 0.6, 1.0, float("nan"), "0.25", None])
+def test_bad_overlap_raises_input_error(overlap):
+    with pytest.raises(InputError, match="--overlap"):
+        patch_grid((480, 640), overlap=overlap)
+
+
+def test_grid_too_fine_raises_input_error():
+    with pytest.raises(InputError, match="--grid"):
+        patch_grid((60, 640), grid=(6, 8))
+    with pytest.raises(InputError, match="--grid"):
+        patch_grid((MIN_WINDOW - 1, 640), grid=(1, 8))
+
+
+# ---------------------------------------------------------------- blend_weights
+
+@pytest.mark.parametrize("shape, grid, overlap", [
+    ((240, 320), (6, 8), 0.25), ((101, 77), (3, 2), 0.5), ((64, 64), (1, 1), 0.25),
+    ((90, 120), (2, 3), 0.0),
+])
+def test_blend_weights_sum_to_one(shape, grid, overlap):
+    patches = patch_grid(shape, grid, overlap)
+    total = np.zeros(shape)
+    for p, (wy, wx) in zip(patches, blend_weights(patches, shape)):
+        assert wy.dtype == np.float32 and wx.shape == (p.x1 - p.x0,)
+        assert np.all(wy > 0) and np.all(wx > 0)
+        total[p.y0:p.y1, p.x0:p.x1] += np.outer(wy, wx)
+    np.testing.assert_allclose(total, 1.0, atol=1e-6)
+
+
+def test_blend_weights_are_normalised_hamming_windows():
+    shape = (300, 400)
+    patches = patch_grid(shape, (3, 4), 0.25)
+    weights = blend_weights(patches, shape)
+    cols = [(p.x0, p.x1) for p in patches[:4]]
+    total = np.zeros(shape[1])
+    for a, b in cols:
+        total[a:b] += np.hamming(b - a)
+    for j, (a, b) in enumerate(cols):
+        np.testing.assert_allclose(weights[4 + j][1], np.hamming(b - a) / total[a:b], rtol=1e-5)
+    # Across an overlap the weight of the left patch falls smoothly from near 1 to near 0.
+    a1 = cols[1][0]
+    left = weights[4][1][a1 - cols[0][0]:]
+    assert left[0] > 0.8 and left[-1] < 0.2
+    assert np.all(np.diff(left) < 0)
+
+
+def test_blend_weights_reject_non_grid_layout():
+    patches = [Patch(0, 40, 0, 40), Patch(20, 64, 20, 64)]
+    with pytest.raises(ValueError):
+        blend_weights(patches, (64, 64))
+
+
+# ---------------------------------------------------------------- deconvolve_patchwise
+
+def _psf_field(n, seed=0):
+    rng = np.random.default_rng(seed)
+    return [_line_psf(rng.uniform(1, 9), rng.uniform(0, np.pi)) for _ in range(n)]
+
+
+@pytest.mark.parametrize("shape", [(150, 200), (150, 200, 3)])
+def test_flat_image_stays_flat_with_varied_psfs(shape):
+    img = np.full(shape, 0.42, np.float32)
+    patches = patch_grid(shape, (3, 4), 0.25)
+    out = deconvolve_patchwise(img, patches, _psf_field(len(patches)),
+                               functools.partial(wiener_deconvolve, phi=0.01))
+    assert out.shape == shape and out.dtype == np.float32
+    assert np.max(np.abs(out - 0.42)) < 1e-3
+
+
+def test_identity_deconvolver_returns_input_exactly():
+    # Blending alone must not change anything: no seams, steps or dark border.
+    img = _scene((120, 170, 3))
+    patches = patch_grid(img.shape, (3, 4), 0.25)
+    out = deconvolve_patchwise(img, patches, _psf_field(len(patches)), lambda s, p: s)
+    np.testing.assert_allclose(out, img, atol=2e-6)
+
+
+def test_same_psf_everywhere_matches_whole_image_wiener():
+    # No seams: with one PSF in every patch the result should match one global filter,
+    # except for the small effect of the finite patch margins.
+    img = _scene((180, 240, 3), seed=4)
+    psf = _line_psf(7, 0.4)
+    patches = patch_grid(img.shape, (3, 4), 0.25)
+    out = deconvolve_patchwise(img, patches, [psf] * len(patches), wiener_deconvolve)
+    whole = wiener_deconvolve(img, psf)
+    # The Wiener filter's tails are long, so a 12 px margin leaves a small difference
+    # (about 2e-3 on average here, a few 1e-2 at most); a seam would be far larger.
+    err = np.abs(out - whole)[16:-16, 16:-16]
+    assert err.mean() < 4e-3 and err.max() < 4e-2, (err.mean(), err.max())
+
+
+def test_patchwise_restores_space_variant_blur():
+    # Left half blurred horizontally, right half vertically (independent shift model).
+    sharp = _scene((120, 240), seed=5, sigma=0.8)
+    shifts_h = [(0, t) for t in range(-3, 4)]
+    shifts_v = [(t, 0) for t in range(-3, 4)]
+
+    def blur(shifts):
+        return np.mean([ndimage.shift(sharp, s, order=0, mode="nearest") for s in shifts], axis=0)
+
+    blurred = np.concatenate([blur(shifts_h)[:, :120], blur(shifts_v)[:, 120:]], axis=1)
+    blurred = blurred.astype(np.float32)
+    patches = patch_grid(blurred.shape, (1, 2), 0.0)
+    psf_h = np.zeros((7, 7))
+    psf_h[3, :] = 1 / 7
+    out = deconvolve_patchwise(blurred, patches, [psf_h, psf_h.T],
+                               functools.partial(wiener_deconvolve, phi=0.002))
+    inner = (slice(8, -8), np.r_[8:110, 130:232])
+    err_out = np.sqrt(np.mean((out[inner] - sharp[inner]) ** 2))
+    err_in = np.sqrt(np.mean((blurred[inner] - sharp[inner]) ** 2))
+    assert err_out < 0.6 * err_in, (err_out, err_in)
+
+
+def test_threads_give_identical_result_and_progress_is_reported():
+    img = _scene((100, 130, 3), seed=6)
+    patches = patch_grid(img.shape, (2, 3), 0.25)
+    psfs = _psf_field(len(patches), seed=1)
+    calls = []
+    serial = deconvolve_patchwise(img, patches, psfs, wiener_deconvolve, workers=1,
+                                  progress=lambda d, t: calls.append((d, t)))
+    assert calls == [(k, 6) for k in range(1, 7)]
+    for workers in (2, 3, None):
+        calls.clear()
+        threaded = deconvolve_patchwise(img, patches, psfs, wiener_deconvolve,
+                                        workers=workers,
+                                        progress=lambda d, t: calls.append((d, t)))
+        np.testing.assert_array_equal(threaded, serial)
+        assert calls == [(k, 6) for k in range(1, 7)]
+
+
+def test_margin_uses_real_neighbours_clamped_at_border():
+    img = _scene((90, 120))
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    psf = _line_psf(6, 0.0)  # radius 4 -> margin 12
+    seen = []
+
+    def record(sub, p):
+        seen.append(sub.shape)
+        return sub
+
+    deconvolve_patchwise(img, patches, [psf] * 4, record)
+    r = psf_radius(psf) + 8
+    h, w = patches[0].shape
+    # Every window touches two image borders here, so one side of each axis is clamped.
+    assert seen == [(h + r, w + r)] * 4
+    assert deconvolve_patchwise(img, patches, [psf] * 4, record, margin=0).shape == img.shape
+    assert seen[-1] == (h, w)
+
+
+def test_non_grid_layout_blends_with_weight_map():
+    img = np.full((64, 80), 0.3, np.float32)
+    patches = [Patch(0, 40, 0, 50), Patch(30, 64, 0, 80), Patch(0, 40, 40, 80)]
+    out = deconvolve_patchwise(img, patches, _psf_field(3), wiener_deconvolve)
+    assert np.max(np.abs(out - 0.3)) < 1e-3
+    with pytest.raises(ValueError, match="uncovered"):
+        deconvolve_patchwise(img, patches[:2], _psf_field(2), wiener_deconvolve)
+
+
+def test_large_psf_warns():
+    img = _scene((120, 160))
+    patches = patch_grid(img.shape, (2, 2), 0.25)  # windows 68x91 (about)
+    psfs = [_line_psf(3, 0.0)] * 3 + [_line_psf(45, 0.3)]
+    with pytest.warns(UserWarning, match="coarser --grid"):
+        deconvolve_patchwise(img, patches, psfs, lambda s, p: s)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        deconvolve_patchwise(img, patches, [_line_psf(3, 0.0)] * 4, lambda s, p: s)
+
+
+def test_psf_radius():
+    psf = np.zeros((11, 11))
+    psf[5, 5] = 1
+    assert psf_radius(psf) == 0
+    psf[5, 8] = 1
+    assert psf_radius(psf) == 3
+    psf[0, 5] = 1
+    assert psf_radius(psf) == 5
+
+
+def test_argument_checks():
+    img = np.zeros((64, 64), np.float32)
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    psf = np.ones((3, 3)) / 9
+    with pytest.raises(ValueError, match="PSFs"):
+        deconvolve_patchwise(img, patches, [psf] * 3, wiener_deconvolve)
+    with pytest.raises(ValueError, match="shape"):
+        deconvolve_patchwise(img, patches, [psf] * 4, lambda s, p: s[1:])
+    with pytest.raises(ValueError, match="leaves"):
+        deconvolve_patchwise(img, [Patch(0, 65, 0, 64)], [psf], wiener_deconvolve)
+    with pytest.raises(ValueError, match="workers"):
+        deconvolve_patchwise(img, patches, [psf] * 4, wiener_deconvolve, workers=0)
