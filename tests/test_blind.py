@@ -1,0 +1,291 @@
+"""Tests for single-image blind deconvolution (gyrodeblur.blind)."""
+
+from __future__ import annotations
+
+import sys
+import types
+
+import numpy as np
+import pytest
+from scipy import ndimage, signal
+
+from gyrodeblur import blind
+from gyrodeblur.blind import _wiener, blind_deconvolve, estimate_kernel
+from gyrodeblur.errors import InputError
+
+NOISE = 0.005
+
+
+# --------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def sharp() -> np.ndarray:
+    """A 256x256 grey natural image in [0, 1] (scikit-image's camera, downsized)."""
+    from skimage import data
+    from skimage.transform import resize
+
+    img = data.camera().astype(np.float32) / 255.0
+    return resize(img, (256, 256), anti_aliasing=True).astype(np.float32)
+
+
+@pytest.fixture
+def levin(shared_data) -> dict[str, np.ndarray]:
+    """Levin et al. 2009 camera-shake kernels, each re-centred on its centre of mass."""
+    path = shared_data / "kernels" / "levin2009.npz"
+    if not path.is_file():
+        pytest.skip(f"Levin 2009 kernels not found at {path}")
+    with np.load(path) as npz:
+        return {name: _centred(npz[name]) for name in npz.files}
+
+
+def _centred(k: np.ndarray) -> np.ndarray:
+    """Shift a kernel by whole pixels so that its centroid is the centre sample."""
+    k = np.asarray(k, dtype=np.float64)
+    k = k / k.sum()
+    yy, xx = np.indices(k.shape)
+    cy, cx = (yy * k).sum(), (xx * k).sum()
+    ny, nx = np.nonzero(k > 0)
+    half = int(np.ceil(max(np.abs(ny - cy).max(), np.abs(nx - cx).max()))) + 1
+    out = np.zeros((2 * half + 1, 2 * half + 1))
+    oy, ox = half - int(round(cy)), half - int(round(cx))
+    out[ny + oy, nx + ox] = k[ny, nx]
+    return out.astype(np.float32)
+
+
+def _blur(img: np.ndarray, k: np.ndarray, sigma: float = NOISE, seed: int = 0) -> np.ndarray:
+    blurred = ndimage.convolve(img, k, mode="reflect")
+    noise = sigma * np.random.default_rng(seed).standard_normal(img.shape)
+    return np.clip(blurred + noise, 0, 1).astype(np.float32)
+
+
+def _support(k: np.ndarray, margin: int = 4) -> int:
+    return k.shape[0] + margin + 1 - (k.shape[0] + margin) % 2
+
+
+def _ncc(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest normalised cross-correlation over all relative shifts (kernels are only
+    defined up to a shift)."""
+    a = np.asarray(a, np.float64) - np.mean(a)
+    b = np.asarray(b, np.float64) - np.mean(b)
+    n = max(a.shape[0], b.shape[0])
+    a = np.pad(a, (n - a.shape[0]) // 2)
+    b = np.pad(b, (n - b.shape[0]) // 2)
+    return float(signal.correlate(a, b).max() / (np.linalg.norm(a) * np.linalg.norm(b)))
+
+
+def _psnr(x: np.ndarray, ref: np.ndarray, max_shift: int = 2) -> float:
+    """PSNR of ``x`` against ``ref`` at the best whole-pixel shift up to ``max_shift``
+    (the estimated kernel's registration is arbitrary up to rounding of its centroid);
+    8-pixel borders excluded."""
+    m = 8
+    h, w = ref.shape
+    core = ref[m:h - m, m:w - m]
+    x = np.clip(x, 0, 1)
+    best = -np.inf
+    for dy in range(-max_shift, max_shift + 1):
+        for dx in range(-max_shift, max_shift + 1):
+            mse = np.mean((x[m + dy:h - m + dy, m + dx:w - m + dx] - core) ** 2)
+            best = max(best, 10 * np.log10(1.0 / mse))
+    return float(best)
+
+
+def _assert_valid_psf(psf: np.ndarray, size: int) -> None:
+    assert psf.shape == (size, size)
+    assert psf.dtype == np.float32
+    assert psf.min() >= 0
+    assert psf.sum() == pytest.approx(1.0, abs=1e-5)
+
+
+# --------------------------------------------------------------------------------------
+# validation
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("size", [4, 1, -3, 2, 129, 301, 9.0, True, "15"])
+def test_bad_kernel_size_raises_input_error_naming_option(size):
+    img = np.zeros((256, 258), np.float32)
+    with pytest.raises(InputError, match="--kernel-size") as err:
+        estimate_kernel(img, size)
+    assert err.value.source == "--kernel-size"
+
+
+def test_kernel_size_just_under_half_the_image_is_accepted():
+    img = np.random.default_rng(1).random((40, 60), dtype=np.float32)
+    _assert_valid_psf(estimate_kernel(img, 19, iterations=1), 19)
+
+
+def test_bad_init_psf_and_image_shape_raise_value_error():
+    img = np.zeros((64, 64), np.float32)
+    with pytest.raises(ValueError, match="init_psf"):
+        estimate_kernel(img, 9, init_psf=np.ones((4, 4)))
+    with pytest.raises(ValueError, match="init_psf"):
+        estimate_kernel(img, 9, init_psf=-np.ones((3, 3)))
+    with pytest.raises(ValueError, match="image"):
+        estimate_kernel(np.zeros((4, 64, 64, 3), np.float32), 9)
+
+
+# --------------------------------------------------------------------------------------
+# properties
+# --------------------------------------------------------------------------------------
+def test_sharp_image_gives_kernel_concentrated_at_centre(sharp):
+    g = np.clip(sharp + NOISE * np.random.default_rng(2).standard_normal(sharp.shape), 0, 1)
+    psf = estimate_kernel(g.astype(np.float32), 21)
+    _assert_valid_psf(psf, 21)
+    r = np.hypot(*(np.indices(psf.shape) - 10))
+    assert psf[r <= 2].sum() > 0.9
+    assert np.unravel_index(psf.argmax(), psf.shape) in {(y, x) for y in (9, 10, 11)
+                                                          for x in (9, 10, 11)}
+
+
+def test_colour_input_is_estimated_on_luminance(sharp, levin):
+    k = levin["levin_5"]
+    g = _blur(sharp, k)
+    # a colour photo whose Rec. 709 luma is exactly g
+    rgb = np.stack([g, g, g], axis=2)
+    rgb[..., 0] += 0.05 / 0.2126
+    rgb[..., 2] -= 0.05 / 0.0722
+    luma = rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    np.testing.assert_allclose(luma, g, atol=1e-5)
+    a = estimate_kernel(rgb, 17, levels=2, iterations=2)
+    b = estimate_kernel(g, 17, levels=2, iterations=2)
+    np.testing.assert_allclose(a, b, atol=1e-4)
+
+
+def test_estimated_kernel_is_recentred(sharp, levin):
+    k = levin["levin_6"]
+    # an off-centre blur: the same kernel shifted by (+3, -2) pixels inside its support
+    shifted = np.zeros((k.shape[0] + 8,) * 2, np.float32)
+    shifted[7:7 + k.shape[0], 2:2 + k.shape[1]] = k
+    psf = estimate_kernel(_blur(sharp, shifted), _support(shifted, 0))
+    yy, xx = np.indices(psf.shape)
+    c = psf.shape[0] // 2
+    assert abs((yy * psf).sum() - c) <= 0.5 + 1e-4
+    assert abs((xx * psf).sum() - c) <= 0.5 + 1e-4
+
+
+# --------------------------------------------------------------------------------------
+# recovering real camera-shake kernels
+# --------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["levin_3", "levin_8"])
+def test_levin_kernel_is_recovered_and_deblurring_helps(sharp, levin, name):
+    k = levin[name]
+    g = _blur(sharp, k)
+    size = _support(k)
+    restored, psf = blind_deconvolve(g, size, deconvolve=_wiener)
+    _assert_valid_psf(psf, size)
+    assert restored.shape == g.shape and restored.dtype == np.float32
+    assert _ncc(psf, k) > 0.75
+    assert _psnr(restored, sharp) > _psnr(g, sharp) + 1.0
+
+
+def test_init_with_true_kernel_stays_close(sharp, levin):
+    k = levin["levin_2"]
+    g = _blur(sharp, k)
+    size = _support(k)
+    psf = estimate_kernel(g, size, init_psf=k)
+    _assert_valid_psf(psf, size)
+    assert _ncc(psf, k) > 0.85
+    # registration is kept: centroid where the initial kernel's is (to a pixel)
+    yy, xx = np.indices(psf.shape)
+    assert abs((yy * psf).sum() - size // 2) <= 1.0
+    assert abs((xx * psf).sum() - size // 2) <= 1.0
+
+
+def test_init_psf_larger_than_support_is_cropped_about_its_centre(sharp, levin):
+    k = levin["levin_5"]
+    big = np.pad(k, 10)
+    g = _blur(sharp, k)
+    psf = estimate_kernel(g, _support(k), init_psf=big, iterations=2)
+    _assert_valid_psf(psf, _support(k))
+
+
+# --------------------------------------------------------------------------------------
+# final non-blind step
+# --------------------------------------------------------------------------------------
+def _tiny_photo(colour: bool = False) -> np.ndarray:
+    rng = np.random.default_rng(3)
+    img = ndimage.gaussian_filter(rng.random((64, 64)), 1.5).astype(np.float32)
+    return np.repeat(img[..., None], 3, axis=2) if colour else img
+
+
+def test_custom_deconvolve_is_called_with_image_and_psf():
+    seen = {}
+
+    def fake(image, psf):
+        seen["args"] = (image.shape, psf.shape)
+        return image * 0 + 0.5
+
+    img = _tiny_photo(colour=True)
+    restored, psf = blind_deconvolve(img, 7, deconvolve=fake, levels=1, iterations=1)
+    assert seen["args"] == ((64, 64, 3), (7, 7))
+    assert np.all(restored == 0.5)
+
+
+def test_default_deconvolve_prefers_sparse_module(monkeypatch):
+    fake = types.ModuleType("gyrodeblur.sparse")
+    fake.sparse_deconvolve = lambda image, psf: np.full_like(image, 0.25)
+    monkeypatch.setitem(sys.modules, "gyrodeblur.sparse", fake)
+    restored, _ = blind_deconvolve(_tiny_photo(), 7, levels=1, iterations=1)
+    assert np.all(restored == 0.25)
+
+
+def test_default_deconvolve_falls_back_to_wiener_then_builtin(monkeypatch):
+    monkeypatch.setitem(sys.modules, "gyrodeblur.sparse", None)  # import fails
+    fake = types.ModuleType("gyrodeblur.wiener")
+    fake.wiener_deconvolve = lambda image, psf: np.full_like(image, 0.75)
+    monkeypatch.setitem(sys.modules, "gyrodeblur.wiener", fake)
+    assert blind._default_deconvolve()(np.zeros((8, 8), np.float32), np.ones((1, 1)))[0, 0] == 0.75
+    monkeypatch.setitem(sys.modules, "gyrodeblur.wiener", None)
+    assert blind._default_deconvolve() is _wiener
+
+
+def test_builtin_wiener_properties():
+    img = _tiny_photo(colour=True)
+    delta = np.zeros((5, 5), np.float32)
+    delta[2, 2] = 1
+    out = _wiener(img, delta)
+    assert out.shape == img.shape and out.dtype == np.float32
+    np.testing.assert_allclose(out, img, atol=2e-3)
+    flat = np.full((40, 50), 0.3, np.float32)
+    box = np.full((5, 5), 1 / 25, np.float32)
+    np.testing.assert_allclose(_wiener(flat, box), flat, atol=1e-5)
+
+
+# --------------------------------------------------------------------------------------
+# operators the solvers rely on (dot tests)
+# --------------------------------------------------------------------------------------
+def test_gradient_matches_its_otf_and_adjoint():
+    from gyrodeblur.fftutils import psf_to_otf
+
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal((20, 26)).astype(np.float32)
+    ux, uy = blind._grad(u)
+    dx = psf_to_otf(np.array([[1.0, -1.0, 0.0]]), u.shape)
+    dy = psf_to_otf(np.array([[1.0], [-1.0], [0.0]]), u.shape)
+    np.testing.assert_allclose(np.fft.rfft2(ux), dx * np.fft.rfft2(u), atol=1e-4)
+    np.testing.assert_allclose(np.fft.rfft2(uy), dy * np.fft.rfft2(u), atol=1e-4)
+    px, py = rng.standard_normal((2, 20, 26)).astype(np.float32)
+    lhs = np.vdot(ux, px) + np.vdot(uy, py)
+    rhs = np.vdot(u, blind._grad_adjoint(px, py))
+    assert lhs == pytest.approx(rhs, rel=1e-5)
+
+
+def test_kernel_normal_equations_dot_test():
+    from gyrodeblur.fftutils import convolve_fft
+
+    rng = np.random.default_rng(5)
+    ux, uy, yx, yy = rng.standard_normal((4, 24, 28)).astype(np.float32)
+    h = rng.standard_normal((5, 5)).astype(np.float32)
+    auto, b = blind._kernel_normal_equations(ux, uy, np.fft.rfft2(yx), np.fft.rfft2(yy), 2)
+    # <A h, y> == <h, A^T y>
+    lhs = np.vdot(convolve_fft(ux, h), yx) + np.vdot(convolve_fft(uy, h), yy)
+    assert lhs == pytest.approx(np.vdot(h, b), rel=1e-4)
+    # A^T A h through the autocorrelation == A^T applied to A h
+    _, atah = blind._kernel_normal_equations(ux, uy, np.fft.rfft2(convolve_fft(ux, h)),
+                                             np.fft.rfft2(convolve_fft(uy, h)), 2)
+    np.testing.assert_allclose(blind._normal_apply(auto, h), atah, rtol=1e-4, atol=1e-3)
+
+
+def test_flat_image_gives_a_delta():
+    psf = estimate_kernel(np.full((64, 64), 0.4, np.float32), 9)
+    _assert_valid_psf(psf, 9)
+    assert psf[4, 4] == pytest.approx(1.0)
