@@ -113,3 +113,13 @@ def test_missing_log_and_unknown_format(capture_dir, capsys):
     (d / "cap.json").write_text(json.dumps(doc))
     assert "unknown gyro log format" in _run_error(["psf", "--capture", str(d / "cap.json"),
                                                     "--at", "5,5", "-o", str(d / "p.npy")], capsys)
+
+
+def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
+    d = capture_dir
+    assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9",
+                 "-o", str(d / "blind.png"), "--quiet"]) == 0
+    assert "mode blind" in capsys.readouterr().out
+    assert read_photo(d / "blind.png").pixels.shape == (192, 256, 3)
+    assert "--kernel-size" in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
+                                          "8", "-o", str(d / "b2.png")], capsys)

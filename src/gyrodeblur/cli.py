@@ -214,9 +214,9 @@ def cmd_deblur(args, say) -> None:
     h, w = photo.pixels.shape[:2]
     t0 = time.perf_counter()
     if args.blind:
-        from .blind import blind_deblur_photo
-        restored, field = blind_deblur_photo(photo.pixels, args.kernel_size, method=args.method,
-                                             transfer=args.transfer, progress=progress, **options)
+        from .deblur import deblur_blind
+        restored, field = deblur_blind(photo.pixels, args.kernel_size, method=args.method,
+                                       transfer=args.transfer, progress=progress, **options)
         mode_txt, grid_txt = "blind", ""
     else:
         cap = _load_capture(args, photo, say)

@@ -23,8 +23,8 @@ from .tiling import DEFAULT_GRID, DEFAULT_OVERLAP, deconvolve_patchwise, patch_g
 from .tonecurve import get_transfer_curve
 from .wiener import DEFAULT_PHI, wiener_deconvolve
 
-__all__ = ["deblur", "deblur_with_psfs", "DeblurReport", "METHODS", "DEFAULT_METHOD",
-           "register_method", "plan_psf_field"]
+__all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
+           "DEFAULT_METHOD", "register_method", "plan_psf_field"]
 
 Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -192,3 +192,37 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     if not return_report:
         return out
     return out, DeblurReport(mode, method, field_.grid, field_, time.perf_counter() - t0, notes)
+
+
+def deblur_blind(image: np.ndarray, kernel_size: int, *, method: str | None = None,
+                 transfer: str = "srgb", max_pixels: int = 1_000_000, clip: bool = True,
+                 progress=None, **options):
+    """Deblur without a gyro log: estimate one PSF from the photo, then deconvolve.
+
+    The kernel is estimated by :func:`gyrodeblur.blind.estimate_kernel` (sec. 6.3.1:
+    gradients, coarse-to-fine, L0 prior with a decreasing weight, positivity and support
+    constraints) on the linear-light luminance of the central ``max_pixels`` of the photo
+    (the blur is assumed space-invariant; a crop keeps the time bounded on big photos),
+    then the whole photo is deconvolved with it by ``method``.
+
+    Returns
+    -------
+    restored : ndarray float32
+    field : PSFField
+        The estimated PSF, at the image centre.
+    """
+    from .blind import estimate_kernel
+    from .tiling import Patch
+
+    H, W = image.shape[:2]
+    lin = get_transfer_curve(transfer).decode(np.asarray(image, np.float32))
+    lum = lin.mean(axis=2) if lin.ndim == 3 else lin
+    if H * W > max_pixels:
+        s = np.sqrt(max_pixels / (H * W))
+        h, w = int(H * s), int(W * s)
+        y0, x0 = (H - h) // 2, (W - w) // 2
+        lum = lum[y0:y0 + h, x0:x0 + w]
+    psf = estimate_kernel(lum, kernel_size)
+    out = deblur_with_psfs(image, [Patch(0, H, 0, W)], [psf], method=method, transfer=transfer,
+                           clip=clip, progress=progress, **options)
+    return out, PSFField(np.array([[(W - 1) / 2, (H - 1) / 2]]), [psf], (1, 1))
