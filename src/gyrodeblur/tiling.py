@@ -273,7 +273,7 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
 
     radii = [psf_radius(psf) for psf in psfs]
-    _warn_large_psfs(patches, radii)
+    _warn_large_psfs(patches, psfs)
 
     try:
         weights = blend_weights(patches, (height, width))
@@ -410,8 +410,12 @@ def _check_inside(patches: Sequence[Patch], height: int, width: int) -> None:
             raise ValueError(f"{p} is empty or leaves the {height}x{width} image")
 
 
-def _warn_large_psfs(patches: Sequence[Patch], radii: Sequence[int]) -> None:
-    bad = [(2 * r + 1, p) for p, r in zip(patches, radii) if 2 * r + 1 > min(p.shape) / 2]
+def _warn_large_psfs(patches: Sequence[Patch], psfs: Sequence[np.ndarray]) -> None:
+    # The blur's own size counts here, not its offset from the centre sample (a rolling
+    # shutter displaces lower rows' PSFs; the margin takes care of the displacement).
+    from .psf import psf_extent
+    extents = [psf_extent(np.asarray(p)) for p in psfs]
+    bad = [(e, p) for p, e in zip(patches, extents) if e > min(p.shape) / 2]
     if bad:
         extent, patch = max(bad, key=lambda t: t[0])
         warnings.warn(
