@@ -1,0 +1,126 @@
+"""Estimate the standard deviation of additive white noise in a photo.
+
+The regularisation weight of the sparse deconvolution (:mod:`gyrodeblur.sparse`) is set
+from the noise level, so the level must be measured from the blurred photo itself when the
+caller does not know it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.ndimage as ndi
+
+__all__ = ["estimate_noise_sigma"]
+
+#: Median of |N(0, 1)| is 0.6745; 1 / 0.6745 turns a median absolute value into a sigma.
+_MAD_TO_SIGMA = 1.482602218505602
+#: Truncation point (in sigmas) of the refining step and the variance of N(0, 1) truncated
+#: to +-3: 1 - 2 * 3 * phi(3) / (2 * Phi(3) - 1).
+_TRUNC = 3.0
+_TRUNC_VAR = 0.9733369246625415
+
+
+def estimate_noise_sigma(image: np.ndarray, *, edge_quantile: float = 0.15,
+                         max_pixels: int = 1_000_000) -> float:
+    r"""Standard deviation of additive white Gaussian noise, in the image's own units.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        The (blurred, noisy) image; for float32 photos in ``[0, 1]`` the answer is on the
+        same ``[0, 1]`` scale (multiply by 255 for 8-bit levels). At least 8x8 pixels.
+    edge_quantile : float, optional
+        Fraction of pixels, those with the weakest smoothed gradient, that the estimate
+        uses; edges and texture in the rest are ignored. 0.15 kept the bias on strongly
+        textured test images within +5 % (0.5: +20 % at sigma 0.005).
+    max_pixels : int, optional
+        Larger images are measured on a regular subsample of rows and columns blocks
+        (whole 3x3 neighbourhoods are kept), which bounds the time on 12 MP photos.
+
+    Returns
+    -------
+    float
+        The noise sigma, averaged over the channels.
+
+    Notes
+    -----
+    Each channel is filtered with Immerkaer's noise-estimation mask, normalised to unit
+    noise gain,
+
+    .. math::
+        r = \frac{1}{6}\begin{pmatrix}1&-2&1\\-2&4&-2\\1&-2&1\end{pmatrix} \star g ,
+
+    the product of second differences along x and along y. Its response is zero along both
+    frequency axes and rises as :math:`\omega_x^2 \omega_y^2` near the origin, so smooth
+    shading, straight horizontal or vertical edges and anything a camera-shake blur has
+    already smoothed barely reach it, while white noise passes with gain 1. Pixels whose
+    Gaussian-smoothed gradient magnitude (sigma 1 px) lies above the ``edge_quantile``
+    quantile are dropped: that removes oblique edges, corners and texture. The gradient
+    filters are odd and the mask even, so for Gaussian noise the selection is independent of
+    the response and does not bias the result. A first estimate is the median absolute
+    deviation, :math:`\sigma_0 = 1.4826\,\mathrm{median}|r|`; the answer is the RMS of the
+    responses within :math:`\pm 3\sigma_0`, divided by the RMS of a unit Gaussian
+    truncated there (0.9866). The median alone moves in steps on 8-bit data (the
+    responses of integer levels lie on a grid of 1/1530), up to 25 % apart at 40 dB
+    noise; the truncated RMS does not. On photos it overestimates
+    slightly where fine texture survives (1 % on average, at most 7 %, on the 12 blurred
+    benchmark photos at sigma 0.0025-0.02); 8-bit
+    quantisation adds its own :math:`1/\sqrt{12}` levels, which is noise the deconvolution
+    sees too.
+
+    References
+    ----------
+    J. Immerkaer, "Fast noise variance estimation", CVIU 64(2), 1996.
+    D. L. Donoho, I. M. Johnstone, "Ideal spatial adaptation by wavelet shrinkage",
+    Biometrika 81(3), 1994 (the MAD estimator).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> flat = np.full((128, 128), 0.5, np.float32)
+    >>> noisy = flat + rng.normal(0, 0.02, flat.shape).astype(np.float32)
+    >>> round(estimate_noise_sigma(noisy), 2)
+    0.02
+    """
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim not in (2, 3) or min(img.shape[:2]) < 8:
+        raise ValueError(f"expected an (H, W) or (H, W, C) image of at least 8x8, got {img.shape}")
+    if not 0 < edge_quantile <= 1:
+        raise ValueError(f"edge_quantile must be in (0, 1], got {edge_quantile}")
+    img = _subsample(img, max_pixels)
+    chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
+    sigmas = [_channel_sigma(np.ascontiguousarray(ch), edge_quantile) for ch in chans]
+    return float(np.mean(sigmas))
+
+
+def _channel_sigma(ch: np.ndarray, edge_quantile: float) -> float:
+    d2 = np.array([1.0, -2.0, 1.0], dtype=np.float32)
+    r = ndi.correlate1d(ndi.correlate1d(ch, d2, axis=0), d2, axis=1)[1:-1, 1:-1]
+    r = np.abs(r.ravel()) / 6.0
+    if edge_quantile < 1:
+        grad = ndi.gaussian_gradient_magnitude(ch, 1.0)[1:-1, 1:-1].ravel()
+        k = max(int(edge_quantile * grad.size) - 1, 0)
+        thresh = np.partition(grad, k)[k]
+        r = r[grad <= thresh]
+    s0 = _MAD_TO_SIGMA * float(np.median(r))
+    if s0 == 0.0:  # e.g. a flat or barely noisy 8-bit image: most responses are exactly 0
+        return float(np.sqrt(np.pi / 2) * r.mean())
+    # Refine with the variance of the responses within +-3 s0, corrected for the
+    # truncation: continuous in the data, where the median of 8-bit data jumps in steps.
+    kept = r[r <= _TRUNC * s0]
+    return float(np.sqrt(np.mean(kept.astype(np.float64) ** 2) / _TRUNC_VAR))
+
+
+def _subsample(img: np.ndarray, max_pixels: int) -> np.ndarray:
+    """Keep a regular grid of 64-row and 64-column bands so that about max_pixels remain."""
+    h, w = img.shape[:2]
+    if h * w <= max_pixels:
+        return img
+    keep = np.sqrt(max_pixels / (h * w))  # fraction of rows (and of columns) to keep
+    band = 64
+    step = max(int(band / keep), band)
+    rows = np.concatenate([np.arange(s, min(s + band, h)) for s in range(0, h, step)])
+    cols = np.concatenate([np.arange(s, min(s + band, w)) for s in range(0, w, step)])
+    # Bands are glued together; the few 3x3 neighbourhoods that straddle a seam are
+    # outliers that the median ignores.
+    return img[np.ix_(rows, cols)]
