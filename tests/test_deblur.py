@@ -70,9 +70,9 @@ def test_variant_improves_every_case_and_beats_invariant_on_roll(cases):
 def test_flat_grey_stays_flat_with_any_field(cases):
     _, sharp, _, cap = cases[-1]
     flat = np.full(sharp.shape, 0.42, np.float32)
-    for method in ("wiener",):
+    for method in ("wiener", "sparse"):
         out = deblur(flat, cap, method=method, transfer="linear")
-        assert np.abs(out - 0.42).max() < 1e-3
+        assert np.abs(out - 0.42).max() < 1e-3, method
 
 
 def test_invariant_mode_uses_principal_point_and_middle_row(cases):
@@ -89,6 +89,16 @@ def test_grid_coarsens_for_huge_psfs():
     with pytest.warns(UserWarning, match="grid coarsened"):
         patches, field, notes = plan_psf_field(cap, (240, 320), grid=(6, 8))
     assert field.grid != (6, 8) and notes
+
+
+def test_sparse_default_beats_wiener_on_average(cases):
+    gains = []
+    for name, sharp, blurred, cap in cases:
+        pw = psnr(sharp, deblur(blurred, cap, method="wiener"), 20)
+        ps = psnr(sharp, deblur(blurred, cap), 20)
+        gains.append(ps - pw)
+        assert ps > pw - 0.3, f"{name}: sparse {ps:.2f} dB vs wiener {pw:.2f} dB"
+    assert np.mean(gains) > 0.5, gains
 
 
 def test_output_matches_sharp_geometry(cases):

@@ -206,10 +206,13 @@ def cmd_deblur(args, say) -> None:
     _check_output(args.output, photo, args.overwrite)
     if args.save_psf:
         _check_output(args.save_psf, photo, args.overwrite)
+    from .deblur import DEFAULT_METHOD
     options = {}
     if args.phi is not None:
+        if (args.method or DEFAULT_METHOD) != "wiener":
+            raise InputError("--phi", "applies to --method wiener only")
         options["phi"] = args.phi
-    grid = _pair(args.grid, "--grid")
+    grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
     progress = _Progress("deblurring", args.quiet)
     h, w = photo.pixels.shape[:2]
     t0 = time.perf_counter()
@@ -235,7 +238,7 @@ def cmd_deblur(args, say) -> None:
     if args.save_psf:
         _write_picture(args.save_psf, field_image(field, w, h), args.overwrite)
     e = field.extents
-    method = args.method or __import__("gyrodeblur.deblur", fromlist=["x"]).DEFAULT_METHOD
+    method = args.method or DEFAULT_METHOD
     say(f"deblurred {args.photo} -> {args.output}: {w}x{h}, mode {mode_txt}{grid_txt}, "
         f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")
 
@@ -298,7 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("photo", metavar="PHOTO")
     s.add_argument("-o", "--output", required=True, metavar="OUT")
     s.add_argument("--mode", choices=("variant", "invariant"), default="variant")
-    s.add_argument("--grid", default="6x8", metavar="RxC", help="patch grid (default 6x8)")
+    s.add_argument("--grid", default=None, metavar="RxC|auto",
+                   help="patch grid; default: 6x8 (the chapter's) for --method wiener, 'auto' "
+                        "(patches small enough that the PSF changes < 2 px across one) otherwise")
     s.add_argument("--overlap", type=float, default=0.25, help="patch overlap fraction (default 0.25)")
     s.add_argument("--method", choices=sorted(METHODS), default=None,
                    help="deconvolution method (default: the best available)")

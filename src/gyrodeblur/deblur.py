@@ -18,7 +18,7 @@ import numpy as np
 
 from .capture import Capture
 from .errors import InputError
-from .psf import PSFField, psf_extent, render_psf
+from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .tiling import DEFAULT_GRID, DEFAULT_OVERLAP, deconvolve_patchwise, patch_grid
 from .tonecurve import get_transfer_curve
 from .wiener import DEFAULT_PHI, wiener_deconvolve
@@ -33,9 +33,24 @@ def _wiener_factory(image: np.ndarray, *, phi: float = DEFAULT_PHI, **_) -> Deco
     return partial(wiener_deconvolve, phi=phi)
 
 
-#: name -> factory(image, **options) -> deconvolve(sub_image, psf)
-METHODS: dict[str, Callable[..., Deconvolver]] = {"wiener": _wiener_factory}
-DEFAULT_METHOD = "wiener"
+def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
+                    noise_sigma: float | None = None, **options) -> Deconvolver:
+    """Sparse-prior (TV) ADMM deconvolution; the noise level is measured once on the
+    photo as encoded (where sensor noise is roughly uniform), not in linear light."""
+    from .noise import estimate_noise_sigma
+    from .sparse import sparse_deconvolve
+    if noise_sigma is None:
+        noise_sigma = estimate_noise_sigma(image if encoded is None else encoded)
+    options.pop("phi", None)
+    return partial(sparse_deconvolve, noise_sigma=noise_sigma, workers=1, **options)
+
+
+#: name -> factory(image, **options) -> deconvolve(sub_image, psf). ``image`` is the
+#: photo in linear light; ``encoded`` (keyword) the same photo as given.
+METHODS: dict[str, Callable[..., Deconvolver]] = {"sparse": _sparse_factory,
+                                                  "wiener": _wiener_factory}
+#: The best method measured by benchmarks/compare_methods.py (see BENCHMARKS.md).
+DEFAULT_METHOD = "sparse"
 
 
 def register_method(name: str, factory: Callable[..., Deconvolver], *, default: bool = False):
@@ -63,16 +78,64 @@ class DeblurReport:
         return int(e.min()), int(e.max())
 
 
+#: Largest change (px) of the PSF across one patch that :func:`auto_grid` aims for.
+AUTO_GRID_TOLERANCE = 2.0
+#: Most patches :func:`auto_grid` chooses.
+AUTO_GRID_MAX_PATCHES = 1024
+
+
+def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT_OVERLAP, *,
+              tolerance: float = AUTO_GRID_TOLERANCE,
+              max_patches: int = AUTO_GRID_MAX_PATCHES, centred: bool = True) -> tuple[int, int]:
+    """A patch grid fine enough that each patch's PSF is nearly constant over it.
+
+    One PSF per patch is exact only where the blur does not change; roll, wide lenses
+    and the rolling shutter make it change (:func:`gyrodeblur.psf.psf_variation`, px per
+    px). Windows are made about ``tolerance / variation`` pixels wide, but never
+    narrower than twice the largest PSF's extent (a blur must fit its patch), never
+    coarser than the chapter's 6 x 8, and never more than ``max_patches`` in all.
+    ``centred``: count only the change of the PSFs' shape (the photo is aligned by the
+    displacement field first, see :func:`plan_psf_field`).
+
+    Returns
+    -------
+    (rows, cols)
+    """
+    H, W = shape[:2]
+    cap = capture.scaled_to(W, H)
+    variation = psf_variation(cap, centred=centred)
+    extent = max(psf_extent(render_psf(cap, x, y, max_step=0.5))
+                 for x in (0, (W - 1) / 2, W - 1) for y in (0, (H - 1) / 2, H - 1))
+    window = tolerance / variation if variation > 0 else np.inf
+    window = max(window, float(extent), 32.0)
+
+    def count(length: int) -> int:
+        return max(1, int(np.ceil((length / window - overlap) / (1 - overlap))))
+
+    rows, cols = max(count(H), DEFAULT_GRID[0]), max(count(W), DEFAULT_GRID[1])
+    if rows * cols > max_patches:
+        f = np.sqrt(max_patches / (rows * cols))
+        rows, cols = max(1, int(rows * f)), max(1, int(cols * f))
+    return rows, cols
+
+
 def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "variant",
                    grid=DEFAULT_GRID, overlap: float = DEFAULT_OVERLAP,
-                   max_fraction: float = 0.5):
+                   max_fraction: float = 1.0, align: bool = False):
     """Patches and their PSFs for a photo of ``shape`` (rows, cols).
 
     ``mode="invariant"``: one patch (the whole photo) and the PSF at the principal point
     with the middle row's rolling-shutter timing. ``mode="variant"``: ``grid`` patches
-    with ``overlap``, each with the PSF of its centre (and its row's timing). If a PSF's
+    (``"auto"``: :func:`auto_grid`) with ``overlap``, each with the PSF of its centre
+    (and its row's timing). If a PSF's
     extent exceeds ``max_fraction`` of its window's smaller side, the grid is made
     coarser (one row and column fewer at a time) and a warning says so.
+
+    ``align=True``: the PSFs are rendered centred (their shape only) and the field keeps
+    the mean-displacement field; :func:`deblur_with_psfs` then warps the photo by it
+    before deconvolving, so the part of the blur that varies fastest across the frame (a
+    displacement that changes from row to row with the rolling shutter, and with roll)
+    is undone exactly per pixel rather than per patch.
 
     Returns
     -------
@@ -84,18 +147,24 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     H, W = shape[:2]
     cap = capture.scaled_to(W, H)
     notes: list[str] = []
+    disp = displacement_field(cap) if align else None
     if mode == "invariant":
         cam = cap.camera
-        psf = render_psf(cap, cam.cx, cam.cy, row=(H - 1) / 2)
-        return [Patch(0, H, 0, W)], PSFField(np.array([[cam.cx, cam.cy]]), [psf], (1, 1)), notes
+        psf = render_psf(cap, cam.cx, cam.cy, row=(H - 1) / 2, centred=align)
+        return ([Patch(0, H, 0, W)], PSFField(np.array([[cam.cx, cam.cy]]), [psf], (1, 1), disp),
+                notes)
     if mode != "variant":
         raise InputError("--mode", f"unknown mode {mode!r} (variant or invariant)")
+    if isinstance(grid, str):
+        if grid != "auto":
+            raise InputError("--grid", f"expected RxC (e.g. 6x8) or 'auto', got {grid!r}")
+        grid = auto_grid(cap, (H, W), overlap, centred=align)
     rows, cols = int(grid[0]), int(grid[1])
     first = (rows, cols)
     while True:
         patches = patch_grid((H, W), (rows, cols), overlap)
         pts = np.array([[p.centre[1], p.centre[0]] for p in patches])
-        psfs = [render_psf(cap, x, y) for x, y in pts]
+        psfs = [render_psf(cap, x, y, centred=align) for x, y in pts]
         side = min(patches[0].shape)
         worst = max(psf_extent(p) for p in psfs)
         if worst <= max_fraction * side or (rows, cols) == (1, 1):
@@ -106,12 +175,42 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
                f"{worst} px do not fit patches of the finer grid")
         warnings.warn(msg, stacklevel=3)
         notes.append(msg)
-    return patches, PSFField(pts, psfs, (rows, cols)), notes
+    return patches, PSFField(pts, psfs, (rows, cols), disp), notes
+
+
+def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
+    """``g(x + c(x))``: sample ``image`` where each pixel's light landed on average.
+
+    ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`,
+    interpolated bilinearly to every pixel; the image is sampled with cubic splines
+    (mirrored outside the frame). After this warp every pixel's PSF is centred on it.
+    """
+    from scipy import ndimage
+
+    ys, xs, d = displacement
+    H, W = image.shape[:2]
+    gy = np.arange(H, dtype=np.float32) * np.float32((len(ys) - 1) / max(ys[-1], 1))
+    gx = np.arange(W, dtype=np.float32) * np.float32((len(xs) - 1) / max(xs[-1], 1))
+    GY, GX = np.meshgrid(gy, gx, indexing="ij")
+    coords = np.stack([GY, GX])
+    del GY, GX
+    cy = ndimage.map_coordinates(d[..., 1].astype(np.float32), coords, order=1, mode="nearest")
+    cx = ndimage.map_coordinates(d[..., 0].astype(np.float32), coords, order=1, mode="nearest")
+    coords[0] = np.arange(H, dtype=np.float32)[:, None] + cy
+    coords[1] = np.arange(W, dtype=np.float32)[None, :] + cx
+    del cy, cx
+    img = np.asarray(image, np.float32)
+    if img.ndim == 2:
+        return ndimage.map_coordinates(img, coords, order=3, mode="mirror")
+    out = np.empty_like(img)
+    for c in range(img.shape[2]):
+        out[..., c] = ndimage.map_coordinates(img[..., c], coords, order=3, mode="mirror")
+    return out
 
 
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
                      transfer: str = "srgb", clip: bool = True, progress=None,
-                     **options) -> np.ndarray:
+                     displacement=None, **options) -> np.ndarray:
     """Deconvolve ``image`` patch by patch with given PSFs (no gyro needed).
 
     Parameters
@@ -126,6 +225,9 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         The photo's transfer curve: undone before deconvolution, reapplied after.
     clip : bool
         Clip the result to [0, 1] (default; values outside are ringing or overshoot).
+    displacement : (ys, xs, d), optional
+        Mean-displacement field the (centred) PSFs leave out; the photo is warped by it
+        first (:func:`warp_by_displacement`).
     **options
         Passed to the method's factory (e.g. ``phi`` for Wiener).
     """
@@ -133,8 +235,11 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
     curve = get_transfer_curve(transfer)
-    img = curve.decode(np.asarray(image, dtype=np.float32))
-    deconvolve = METHODS[method](img, **options)
+    encoded = np.asarray(image, dtype=np.float32)
+    img = curve.decode(encoded)
+    deconvolve = METHODS[method](img, encoded=encoded, **options)
+    if displacement is not None:
+        img = warp_by_displacement(img, displacement)
     if len(patches) == 1 and patches[0].shape == img.shape[:2]:
         out = deconvolve(img, psfs[0])
         if progress:
@@ -145,8 +250,15 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     return np.clip(out, 0, 1).astype(np.float32) if clip else out.astype(np.float32)
 
 
+#: Per-method defaults of :func:`deblur`: the chapter's 6 x 8 grid and no alignment warp
+#: for its Wiener filter; :func:`auto_grid` and the warp for the others.
+METHOD_DEFAULTS = {"wiener": {"grid": DEFAULT_GRID, "align": False}}
+_OTHER_DEFAULTS = {"grid": "auto", "align": True}
+
+
 def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
-           grid=DEFAULT_GRID, overlap: float = DEFAULT_OVERLAP, method: str | None = None,
+           grid=None, overlap: float = DEFAULT_OVERLAP, method: str | None = None,
+           align: bool | None = None,
            transfer: str = "srgb", clip: bool = True, progress=None,
            return_report: bool = False, **options):
     """Remove camera-shake blur from ``image`` using the motion in ``capture``.
@@ -161,8 +273,14 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     mode : {"variant", "invariant"}
         Space-variant patch-wise deconvolution (default) or one PSF for the whole photo
         (the principal point's, with the middle row's rolling-shutter timing).
-    grid : (rows, cols)
-        Patch grid for ``mode="variant"`` (default 6 x 8, the chapter's).
+    grid : (rows, cols) or "auto"
+        Patch grid for ``mode="variant"``. Default: the chapter's 6 x 8 for
+        ``method="wiener"``, ``"auto"`` (:func:`auto_grid`: patches small enough that the
+        PSF changes by at most ~2 px across one) for the other methods.
+    align : bool, optional
+        Warp the photo by the PSFs' mean-displacement field and deconvolve with centred
+        PSFs (see :func:`plan_psf_field`). Default: off for ``"wiener"`` (the chapter's
+        design), on for the other methods.
     overlap : float
         Overlap between neighbouring patches, fraction of the patch size (default 0.25).
     method : str
@@ -185,10 +303,14 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     """
     t0 = time.perf_counter()
     method = method or DEFAULT_METHOD
+    defaults = METHOD_DEFAULTS.get(method, _OTHER_DEFAULTS)
+    grid = defaults["grid"] if grid is None else grid
+    align = defaults["align"] if align is None else align
     patches, field_, notes = plan_psf_field(capture, image.shape[:2], mode=mode, grid=grid,
-                                            overlap=overlap)
+                                            overlap=overlap, align=align)
     out = deblur_with_psfs(image, patches, field_.psfs, method=method, transfer=transfer,
-                           clip=clip, progress=progress, **options)
+                           clip=clip, progress=progress, displacement=field_.displacement,
+                           **options)
     if not return_report:
         return out
     return out, DeblurReport(mode, method, field_.grid, field_, time.perf_counter() - t0, notes)

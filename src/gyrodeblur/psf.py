@@ -24,7 +24,8 @@ import numpy as np
 
 from .capture import Capture
 
-__all__ = ["trace", "render_psf", "splat", "PSFField", "psf_field", "psf_extent"]
+__all__ = ["trace", "render_psf", "splat", "PSFField", "psf_field", "psf_extent",
+           "psf_variation", "displacement_field"]
 
 #: Largest allowed distance (px) between consecutive trace samples when rendering.
 MAX_STEP_PX = 0.25
@@ -93,7 +94,8 @@ def splat(offsets: np.ndarray, weights: np.ndarray | None = None,
 
 
 def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_STEP_PX,
-               radius: int | None = None, row: float | None = None) -> np.ndarray:
+               radius: int | None = None, row: float | None = None,
+               centred: bool = False) -> np.ndarray:
     """The PSF at pixel ``(x, y)`` (pixels, reference-image coordinates).
 
     Parameters
@@ -107,13 +109,19 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         Force the half-size; default: the smallest holding the whole trace (+1 px).
     row : float, optional
         Row whose rolling-shutter timing to use (default ``y``).
+    centred : bool
+        Subtract the trace's mean displacement, so the PSF's centre of mass is its centre
+        sample (its shape only; see :func:`displacement_field`).
 
     Returns
     -------
     ndarray, float32, shape (2r+1, 2r+1), sums to 1.
     """
     pts = _adaptive_trace(capture, float(x), float(y), max_step, row)
-    return splat(pts - np.array([x, y]), radius=radius)
+    offsets = pts - np.array([x, y])
+    if centred:
+        offsets -= offsets.mean(axis=0)
+    return splat(offsets, radius=radius)
 
 
 @dataclass(frozen=True)
@@ -127,11 +135,15 @@ class PSFField:
     psfs : list of ndarray
         One odd-sized PSF per point.
     grid : (rows, cols) or None
+    displacement : (ys, xs, d) or None
+        When the PSFs are centred (shape only), the mean-displacement field they were
+        centred by (:func:`displacement_field`).
     """
 
     points: np.ndarray
     psfs: list
     grid: tuple | None = None
+    displacement: tuple | None = None
 
     @property
     def extents(self) -> np.ndarray:
@@ -151,3 +163,63 @@ def psf_field(capture: Capture, points, *, grid: tuple | None = None,
     """PSFs at ``points`` (``(N, 2)`` x, y pixels). See :func:`render_psf`."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     return PSFField(pts, [render_psf(capture, x, y, max_step=max_step) for x, y in pts], grid)
+
+
+def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int = 32,
+                  centred: bool = False) -> float:
+    """How fast the PSF changes across the frame: pixels of trace difference per pixel.
+
+    The traces of a ``probes`` grid of points are sampled at ``n`` equal steps of their
+    own rows' exposures; for every pair of neighbouring probes, the largest difference of
+    their displacements ``x(t) - x0`` at equal steps, divided by their distance, is a
+    finite-difference estimate of the displacement field's spatial derivative (roll,
+    perspective and the rolling shutter's row timing all contribute). The maximum over
+    pairs is returned: a patch of ``w`` pixels sees its PSF change by about
+    ``w * psf_variation`` pixels from one side to the other. ``centred=True`` measures
+    the change of the PSFs' shape only (each trace minus its mean displacement), what is
+    left once the photo is warped by :func:`displacement_field`.
+    """
+    cam = capture.camera
+    ys = np.linspace(0, cam.height - 1, probes[0])
+    xs = np.linspace(0, cam.width - 1, probes[1])
+    d = np.empty((probes[0], probes[1], n, 2))
+    for i, y in enumerate(ys):
+        for j, x in enumerate(xs):
+            d[i, j] = trace(capture, x, y, n) - (x, y)
+            if centred:
+                d[i, j] -= d[i, j].mean(axis=0)
+    dx = np.abs(np.diff(d, axis=1)).max(axis=(2, 3)) / (xs[1] - xs[0])
+    dy = np.abs(np.diff(d, axis=0)).max(axis=(2, 3)) / (ys[1] - ys[0])
+    return float(max(dx.max(), dy.max()))
+
+
+def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
+    """Mean displacement (px) of each pixel's PSF: where, on average over the exposure,
+    the light of the reference-time pixel lands, relative to that pixel.
+
+    Evaluated on a regular grid (about ``step`` px apart, corners included) with ``n``
+    time steps per row's exposure, vectorised; the field is smooth, so bilinear
+    interpolation between grid points is accurate.
+
+    Returns
+    -------
+    ys, xs : ndarray
+        Grid row and column coordinates (pixels).
+    d : ndarray, shape (len(ys), len(xs), 2)
+        Mean displacement (dx, dy) in pixels at each grid point.
+    """
+    cam = capture.camera
+    ny = max(2, int(np.ceil((cam.height - 1) / step)) + 1)
+    nx = max(2, int(np.ceil((cam.width - 1) / step)) + 1)
+    ys = np.linspace(0, cam.height - 1, ny)
+    xs = np.linspace(0, cam.width - 1, nx)
+    times = (capture.row_start(ys)[:, None]
+             + capture.exposure_time * (np.arange(n) + 0.5)[None, :] / n)      # (ny, n)
+    R = capture.orientation.matrices(times)                                   # (ny, n, 3, 3)
+    X, Y = np.meshgrid(xs, ys)                                                # (ny, nx)
+    rays = np.stack([X, Y, np.ones_like(X)], axis=-1) @ cam.K_inv.T          # (ny, nx, 3)
+    d = np.einsum("ykji,yxj->ykxi", R, rays)                                   # R^T ray
+    p = d @ cam.K.T
+    xy = p[..., :2] / p[..., 2:3]                                            # (ny, n, nx, 2)
+    mean = xy.mean(axis=1)                                                    # (ny, nx, 2)
+    return ys, xs, mean - np.stack([X, Y], axis=-1)

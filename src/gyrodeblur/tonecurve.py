@@ -64,10 +64,9 @@ def srgb_to_linear(image: np.ndarray) -> np.ndarray:
     >>> float(srgb_to_linear(np.float32(0.5)))  # doctest: +ELLIPSIS
     0.2140...
     """
-    v = np.asarray(image, dtype=np.float64)
-    a = np.abs(v)
-    out = np.where(a <= _ENC_THRESHOLD, a / _SLOPE, ((a + _A) / (1 + _A)) ** _GAMMA)
-    return (np.sign(v) * out).astype(np.float32)
+    return _piecewise(image, _ENC_THRESHOLD, 1 / _SLOPE,
+                      lambda a: np.power(np.multiply(np.add(a, _A, out=a), 1 / (1 + _A), out=a),
+                                         _GAMMA, out=a))
 
 
 def linear_to_srgb(image: np.ndarray) -> np.ndarray:
@@ -95,10 +94,23 @@ def linear_to_srgb(image: np.ndarray) -> np.ndarray:
     >>> round(float(linear_to_srgb(np.float32(0.18))), 4)
     0.4614
     """
-    x = np.asarray(image, dtype=np.float64)
-    a = np.abs(x)
-    out = np.where(a <= _LIN_THRESHOLD, _SLOPE * a, (1 + _A) * a ** (1 / _GAMMA) - _A)
-    return (np.sign(x) * out).astype(np.float32)
+    return _piecewise(image, _LIN_THRESHOLD, _SLOPE,
+                      lambda a: np.subtract(np.multiply(np.power(a, 1 / _GAMMA, out=a), 1 + _A,
+                                                        out=a), _A, out=a))
+
+
+def _piecewise(image, threshold: float, slope: float, power_segment) -> np.ndarray:
+    """Odd-symmetric curve: ``slope * |x|`` up to ``threshold``, ``power_segment`` above.
+
+    float32 throughout, with in-place operations: a 12 MP RGB photo costs two extra
+    image-sized buffers rather than a dozen float64 ones."""
+    x = np.asarray(image, dtype=np.float32)
+    out = np.abs(x, out=np.empty_like(x))
+    small = out <= threshold
+    linear = out[small] * np.float32(slope)
+    power_segment(out)
+    out[small] = linear
+    return np.copysign(out, x, out=out)
 
 
 def _identity(image: np.ndarray) -> np.ndarray:
