@@ -270,7 +270,7 @@ def test_non_grid_layout_blends_with_weight_map():
 def test_large_psf_warns():
     img = _scene((120, 160))
     patches = patch_grid(img.shape, (2, 2), 0.25)  # windows 68x91 (about)
-    psfs = [_line_psf(3, 0.0)] * 3 + [_line_psf(45, 0.3)]
+    psfs = [_line_psf(3, 0.0)] * 3 + [_line_psf(85, 0.3)]
     with pytest.warns(UserWarning, match="coarser --grid"):
         deconvolve_patchwise(img, patches, psfs, lambda s, p: s)
     with warnings.catch_warnings():

@@ -81,7 +81,7 @@ class DeblurReport:
 #: Largest change (px) of the PSF across one patch that :func:`auto_grid` aims for.
 AUTO_GRID_TOLERANCE = 2.0
 #: Most patches :func:`auto_grid` chooses.
-AUTO_GRID_MAX_PATCHES = 1024
+AUTO_GRID_MAX_PATCHES = 96
 
 
 def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT_OVERLAP, *,

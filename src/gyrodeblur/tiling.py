@@ -232,11 +232,14 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
     Warns
     -----
     UserWarning
-        When a PSF's extent (``2 * psf_radius + 1``) exceeds half the smaller side of its
-        window. The patch is still processed, but a blur that long cannot be undone from
-        a window barely twice its size (the window's own border band dominates); use a
-        coarser grid. We warn rather than silently enlarge the patches because the PSFs
-        were rendered for these windows' centres.
+        When a PSF's blur extent (:func:`gyrodeblur.psf.psf_extent`, its offset from the
+        centre left out) exceeds the smaller side of its window. The patch is still
+        processed: the margin of real neighbours (the PSF's radius on every side) gives
+        the deconvolution the context it needs, so windows down to the blur's own size
+        work (measured on shared photos); beyond that a patch holds less than one blur
+        length of its own content, and a coarser grid is better. We warn rather than
+        silently enlarge the patches because the PSFs were rendered for these windows'
+        centres.
 
     Notes
     -----
@@ -415,11 +418,11 @@ def _warn_large_psfs(patches: Sequence[Patch], psfs: Sequence[np.ndarray]) -> No
     # shutter displaces lower rows' PSFs; the margin takes care of the displacement).
     from .psf import psf_extent
     extents = [psf_extent(np.asarray(p)) for p in psfs]
-    bad = [(e, p) for p, e in zip(patches, extents) if e > min(p.shape) / 2]
+    bad = [(e, p) for p, e in zip(patches, extents) if e > min(p.shape)]
     if bad:
         extent, patch = max(bad, key=lambda t: t[0])
         warnings.warn(
-            f"PSF extent up to {extent} px exceeds half the patch window "
+            f"PSF extent up to {extent} px exceeds the patch window "
             f"({patch.shape[0]}x{patch.shape[1]} px) in {len(bad)} of {len(patches)} patches: "
             "deblurring will be poor there; use a coarser --grid",
             UserWarning, stacklevel=3)
