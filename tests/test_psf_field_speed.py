@@ -1,0 +1,16 @@
+"""The PSF-field speed benchmark runs (quick mode) and reports sane figures."""
+
+import importlib.util
+from pathlib import Path
+
+
+def test_psf_field_speed_quick(tmp_path):
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "psf_field_speed.py"
+    spec = importlib.util.spec_from_file_location("psf_field_speed", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    res = mod.main(["--quick", "--out", str(tmp_path / "r.json")])
+    assert (tmp_path / "r.json").exists()
+    for case in res["cases"].values():
+        assert 0 < case["seconds_best"] < 30
+        assert case["psf_extent_px"][1] >= case["psf_extent_px"][0] >= 1
