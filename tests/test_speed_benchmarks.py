@@ -14,3 +14,14 @@ def test_psf_field_speed_quick(tmp_path):
     for case in res["cases"].values():
         assert 0 < case["seconds_best"] < 30
         assert case["psf_extent_px"][1] >= case["psf_extent_px"][0] >= 1
+
+
+def test_deconv_speed_quick(tmp_path):
+    import json
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "deconv_speed.py"
+    spec = importlib.util.spec_from_file_location("deconv_speed", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "d.json"
+    assert mod.main(["--quick", "--out", str(out)]) in (0, None)
+    assert out.exists() and json.loads(out.read_text())
