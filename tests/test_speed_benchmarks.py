@@ -25,3 +25,13 @@ def test_deconv_speed_quick(tmp_path):
     out = tmp_path / "d.json"
     assert mod.main(["--quick", "--out", str(out)]) in (0, None)
     assert out.exists() and json.loads(out.read_text())
+
+
+def test_wiener_oracle_quick(tmp_path, shared_data):
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "wiener_oracle.py"
+    spec = importlib.util.spec_from_file_location("wiener_oracle", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    res = mod.main(["--quick", "--out", str(tmp_path / "o.json")])
+    assert res["cases"] == 2 and (tmp_path / "o.json").exists()
+    assert res["mean_psnr"]["oracle_psnr"] >= res["mean_psnr"]["wiener_psnr"]
