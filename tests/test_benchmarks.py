@@ -1,0 +1,104 @@
+"""Every benchmark runs in its --quick mode and writes sane JSON, so the code cannot rot.
+
+The full runs are not part of the test suite (see BENCHMARKS.md).
+"""
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import SHARED_DATA
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def _load(name: str):
+    if str(BENCH) not in sys.path:
+        sys.path.insert(0, str(BENCH))
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", BENCH / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _need_shared():
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"shared test data not found at {SHARED_DATA}")
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_noise_sensitivity_quick(tmp_path):
+    _need_shared()
+    out = tmp_path / "noise.json"
+    assert _load("noise_sensitivity").main(["--quick", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    assert r["psnr_exact_gyro"] > r["psnr_blurred"] + 3
+    assert math.isfinite(r["psnr_drop_at_typical_noise_db"])
+    assert abs(r["psnr_drop_at_typical_noise_db"]) < 3
+    g = r["panels"]["gyro_noise"]
+    assert g["levels"] == [0.0, 0.007] and g["psnr"][1]["n"] == 2
+    assert set(r["panels"]) == {"gyro_noise", "bias", "time_offset", "readout", "focal"}
+    for name in ("time_offset", "readout", "focal"):
+        p = r["panels"][name]
+        assert len(p["psnr_plus"]) == len(p["psnr_minus"]) == len(p["levels"])
+        assert p["psnr_plus"][0] == pytest.approx(r["psnr_exact_gyro"])
+        # a large calibration error hurts
+        assert min(p["psnr_plus"][-1], p["psnr_minus"][-1]) < r["psnr_exact_gyro"]
+    assert r["border_px"] > 0 and r["method"]
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_compare_methods_quick(tmp_path):
+    _need_shared()
+    out = tmp_path / "compare.json"
+    mod = _load("compare_methods")
+    assert mod.main(["--quick", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    table = r["table"]
+    for name in mod.BASE:
+        assert name in table
+    from gyrodeblur.deblur import METHODS
+    # every registered method takes part ("wiener" as wiener-variant/-invariant)
+    assert {"wiener-variant" if n == "wiener" else n for n in METHODS} <= set(table)
+    assert r["dataset"]["cases"] == 2 and len(r["per_case"]) == 2
+    for name, row in table.items():
+        assert row["errors"] == 0, (name, r["per_case"])
+        assert 5 < row["psnr_mean"] < 60 and 0 < row["ssim_mean"] <= 1
+        if name != "blurred":
+            assert row["seconds_per_mp"] > 0
+    assert table["wiener-variant"]["psnr_mean"] > table["blurred"]["psnr_mean"] + 3
+    md = out.with_suffix(".md").read_text()
+    assert "| wiener-variant |" in md and "| skimage-rl |" in md
+
+
+def test_compare_methods_registry_plugs_in_new_methods(monkeypatch):
+    from gyrodeblur import deblur as deblur_mod
+
+    mod = _load("compare_methods")
+    monkeypatch.setitem(deblur_mod.METHODS, "dummy", deblur_mod.METHODS["wiener"])
+    reg = mod.registry()
+    assert "dummy" in reg
+    assert "dummy@invariant" in mod.resolve(["dummy@invariant"])
+    with pytest.raises(SystemExit):
+        mod.resolve(["no-such-method"])
+
+
+def test_speed_quick(tmp_path):
+    out = tmp_path / "speed.json"
+    assert _load("speed").main(["--quick", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["sizes_mp"] == [0.25, 1]
+    assert len(r["runs"]) == 4            # 2 sizes x 2 modes, the default method
+    for run in r["runs"]:
+        assert run["status"] == "ok", run
+        assert run["seconds"] > 0 and run["floor_s"] > 0
+        assert run["ratio_to_floor"] == pytest.approx(run["seconds"] / run["floor_s"])
+        assert run["peak_rss_mib"] > run["image_mib"]
+        assert run["width"] * 3 == run["height"] * 4
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    assert "| 1 | 1152x864 |" in out.with_suffix(".md").read_text()

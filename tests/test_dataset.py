@@ -1,0 +1,207 @@
+"""Benchmark dataset builder: determinism, layout on disk, CLI-compatible captures, gaps."""
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import SHARED_DATA
+from gyrodeblur.capture import load_capture
+from gyrodeblur.dataset import (Case, build_cases, build_dataset, draw_window, find_gaps,
+                                load_case, load_dataset, write_case)
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import GyroLog, check_coverage, read_gyro_log
+
+SMALL = dict(max_photos=2, windows_per_photo=2, max_size=128, seed=3)
+GYRO = SHARED_DATA / "gyro" / "handheld_phone_210hz.csv"
+FILES = {"blurred.png", "sharp.png", "gyro.gcsv", "capture.json", "case.json"}
+
+
+def _need_shared():
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"shared test data not found at {SHARED_DATA}")
+
+
+@pytest.fixture(scope="module")
+def cases():
+    _need_shared()
+    return build_cases(**SMALL)
+
+
+@pytest.fixture(scope="module")
+def on_disk(tmp_path_factory):
+    _need_shared()
+    out = tmp_path_factory.mktemp("dataset")
+    build_dataset(out, **SMALL)
+    return out
+
+
+def test_deterministic_for_a_seed(cases):
+    again = build_cases(**SMALL)
+    assert [c.name for c in again] == [c.name for c in cases]
+    for a, b in zip(cases, again):
+        assert np.array_equal(a.blurred, b.blurred)
+        assert np.array_equal(a.sharp, b.sharp)
+        assert a.meta == b.meta
+    other = build_cases(**{**SMALL, "seed": 4, "max_photos": 1})
+    assert other[0].meta["window_start"] != cases[0].meta["window_start"]
+    assert not np.array_equal(other[0].blurred, cases[0].blurred)
+
+
+def test_case_does_not_depend_on_the_other_photos(cases):
+    """Each case draws from its own generator: fewer photos, same first cases."""
+    first = build_cases(**{**SMALL, "max_photos": 1})
+    assert [c.name for c in first] == [c.name for c in cases[:2]]
+    assert np.array_equal(first[1].blurred, cases[1].blurred)
+
+
+def test_cases_are_sane(cases):
+    assert len(cases) == 4
+    assert len({c.name for c in cases}) == 4
+    for c in cases:
+        assert isinstance(c, Case)
+        h, w = c.sharp.shape[:2]
+        assert max(h, w) == 128 and c.sharp.shape == c.blurred.shape
+        assert c.blurred.dtype == np.float32
+        assert np.array_equal(np.round(c.blurred * 255) / 255, c.blurred)   # 8-bit levels
+        assert 0.010 <= c.capture.exposure_time <= 0.040
+        assert c.capture.readout_time == 0.03
+        assert c.capture.camera.fx == pytest.approx(0.8 * w)
+        assert c.meta["roll_deg"] >= 0 and c.meta["rotation_deg"] >= c.meta["roll_deg"] - 1e-9
+        assert c.meta["blur_px"] >= 1
+        # the blur actually changes the photo
+        assert np.abs(c.blurred - c.sharp).mean() > 0.005
+
+
+def test_fixed_exposure_and_options():
+    _need_shared()
+    (c,) = build_cases(max_photos=1, windows_per_photo=1, max_size=64, exposure=0.02,
+                       readout=0.0, focal=1.2, snr_db=None, seed=0)
+    assert c.capture.exposure_time == 0.02 and c.capture.readout_time == 0.0
+    assert c.capture.camera.fx == pytest.approx(1.2 * 64)
+    assert c.meta["snr_db"] is None
+
+
+def test_layout_on_disk(on_disk, cases):
+    index = json.loads((on_disk / "dataset.json").read_text())
+    assert index["cases"] == [c.name for c in cases]
+    for c in cases:
+        folder = on_disk / c.name
+        assert {p.name for p in folder.iterdir()} == FILES
+        spec = json.loads((folder / "capture.json").read_text())
+        assert spec["gyro"]["path"] == "gyro.gcsv"          # relative, travels with the folder
+        assert spec["gyro"]["format"] == "gcsv"
+
+
+def test_load_case_equals_the_in_memory_case(on_disk, cases):
+    loaded = load_dataset(on_disk)
+    for a, b in zip(cases, loaded):
+        assert a.name == b.name
+        assert np.array_equal(a.sharp, b.sharp) and np.array_equal(a.blurred, b.blurred)
+        assert np.array_equal(a.capture.log.t, b.capture.log.t)
+        assert np.array_equal(a.capture.log.omega, b.capture.log.omega)
+        assert np.array_equal(a.capture.axes, b.capture.axes)
+        assert a.capture.camera == b.capture.camera
+        for k in ("exposure_start", "exposure_time", "readout_time", "time_offset"):
+            assert getattr(a.capture, k) == getattr(b.capture, k)
+        assert b.meta["photo"] == a.meta["photo"]
+
+
+def test_capture_json_works_like_a_users_capture(on_disk, tmp_path):
+    from gyrodeblur.cli import main
+    from gyrodeblur.imageio import read_photo
+    from gyrodeblur.metrics import psnr
+
+    folder = on_disk / sorted(p.name for p in on_disk.iterdir() if p.is_dir())[0]
+    cap = load_capture(folder / "capture.json")
+    t0, t1 = cap.window
+    check_coverage(cap.log, t0 - cap.time_offset, t1 - cap.time_offset)
+    assert cap.log.t[0] <= t0 - 0.29 and cap.log.t[-1] >= t1 + 0.29   # +-0.3 s excerpt
+    out = tmp_path / "out.png"
+    rc = main(["deblur", str(folder / "blurred.png"), "--capture", str(folder / "capture.json"),
+               "-o", str(out), "--quiet"])
+    assert rc == 0 and out.exists()
+    sharp = read_photo(folder / "sharp.png").pixels
+    blurred = read_photo(folder / "blurred.png").pixels
+    restored = read_photo(out).pixels
+    assert psnr(sharp, restored, 6) > psnr(sharp, blurred, 6) + 3
+
+
+def test_write_case_roundtrip_single(cases, tmp_path):
+    write_case(cases[0], tmp_path / "one")
+    back = load_case(tmp_path / "one")
+    assert back.name == cases[0].name and np.array_equal(back.blurred, cases[0].blurred)
+
+
+def test_shared_log_gap_is_found_and_avoided(cases):
+    log = read_gyro_log(GYRO)
+    gaps = find_gaps(log)
+    assert len(gaps) == 1
+    gap_t0, gap_t1 = log.t[gaps[0]], log.t[gaps[0] + 1]
+    assert 0.02 < gap_t1 - gap_t0 < 0.03
+    for c in cases:
+        exc = c.capture.log
+        assert len(find_gaps(exc)) == 0
+        assert exc.t[-1] < gap_t0 or exc.t[0] > gap_t1
+    # many draws: none touches the gap
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        s = draw_window(log, 0.07, rng, margin=0.3, gaps=gaps)
+        assert s + 0.07 + 0.3 <= gap_t0 or s - 0.3 >= gap_t1
+
+
+def test_draw_window_avoids_gaps_in_a_small_log():
+    """A synthetic log that is mostly gap: every draw lands in the one clean stretch."""
+    t = np.concatenate([np.arange(0, 1.0, 0.005), [1.2], np.arange(1.3, 2.0, 0.005)])
+    t = np.unique(t)
+    log = GyroLog(t, np.full((t.size, 3), 0.1))
+    gaps = find_gaps(log)
+    assert len(gaps) == 2
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        s = draw_window(log, 0.05, rng, margin=0.1)
+        assert (s - 0.1 >= 0 and s + 0.15 <= log.t[gaps[0]]) or s - 0.1 >= 1.3
+    with pytest.raises(InputError, match="gap-free"):
+        draw_window(log, 0.5, np.random.default_rng(0), margin=0.4, tries=50)
+    with pytest.raises(InputError, match="too short"):
+        draw_window(log, 5.0, np.random.default_rng(0))
+
+
+def test_missing_photo_folder_is_an_input_error(tmp_path):
+    with pytest.raises(InputError, match="photo folder not found"):
+        build_cases(photos=tmp_path / "nope", gyro=GyroLog([0, 1], np.zeros((2, 3))))
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no photos"):
+        build_cases(photos=tmp_path / "empty", gyro=GyroLog([0, 1], np.zeros((2, 3))))
+
+
+def test_any_folder_and_log(tmp_path):
+    """A user's own folder of photos and their own gcsv log work too (no shared data)."""
+    from skimage import data
+
+    from gyrodeblur.gyrolog import write_gcsv
+    from gyrodeblur.imageio import write_photo
+    from gyrodeblur.shake import synthetic_hand_shake
+
+    (tmp_path / "photos").mkdir()
+    write_photo(tmp_path / "photos" / "astro.png", data.astronaut()[::8, ::8] / 255.0)
+    write_gcsv(tmp_path / "shake.gcsv", synthetic_hand_shake(2.0, seed=1))
+    cs = build_cases(photos=tmp_path / "photos", gyro=tmp_path / "shake.gcsv",
+                     windows_per_photo=2, orientation="XYZ", seed=0)
+    assert [c.name for c in cs] == ["astro_w0", "astro_w1"]
+    assert cs[0].sharp.shape == (64, 64, 3)
+    build_dataset(tmp_path / "ds", photos=tmp_path / "photos", gyro=tmp_path / "shake.gcsv",
+                  windows_per_photo=1, orientation="XYZ")
+    assert load_capture(tmp_path / "ds" / "astro_w0" / "capture.json").camera.width == 64
+
+
+def test_command_line(tmp_path, capsys):
+    _need_shared()
+    from gyrodeblur.dataset import main
+
+    assert main([str(tmp_path / "ds"), "--max-size", "48", "--max-photos", "1",
+                 "--windows", "1", "--exposure", "0.02", "--seed", "5"]) == 0
+    assert "wrote 1 cases" in capsys.readouterr().out
+    (case,) = load_dataset(tmp_path / "ds")
+    assert case.capture.exposure_time == 0.02 and case.meta["seed"] == 5
+    assert main([str(tmp_path / "ds2"), "--photos", str(tmp_path / "nowhere")]) == 2
