@@ -1,0 +1,247 @@
+"""Self-calibration: recovery of injected errors on a synthetic photo, fixed parameters,
+several photos of one session, the command line.
+
+The blurred photos are made by :func:`gyrodeblur.simulate.simulate_blur` (warping the
+sharp image by the recorded rotation), never by convolving the PSFs the calibration fits.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from gyrodeblur.axes import axes_to_letters, parse_axes
+from gyrodeblur.calibrate import PARAMETERS, calibrate, format_estimates
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture, load_capture
+from gyrodeblur.cli import main
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import GyroLog, write_gcsv
+from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
+from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
+
+W, H = 384, 256
+TRUE_AXES = "Xyz"
+
+
+def _log() -> GyroLog:
+    """A 200 Hz log of a hand-shake-like motion (device axes), 1.2 s."""
+    t = np.arange(0.0, 1.2, 1 / 200)
+    wc = np.stack([0.55 * np.sin(2 * np.pi * 3.1 * t + 0.4) + 0.25 * np.sin(2 * np.pi * 7.7 * t),
+                   0.75 * np.cos(2 * np.pi * 2.3 * t + 1.0) + 0.3 * np.sin(2 * np.pi * 8.9 * t + 2.0),
+                   0.25 * np.sin(2 * np.pi * 4.3 * t + 0.7)], 1)
+    return GyroLog(t, wc @ parse_axes(TRUE_AXES))          # camera -> device: M^T w (M^-1 = M^T)
+
+
+def _sharp() -> np.ndarray:
+    from skimage import data, transform
+    img = transform.resize(data.astronaut(), (H, W), anti_aliasing=True)
+    return img.astype(np.float32)
+
+
+def _true_capture(start: float, log: GyroLog | None = None) -> Capture:
+    return Capture(start, 0.04, 0.03, Camera.centred(W, H, 1.3 * W), log or _log(),
+                   axes=TRUE_AXES)
+
+
+def _blur(sharp, cap, seed=0) -> np.ndarray:
+    out = linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap))
+    return quantize_8bit(add_noise(out, 40.0, seed))
+
+
+def _corrupt(cap: Capture, *, offset=0.014, readout=1.2, focal=1.06, bias=(0.02, -0.02, 0.0),
+             axes="YXz") -> Capture:
+    return cap.replace(time_offset=cap.time_offset + offset,
+                       readout_time=cap.readout_time * readout,
+                       camera=cap.camera.with_focal_scale(focal),
+                       bias=np.asarray(bias, float), axes=parse_axes(axes))
+
+
+@pytest.fixture(scope="module")
+def case():
+    sharp = _sharp()
+    true = _true_capture(0.5)
+    return sharp, true, _blur(sharp, true)
+
+
+@pytest.fixture(scope="module")
+def recovered(case):
+    _, true, blurred = case
+    bad = _corrupt(true)
+    lines = []
+    res = calibrate([blurred], bad, say=lines.append)
+    return res, bad, lines
+
+
+def test_recovers_injected_offset_axes_focal(case, recovered):
+    _, true, _ = case
+    res, bad, lines = recovered
+    got = res.capture
+    assert axes_to_letters(got.axes) == TRUE_AXES
+    assert abs(got.time_offset - true.time_offset) < 0.003
+    assert abs(got.camera.fx / true.camera.fx - 1) < 0.06
+    assert abs(got.readout_time - true.readout_time) < 0.008
+    # better than what it was given, on every estimated parameter that matters for PSFs
+    assert abs(got.camera.fx - true.camera.fx) < abs(bad.camera.fx - true.camera.fx)
+    assert abs(got.readout_time - true.readout_time) < abs(bad.readout_time - true.readout_time)
+    # before/after with an uncertainty for each parameter
+    est = res.estimates
+    assert set(est) == set(PARAMETERS)
+    assert est["offset"][0] == pytest.approx(bad.time_offset)
+    assert est["offset"][2] is not None and est["offset"][2] > 0
+    assert est["focal"][2] is not None and np.all(np.asarray(est["bias"][2]) > 0)
+    text = "\n".join(format_estimates(est))
+    for word in ("time offset", "readout", "focal scale", "gyro bias", "axes", "->", "+-"):
+        assert word in text
+    assert any("coarse ranking" in line for line in lines)
+    assert res.ranking and res.ranking[0][1] == 0.0
+
+
+def test_deblurring_with_the_calibrated_capture_is_close_to_the_true_one(case, recovered):
+    from gyrodeblur.deblur import deblur
+    from gyrodeblur.metrics import psnr
+    sharp, true, blurred = case
+    res, bad, _ = recovered
+    b = 16
+    p_true = psnr(sharp, deblur(blurred, true, grid=(2, 3)), b)
+    p_cal = psnr(sharp, deblur(blurred, res.capture, grid=(2, 3)), b)
+    p_bad = psnr(sharp, deblur(blurred, bad, grid=(2, 3)), b)
+    assert p_cal > p_bad + 3.0
+    assert p_cal > p_true - 1.5
+
+
+def test_fixed_parameters_are_not_estimated(case):
+    _, true, blurred = case
+    bad = _corrupt(true, offset=0.01, axes=TRUE_AXES)
+    res = calibrate([blurred], bad, fix={"axes", "focal", "readout", "bias"})
+    got = res.capture
+    np.testing.assert_array_equal(got.axes, bad.axes)
+    assert got.camera == bad.camera
+    assert got.readout_time == bad.readout_time
+    np.testing.assert_array_equal(got.bias, bad.bias)
+    # the free one moved towards the truth (it cannot reach it: the fixed ones are wrong)
+    assert abs(got.time_offset - true.time_offset) < 0.7 * abs(bad.time_offset - true.time_offset)
+    for name in ("focal", "readout", "bias", "axes"):
+        assert res.estimates[name][2] is None                     # "fixed"
+    assert res.fixed == {"axes", "focal", "readout", "bias"}
+    assert "fixed" in "\n".join(format_estimates(res.estimates))
+
+
+def test_fixed_offset_and_axes(case):
+    _, true, blurred = case
+    bad = _corrupt(true, offset=0.0, readout=1.25, focal=1.05, bias=(0, 0, 0), axes=TRUE_AXES)
+    res = calibrate([blurred], bad, fix={"offset", "axes"})
+    got = res.capture
+    assert got.time_offset == bad.time_offset
+    np.testing.assert_array_equal(got.axes, bad.axes)
+    assert abs(got.readout_time - true.readout_time) < abs(bad.readout_time - true.readout_time)
+    assert res.estimates["offset"][2] is None and res.estimates["readout"][2] is not None
+
+
+def test_everything_fixed_returns_the_given_capture(case):
+    _, true, blurred = case
+    res = calibrate([blurred], true, fix=set(PARAMETERS))
+    got = res.capture
+    assert got.time_offset == true.time_offset and got.camera == true.camera
+    np.testing.assert_array_equal(got.axes, true.axes)
+
+
+def test_bad_fix_name_is_an_input_error(case):
+    _, true, blurred = case
+    with pytest.raises(InputError, match="unknown parameter"):
+        calibrate([blurred], true, fix={"offset", "focus"})
+
+
+def test_several_photos_share_the_corrections(case):
+    sharp, _, _ = case
+    log = _log()
+    t1, t2 = _true_capture(0.45, log), _true_capture(0.53, log)
+    # the second photo sees the scene a little to the side: roll the sharp image
+    b1 = _blur(sharp, t1, seed=1)
+    b2 = _blur(np.roll(sharp, 6, axis=1), t2, seed=2)
+    kw = dict(offset=-0.012, readout=0.85, focal=0.95, bias=(0.0, 0.02, -0.01), axes="xYz")
+    res = calibrate([b1, b2], [_corrupt(t1, **kw), _corrupt(t2, **kw)])
+    c1, c2 = res.captures
+    assert c1.exposure_start == t1.exposure_start and c2.exposure_start == t2.exposure_start
+    assert c1.time_offset == c2.time_offset                        # one correction for both
+    assert c1.camera.fx == c2.camera.fx and c1.readout_time == c2.readout_time
+    np.testing.assert_array_equal(c1.bias, c2.bias)
+    assert axes_to_letters(c1.axes) == TRUE_AXES
+    assert abs(c1.time_offset - t1.time_offset) < 0.003
+
+
+def test_mismatched_inputs(case):
+    _, true, blurred = case
+    with pytest.raises(InputError):
+        calibrate([blurred, blurred], [true, true, true])
+    with pytest.raises(InputError):
+        calibrate([], true)
+
+
+# ----------------------------------------------------------------------------- CLI
+
+@pytest.fixture(scope="module")
+def cli_dir(tmp_path_factory, case):
+    from gyrodeblur.imageio import write_photo
+    _, true, blurred = case
+    d = tmp_path_factory.mktemp("cal")
+    write_gcsv(d / "gyro.gcsv", true.log)
+    write_photo(d / "blurred.png", blurred, bit_depth=8)
+    bad = _corrupt(true)
+    doc = {"exposure_start": true.exposure_start, "exposure_time": true.exposure_time,
+           "readout_time": bad.readout_time,
+           "camera": {"fx": bad.camera.fx, "fy": bad.camera.fy, "cx": bad.camera.cx,
+                      "cy": bad.camera.cy, "width": W, "height": H},
+           "gyro": {"path": "gyro.gcsv", "format": "gcsv", "orientation": "YXz",
+                    "time_offset": bad.time_offset, "bias": list(bad.bias)}}
+    (d / "cap.json").write_text(json.dumps(doc))
+    (d / "out").mkdir()
+    return d
+
+
+def test_cli_calibrate_writes_a_loadable_capture(cli_dir, case, capsys):
+    _, true, _ = case
+    d = cli_dir
+    out = d / "out" / "corrected.json"
+    assert main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+                 "--fix", "bias", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "time offset" in text and "->" in text and "+-" in text and "wrote" in text
+    assert "gyro bias" in text and "fixed" in text
+    cap = load_capture(out)                      # the gyro path was made relative to out/
+    assert axes_to_letters(cap.axes) == TRUE_AXES
+    assert abs(cap.time_offset - true.time_offset) < 0.003
+    np.testing.assert_allclose(cap.bias, [0.02, -0.02, 0.0])   # fixed: as given
+    doc = json.loads(out.read_text())
+    assert doc["gyro"]["orientation"] == TRUE_AXES
+
+
+def test_cli_bad_fix_name_exits_2(cli_dir, capsys):
+    d = cli_dir
+    rc = main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+               "--fix", "offset,zoom", "-o", str(d / "out" / "x.json")])
+    assert rc == 2
+    err = capsys.readouterr()
+    assert "--fix" in (err.out + err.err) and "zoom" in (err.out + err.err)
+    assert not (d / "out" / "x.json").exists()
+
+
+def test_cli_capture_per_photo_count_must_match(cli_dir, capsys):
+    d = cli_dir
+    rc = main(["calibrate", str(d / "blurred.png"), str(d / "blurred.png"), "--capture",
+               f"{d / 'cap.json'},{d / 'cap.json'},{d / 'cap.json'}", "-o",
+               str(d / "out" / "y.json")])
+    assert rc == 2
+    assert "one per photo" in capsys.readouterr().err
+
+
+def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
+    d = cli_dir
+    out = d / "out" / "refined.png"
+    assert main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+                 "--refine", "--grid", "2x3", "--quiet", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "coarse ranking" in text and "deblurred" in text
+    assert out.exists()
