@@ -97,8 +97,9 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     One PSF per patch is exact only where the blur does not change; roll, wide lenses
     and the rolling shutter make it change (:func:`gyrodeblur.psf.psf_variation`, px per
     px). Windows are made about ``tolerance / variation`` pixels wide, but never
-    narrower than twice the largest PSF's extent (a blur must fit its patch), never
-    coarser than the chapter's 6 x 8, and never more than ``max_patches`` in all.
+    narrower than the largest PSF's extent (the margin of real neighbours around each
+    window gives the deconvolution its context) nor 32 px, never coarser than the
+    chapter's 6 x 8, and never more than ``max_patches`` in all.
     ``centred``: count only the change of the PSFs' shape (the photo is aligned by the
     displacement field first, see :func:`plan_psf_field`).
 
