@@ -131,13 +131,23 @@ def test_fixed_parameters_are_not_estimated(case):
 
 def test_fixed_offset_and_axes(case):
     _, true, blurred = case
-    bad = _corrupt(true, offset=0.0, readout=1.25, focal=1.05, bias=(0, 0, 0), axes=TRUE_AXES)
+    bad = _corrupt(true, offset=0.0, readout=1.35, focal=1.08, bias=(0, 0, 0), axes=TRUE_AXES)
     res = calibrate([blurred], bad, fix={"offset", "axes"})
     got = res.capture
     assert got.time_offset == bad.time_offset
     np.testing.assert_array_equal(got.axes, bad.axes)
     assert abs(got.readout_time - true.readout_time) < abs(bad.readout_time - true.readout_time)
     assert res.estimates["offset"][2] is None and res.estimates["readout"][2] is not None
+
+
+def test_a_correct_capture_is_left_alone(case):
+    _, true, blurred = case
+    res = calibrate([blurred], true)
+    assert any("kept the given parameters" in n for n in res.notes)
+    got = res.capture
+    assert got.time_offset == true.time_offset and got.camera == true.camera
+    assert got.readout_time == true.readout_time
+    np.testing.assert_array_equal(got.axes, true.axes)
 
 
 def test_everything_fixed_returns_the_given_capture(case):

@@ -67,9 +67,10 @@ Search
    points), which pins the sign of the motion and the focal length, and weakly the time
    offset, where blur alone is ambiguous (a straight pan).
 
-5. The given parameters are kept unless the best found lowers the tempered objective by
-   :data:`_KEEP_MARGIN`: a correct capture on a photo that says little (small blur) is left
-   alone rather than moved along directions the photo cannot tell apart.
+5. When the best mapping is the given one, the given parameters are kept unless the best
+   found lowers the tempered objective by :data:`_KEEP_MARGIN`: a correct capture on a
+   photo that says little (small blur) is left alone rather than moved along directions
+   the photo cannot tell apart.
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
 objective (priors included). The axis mapping's confidence is the objective gap to the
@@ -798,9 +799,10 @@ _COARSE_EXTENT = 16.0      # px: the same for the coarse search
 _COARSE_PATCH = 64
 _COARSE_STEP = 0.002       # s: time-shift grid of the coarse search
 _N_PATCHES = 9             # patches in all, by default
-#: The given parameters are kept unless the best found lowers the (tempered) objective by
-#: at least this much: a correct capture on a photo with little blur is left alone rather
-#: than moved along directions the photo cannot tell apart.
+#: With the given axis mapping, the given parameters are kept unless the best found lowers
+#: the (tempered) objective by at least this much: a correct capture on a photo with little
+#: blur is left alone rather than moved along directions the photo cannot tell apart. (A
+#: different mapping is taken whenever it is better at all.)
 _KEEP_MARGIN = 10.0
 _CANDIDATES = 3            # mappings refined at full working scale (+ the best's twin)
 _X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
@@ -1172,9 +1174,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         x0 = np.clip(np.zeros(6), lo, hi)
         f_given = _objective(stage, lambda v: search.theta_of(v, c0.axes, ubar), x0,
                              idx, prior, extra_for(c0.axes))
-        if f_given - fx < _KEEP_MARGIN:
+        margin = _KEEP_MARGIN if np.allclose(M, c0.axes) else 0.0
+        if f_given - fx < margin:
             msg = (f"kept the given parameters: the best found ({axes_to_letters(M) or 'given'}) "
-                   f"improves the objective by only {f_given - fx:.1f} (< {_KEEP_MARGIN:g})")
+                   f"improves the objective by only {f_given - fx:.1f} (< {margin:g})")
             x, M, fx = x0, c0.axes, f_given
             _, _, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x, idx,
                                       lo, hi, hs, caps, prior, iters=0, extra=extra_for(M))
@@ -1341,7 +1344,9 @@ def calibrate_command(args, say, load_capture) -> None:
         say(line)
     src = caps[0].source
     gyro_rel = caps[0].gyro_spec.get("path")
-    if src and src != "capture" and gyro_rel is not None:
+    if gyro_rel is not None and os.path.isabs(gyro_rel):
+        pass                                     # an absolute path stays as it is
+    elif src and src != "capture" and gyro_rel is not None:
         gyro_abs = os.path.join(os.path.dirname(os.path.abspath(src)), gyro_rel)
         gyro_rel = os.path.relpath(gyro_abs, os.path.dirname(os.path.abspath(args.output)))
     elif gyro_rel is not None and not os.path.isabs(gyro_rel):
