@@ -205,28 +205,47 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`,
     interpolated bilinearly to every pixel; the image is sampled with cubic splines
     (mirrored outside the frame). After this warp every pixel's PSF is centred on it.
+    Channels are spline-filtered and rows sampled in bands on all cores
+    (:func:`gyrodeblur.bands.for_row_bands`); memory: one float32 image for the spline
+    coefficients besides the output, and coordinates for one band at a time.
     """
     from scipy import ndimage
 
+    from .bands import for_row_bands
+
     ys, xs, d = displacement
-    H, W = image.shape[:2]
-    gy = np.arange(H, dtype=np.float32) * np.float32((len(ys) - 1) / max(ys[-1], 1))
-    gx = np.arange(W, dtype=np.float32) * np.float32((len(xs) - 1) / max(xs[-1], 1))
-    GY, GX = np.meshgrid(gy, gx, indexing="ij")
-    coords = np.stack([GY, GX])
-    del GY, GX
-    cy = ndimage.map_coordinates(d[..., 1].astype(np.float32), coords, order=1, mode="nearest")
-    cx = ndimage.map_coordinates(d[..., 0].astype(np.float32), coords, order=1, mode="nearest")
-    coords[0] = np.arange(H, dtype=np.float32)[:, None] + cy
-    coords[1] = np.arange(W, dtype=np.float32)[None, :] + cx
-    del cy, cx
     img = np.asarray(image, np.float32)
-    if img.ndim == 2:
-        return ndimage.map_coordinates(img, coords, order=3, mode="mirror")
-    out = np.empty_like(img)
-    for c in range(img.shape[2]):
-        out[..., c] = ndimage.map_coordinates(img[..., c], coords, order=3, mode="mirror")
-    return out
+    planes = img[..., None] if img.ndim == 2 else img
+    H, W, C = planes.shape
+    coeffs = np.empty((C, H, W), np.float32)
+
+    def prefilter(c0: int, c1: int) -> None:
+        for c in range(c0, c1):
+            ndimage.spline_filter(planes[..., c], order=3, output=coeffs[c], mode="mirror")
+
+    for_row_bands(prefilter, C, min_rows=1)
+    sy = np.float32((len(ys) - 1) / max(ys[-1], 1))
+    sx = np.float32((len(xs) - 1) / max(xs[-1], 1))
+    dy, dx = d[..., 1].astype(np.float32), d[..., 0].astype(np.float32)
+    out = np.empty((H, W, C), np.float32)
+
+    def band(r0: int, r1: int) -> None:
+        GY, GX = np.meshgrid(np.arange(r0, r1, dtype=np.float32) * sy,
+                             np.arange(W, dtype=np.float32) * sx, indexing="ij")
+        grid = np.stack([GY, GX])
+        del GY, GX
+        coords = np.empty_like(grid)
+        coords[0] = np.arange(r0, r1, dtype=np.float32)[:, None]
+        coords[0] += ndimage.map_coordinates(dy, grid, order=1, mode="nearest")
+        coords[1] = np.arange(W, dtype=np.float32)[None, :]
+        coords[1] += ndimage.map_coordinates(dx, grid, order=1, mode="nearest")
+        del grid
+        for c in range(C):
+            out[r0:r1, :, c] = ndimage.map_coordinates(coeffs[c], coords, order=3,
+                                                       mode="mirror", prefilter=False)
+
+    for_row_bands(band, H)
+    return out[..., 0] if img.ndim == 2 else out
 
 
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,

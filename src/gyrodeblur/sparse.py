@@ -40,10 +40,12 @@ _WEIGHT_PER_SIGMA_DEFAULT = 0.3
 _SIGMA_FLOOR = 1e-3
 
 # ADMM constants (penalties relative to a data-term weight of 1); see Notes of
-# sparse_deconvolve. Chosen for the fastest PSNR rise in the first ~8 iterations.
+# sparse_deconvolve. Chosen for the fastest PSNR rise in the first ~6 iterations (on the
+# 36-case benchmark: beta up to 32 rather than 64 gained 0.07 dB at 8 iterations and lets
+# 6 iterations come within 0.11 dB of 8, for 23 % fewer FFTs).
 _RHO_DATA = 0.15
 _BETA0 = 8.0
-_BETA_MAX = 64.0
+_BETA_MAX = 32.0
 _INIT_TIKHONOV = 3.0
 #: ADMM over-relaxation factor (Eckstein & Bertsekas); 1.5 gained 0.2-0.4 dB at 8 iterations.
 _RELAX = 1.5
@@ -85,7 +87,7 @@ def sparse_deconvolve(
     noise_sigma: float | None = None,
     weight: float | None = None,
     exponent: float = 1.0,
-    iterations: int = 8,
+    iterations: int = 6,
     saturation_level: float | None = 0.98,
     saturation_dilation: int = 1,
     clip: bool = True,
@@ -114,7 +116,8 @@ def sparse_deconvolve(
         better than ``p = 2/3`` at this iteration budget, and its shrinkage is cheapest);
         smaller values give the hyper-Laplacian of Krishnan and Fergus.
     iterations : int, optional
-        ADMM iterations (each costs four FFTs per channel). 8 reaches most of the gain.
+        ADMM iterations (each costs four FFTs per channel). 6 reaches most of the gain
+        (8: +0.1 dB on the benchmark for a third more time).
     saturation_level : float or None, optional
         Pixels at or above this value (image units) in any channel count as clipped.
         Clipped blobs whose surroundings show the scene was far brighter (point lights)
@@ -161,7 +164,7 @@ def sparse_deconvolve(
             + \rho_w \mathcal F(\nabla^T(w - y_w))}{\rho_v |H|^2 + \rho_w |D|^2}.
 
     :math:`\rho_v = 0.15`; :math:`\rho_w = \beta\lambda` with :math:`\beta` doubling from 8
-    to 64 (continuation, Krishnan & Fergus 2009). ``u`` starts as a Tikhonov solution
+    to 32 (continuation, Krishnan & Fergus 2009). ``u`` starts as a Tikhonov solution
     (gradient weight :math:`3\lambda`), except around small over-exposed blobs (point
     lights), where it starts as the blurred image: the Tikhonov start would ring there and
     ADMM is slow to undo ringing inside data-free areas. Over-relaxation 1.5 (Eckstein &
@@ -283,8 +286,11 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
     def fft(a):
         return sfft.rfft2(a, workers=workers)
 
-    def ifft(A):
-        return sfft.irfft2(A, s=N, workers=workers).astype(f32, copy=False)
+    def ifft(A, disposable=False):
+        # A spectrum no longer needed may be overwritten: pocketfft's c2r then skips
+        # a copy (27 % faster on a 600 x 576 x 3 patch).
+        return sfft.irfft2(A, s=N, workers=workers,
+                           overwrite_x=disposable).astype(f32, copy=False)
 
     # Periodic domain: photo at the top-left, smooth fill elsewhere (used only to start).
     gp = np.empty((C,) + N, f32)
@@ -321,7 +327,7 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
 
     a = f32(_RELAX)
     a1 = f32(1.0 - _RELAX)
-    ku = ifft(U * K)
+    ku = ifft(U * K, True)
     v_old = ku.copy()                    # last v (for over-relaxation)
     wx_old = _dx(u, out=np.empty_like(u))  # last w, per direction
     wy_old = _dy(u, out=np.empty_like(u))
@@ -377,9 +383,9 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
         R = fft(r)
         _as_pairs(R)[...] *= B               # real factor: multiply re and im alike
         num += R
-        u = ifft(num)
-        num *= K
-        ku = ifft(num)
+        kn = num * K
+        u = ifft(num, True)
+        ku = ifft(kn, True)
         # Continuation: raise rho_w, rescale the scaled dual to keep the true dual fixed.
         nbeta = min(2.0 * beta, _BETA_MAX)
         if nbeta != beta:
@@ -398,7 +404,9 @@ def _light_zone(lights: np.ndarray, kh: int, kw: int,
     small[0] = False
     if not small.any():
         return None
-    lights = ndi.binary_dilation(small[lab], structure=np.ones((kh, kw), bool))
+    # Dilation by a kh x kw box: a separable running maximum (a 2-D structuring element
+    # costs kh * kw operations per pixel, most of a patch's time for a 37 px PSF).
+    lights = ndi.maximum_filter(small[lab].view(np.uint8), size=(kh, kw), mode="constant") > 0
     zone = np.zeros(shape, np.float32)
     zone[: lights.shape[0], : lights.shape[1]] = lights
     return ndi.uniform_filter(zone, (kh, kw), mode="wrap")
