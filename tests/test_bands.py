@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from gyrodeblur.bands import for_row_bands
-from gyrodeblur.deblur import warp_by_displacement
+from gyrodeblur.deblur import WARP_ORDER, warp_by_displacement
 from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
 
@@ -28,7 +28,7 @@ def test_band_errors_reach_the_caller():
         for_row_bands(job, 200, workers=2, min_rows=1)
 
 
-def _reference_warp(image, displacement):
+def _reference_warp(image, displacement, order):
     """The warp written plainly: whole-image coordinates, one map_coordinates per channel."""
     ys, xs, d = displacement
     H, W = image.shape[:2]
@@ -37,7 +37,7 @@ def _reference_warp(image, displacement):
     grid = np.stack(np.meshgrid(gy, gx, indexing="ij"))
     coords = np.stack([np.arange(H)[:, None] + ndimage.map_coordinates(d[..., 1], grid, order=1),
                        np.arange(W)[None, :] + ndimage.map_coordinates(d[..., 0], grid, order=1)])
-    return np.stack([ndimage.map_coordinates(image[..., c].astype(np.float64), coords, order=3,
+    return np.stack([ndimage.map_coordinates(image[..., c].astype(np.float64), coords, order=order,
                                              mode="mirror") for c in range(image.shape[2])], -1)
 
 
@@ -45,7 +45,7 @@ def test_threaded_warp_matches_a_plain_one():
     rng = np.random.default_rng(3)
     img = ndimage.gaussian_filter(rng.random((300, 410, 3)), (1.5, 1.5, 0)).astype(np.float32)
     field = (np.linspace(0, 299, 5), np.linspace(0, 409, 6), rng.normal(0, 4, (5, 6, 2)))
-    ref = _reference_warp(img, field)
+    ref = _reference_warp(img, field, WARP_ORDER)
     out = warp_by_displacement(img, field)
     assert out.dtype == np.float32 and out.shape == img.shape
     np.testing.assert_allclose(out, ref, atol=2e-5)

@@ -85,6 +85,9 @@ AUTO_GRID_TOLERANCE = 2.0
 #: only where the mean displacement changes faster than this (px per px), where it gained
 #: 1-5 dB on the same photos.
 ALIGN_MIN_SLOPE = 0.015
+#: B-spline order of the alignment warp: quadratic came within 0.015 dB of cubic on the 33
+#: warped cases of the 36-case benchmark and samples 9 rather than 16 pixels (25 % faster).
+WARP_ORDER = 2
 #: Most patches :func:`auto_grid` chooses.
 AUTO_GRID_MAX_PATCHES = 96
 
@@ -202,12 +205,12 @@ def _displacement_slope(displacement) -> float:
 def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     """``g(x + c(x))``: sample ``image`` where each pixel's light landed on average.
 
-    ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`,
-    interpolated bilinearly to every pixel; the image is sampled with cubic splines
-    (mirrored outside the frame). After this warp every pixel's PSF is centred on it.
-    Channels are spline-filtered and rows sampled in bands on all cores
-    (:func:`gyrodeblur.bands.for_row_bands`); memory: one float32 image for the spline
-    coefficients besides the output, and coordinates for one band at a time.
+    ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`
+    (a regular grid), interpolated bilinearly to every pixel; the image is sampled with
+    B-splines of order :data:`WARP_ORDER` (mirrored outside the frame). After this warp
+    every pixel's PSF is centred on it. Channels are spline-filtered and rows sampled in
+    bands on all cores (:func:`gyrodeblur.bands.for_row_bands`); memory: one float32 image
+    of spline coefficients besides the output, and coordinates for one band at a time.
     """
     from scipy import ndimage
 
@@ -221,31 +224,40 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
 
     def prefilter(c0: int, c1: int) -> None:
         for c in range(c0, c1):
-            ndimage.spline_filter(planes[..., c], order=3, output=coeffs[c], mode="mirror")
+            ndimage.spline_filter(planes[..., c], order=WARP_ORDER, output=coeffs[c],
+                                  mode="mirror")
 
     for_row_bands(prefilter, C, min_rows=1)
-    sy = np.float32((len(ys) - 1) / max(ys[-1], 1))
-    sx = np.float32((len(xs) - 1) / max(xs[-1], 1))
-    dy, dx = d[..., 1].astype(np.float32), d[..., 0].astype(np.float32)
+    # Bilinear interpolation of the grid as two small matrix products per band.
+    ax = _linear_weights(np.arange(W) * ((len(xs) - 1) / max(xs[-1], 1)), len(xs)).T
     out = np.empty((H, W, C), np.float32)
 
     def band(r0: int, r1: int) -> None:
-        GY, GX = np.meshgrid(np.arange(r0, r1, dtype=np.float32) * sy,
-                             np.arange(W, dtype=np.float32) * sx, indexing="ij")
-        grid = np.stack([GY, GX])
-        del GY, GX
-        coords = np.empty_like(grid)
-        coords[0] = np.arange(r0, r1, dtype=np.float32)[:, None]
-        coords[0] += ndimage.map_coordinates(dy, grid, order=1, mode="nearest")
-        coords[1] = np.arange(W, dtype=np.float32)[None, :]
-        coords[1] += ndimage.map_coordinates(dx, grid, order=1, mode="nearest")
-        del grid
+        ay = _linear_weights(np.arange(r0, r1) * ((len(ys) - 1) / max(ys[-1], 1)), len(ys))
+        coords = np.empty((2, r1 - r0, W), np.float32)
+        for k, axis_pixels in ((0, np.arange(r0, r1)[:, None]), (1, np.arange(W)[None, :])):
+            np.matmul(ay @ d[..., 1 - k].astype(np.float32), ax, out=coords[k])
+            coords[k] += axis_pixels
         for c in range(C):
-            out[r0:r1, :, c] = ndimage.map_coordinates(coeffs[c], coords, order=3,
+            out[r0:r1, :, c] = ndimage.map_coordinates(coeffs[c], coords, order=WARP_ORDER,
                                                        mode="mirror", prefilter=False)
 
     for_row_bands(band, H)
     return out[..., 0] if img.ndim == 2 else out
+
+
+def _linear_weights(t: np.ndarray, n: int) -> np.ndarray:
+    """(len(t), n) float32 matrix of linear-interpolation weights at grid coordinates ``t``
+    (clamped to ``[0, n - 1]``), so that ``weights @ values`` interpolates."""
+    t = np.clip(np.asarray(t, np.float64), 0, n - 1)
+    i0 = np.minimum(np.floor(t).astype(int), max(n - 2, 0))
+    f = (t - i0).astype(np.float32)
+    w = np.zeros((t.size, n), np.float32)
+    rows = np.arange(t.size)
+    w[rows, i0] = 1 - f
+    if n > 1:
+        w[rows, i0 + 1] += f
+    return w
 
 
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
