@@ -298,8 +298,21 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
             progress(1, 1)
     else:
         out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress)
-    out = curve.encode(np.clip(out, 0, None) if clip else out)
-    return np.clip(out, 0, 1).astype(np.float32) if clip else out.astype(np.float32)
+    out = np.asarray(out, np.float32)
+    if np.shares_memory(out, image):  # never clip the caller's array in place
+        out = out.copy()
+    if clip:  # negative light is ringing; clip before the curve (in row bands, in place)
+        _clip_rows(out, 0.0, None)
+    out = curve.encode(out)
+    if clip:
+        _clip_rows(out, 0.0, 1.0)
+    return out
+
+
+def _clip_rows(a: np.ndarray, lo, hi) -> None:
+    """``np.clip(a, lo, hi, out=a)`` on all cores."""
+    from .bands import for_row_bands
+    for_row_bands(lambda r0, r1: np.clip(a[r0:r1], lo, hi, out=a[r0:r1]), a.shape[0])
 
 
 #: Per-method defaults of :func:`deblur`: the chapter's 6 x 8 grid and no alignment warp
