@@ -123,3 +123,28 @@ def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
     assert read_photo(d / "blind.png").pixels.shape == (192, 256, 3)
     assert "--kernel-size" in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
                                           "8", "-o", str(d / "b2.png")], capsys)
+
+
+def test_sparse_options_change_the_result_and_are_checked(capture_dir, capsys):
+    d = capture_dir
+    cap = str(d / "cap.json")
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "b.png"),
+                 "--snr-db", "40", "--seed", "1"]) == 0
+    for name, extra in (("i2.png", ["--iterations", "2"]), ("i6.png", ["--iterations", "6"]),
+                        ("n.png", ["--noise-sigma", "0.05"]), ("default.png", [])):
+        assert main(["deblur", str(d / "b.png"), "--capture", cap, "-o", str(d / name), "--quiet",
+                     *extra]) == 0
+    px = {n: read_photo(d / n).pixels for n in ("i2.png", "i6.png", "n.png", "default.png")}
+    np.testing.assert_array_equal(px["i6.png"], px["default.png"])  # 6 is the default
+    assert np.abs(px["i2.png"] - px["i6.png"]).mean() > 1e-3
+    # A 10x larger noise level means a much stronger prior: a smoother result.
+    assert np.abs(np.diff(px["n.png"], axis=1)).mean() < np.abs(np.diff(px["i6.png"], axis=1)).mean()
+    before = sorted(p.name for p in d.iterdir())
+    assert "--iterations" in _run_error(["deblur", str(d / "b.png"), "--capture", cap, "-o",
+                                         str(d / "x.png"), "--iterations", "0"], capsys)
+    assert "--noise-sigma" in _run_error(["deblur", str(d / "b.png"), "--capture", cap, "-o",
+                                          str(d / "x.png"), "--noise-sigma", "-1"], capsys)
+    assert "sparse only" in _run_error(["deblur", str(d / "b.png"), "--capture", cap, "-o",
+                                        str(d / "x.png"), "--method", "wiener", "--iterations",
+                                        "3"], capsys)
+    assert sorted(p.name for p in d.iterdir()) == before

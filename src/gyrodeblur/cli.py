@@ -212,6 +212,17 @@ def cmd_deblur(args, say) -> None:
         if (args.method or DEFAULT_METHOD) != "wiener":
             raise InputError("--phi", "applies to --method wiener only")
         options["phi"] = args.phi
+    for name, value in (("iterations", args.iterations), ("noise_sigma", args.noise_sigma)):
+        if value is None:
+            continue
+        flag = "--" + name.replace("_", "-")
+        if (args.method or DEFAULT_METHOD) != "sparse":
+            raise InputError(flag, "applies to --method sparse only")
+        if (name == "iterations" and not 1 <= value <= 100) or (name == "noise_sigma"
+                                                                and not 0 <= value < 1):
+            raise InputError(flag, f"out of range: {value!r} (iterations 1-100; noise sigma "
+                                   "in [0, 1), pixel-value units)")
+        options[name] = value
     grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
     progress = _Progress("deblurring", args.quiet)
     h, w = photo.pixels.shape[:2]
@@ -309,6 +320,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="deconvolution method (default: the best available)")
     s.add_argument("--phi", type=float, default=None,
                    help="Wiener inverse SNR (default 0.01, the chapter's)")
+    s.add_argument("--iterations", type=int, default=None,
+                   help="sparse method: ADMM iterations (default 6; fewer is faster, see "
+                        "BENCHMARKS.md for the trade)")
+    s.add_argument("--noise-sigma", type=float, default=None,
+                   help="sparse method: noise std of the photo in [0, 1] units, which sets the "
+                        "prior weight (default: measured on the photo)")
     s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
     s.add_argument("--kernel-size", type=int, default=31, help="blind kernel size, px (odd)")
