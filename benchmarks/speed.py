@@ -245,7 +245,8 @@ def main(argv: list[str] | None = None) -> int:
     args.out.with_suffix(".md").write_text(md, encoding="utf-8")
     png = args.out.with_suffix(".png")
     plot(result, png)
-    figure = args.figure or (None if args.quick else _common.FIGURES / "speed.png")
+    full = not args.quick and not args.sizes and not args.methods and args.modes == ",".join(MODES)
+    figure = args.figure or (_common.FIGURES / "speed.png" if full else None)
     if figure is not None:
         plot(result, Path(figure), dpi=80)
     print(md)

@@ -348,8 +348,7 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
         rho_w = weight * beta
         # w-step, per direction: z = relaxed(D u) + y; w = prox(z); y <- z - w (= c, what
         # the shrinkage removed); the u-step needs q = w - y = z - 2c.
-        r.fill(0.0)
-        for diff, diff_t_add, y, w_old in ((_dx, _dx_t_add, yx, wx_old),
+        for diff, diff_t_add, y, w_old in ((_dx, _dx_t_set, yx, wx_old),
                                            (_dy, _dy_t_add, yy, wy_old)):
             diff(u, out=z)
             z *= a
@@ -446,10 +445,10 @@ def _dy(u, out):
     return out
 
 
-def _dx_t_add(w, out):
-    out[..., 1:] += w[..., :-1]
-    out[..., 0] += w[..., -1]
-    out -= w
+def _dx_t_set(w, out):
+    """``out = D_x^T w`` (one pass, where zero-fill then add takes three)."""
+    np.subtract(w[..., :-1], w[..., 1:], out=out[..., 1:])
+    np.subtract(w[..., -1], w[..., 0], out=out[..., 0])
     return out
 
 
