@@ -11,7 +11,6 @@ from gyrodeblur.fftutils import psf_to_otf
 from gyrodeblur.wiener import (
     apply_spectral_filter,
     normalize_range,
-    otf_of,
     wiener_deconvolve,
     wiener_fft_shape,
     wiener_filter,
@@ -217,10 +216,15 @@ def test_bad_image_raises():
 
 
 @pytest.mark.parametrize("psf_shape, fft_shape", [((31, 31), (720, 720)), ((5, 9), (33, 48)),
-                                                  ((1, 1), (8, 9)), ((15, 3), (15, 7))])
-def test_otf_of_matches_psf_to_otf(psf_shape, fft_shape):
+                                                  ((1, 1), (8, 9)), ((15, 3), (15, 7)),
+                                                  ((131, 5), (160, 40))])
+def test_psf_to_otf_matches_a_padded_fft(psf_shape, fft_shape):
+    """Both paths (separable DFT up to 128 px, padded FFT beyond) against the definition."""
     psf = np.random.default_rng(0).random(psf_shape).astype(np.float32)
     psf /= psf.sum()
-    fast = otf_of(psf, fft_shape)
-    assert fast.dtype == np.complex64 and fast.shape == (fft_shape[0], fft_shape[1] // 2 + 1)
-    np.testing.assert_allclose(fast, psf_to_otf(psf, fft_shape), atol=2e-6)
+    padded = np.zeros(fft_shape)
+    padded[:psf_shape[0], :psf_shape[1]] = psf
+    padded = np.roll(padded, (-(psf_shape[0] // 2), -(psf_shape[1] // 2)), axis=(0, 1))
+    otf = psf_to_otf(psf, fft_shape)
+    assert otf.dtype == np.complex64 and otf.shape == (fft_shape[0], fft_shape[1] // 2 + 1)
+    np.testing.assert_allclose(otf, np.fft.rfft2(padded), atol=2e-6)

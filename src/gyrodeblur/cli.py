@@ -198,7 +198,7 @@ def cmd_simulate(args, say) -> None:
 
 
 def cmd_deblur(args, say) -> None:
-    from .deblur import METHODS, deblur, deblur_with_psfs
+    from .deblur import deblur
     from .imageio import read_photo, write_photo
     from .psfplot import field_image
 

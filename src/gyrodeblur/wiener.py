@@ -26,7 +26,6 @@ blending patches.
 
 from __future__ import annotations
 
-import functools
 import numbers
 
 import numpy as np
@@ -39,7 +38,6 @@ __all__ = [
     "wiener_deconvolve",
     "wiener_fft_shape",
     "wiener_filter",
-    "otf_of",
     "apply_spectral_filter",
     "normalize_range",
     "DEFAULT_PHI",
@@ -108,7 +106,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
 
     The raw eq. 6.18 has DC gain :math:`1/(1+\\Phi)` and would darken the photo by about
     1 %; setting :math:`W(0) = 1/H(0)` keeps the mean, so a flat image stays flat.
-    All channels share one OTF (:func:`otf_of`) and go through one ``rfft2``/``irfft2``
+    All channels share one OTF (:func:`~gyrodeblur.fftutils.psf_to_otf`) and go through one ``rfft2``/``irfft2``
     pair over axes (0, 1), in complex64, with ``workers=FFT_WORKERS``.
 
     References
@@ -131,7 +129,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     height, width = image.shape[:2]
     shape = wiener_fft_shape(image.shape, psf.shape, taper=taper)
     padded = smooth_periodic_pad(image, shape) if shape != (height, width) else image
-    filt = wiener_filter(otf_of(psf, shape), phi)
+    filt = wiener_filter(psf_to_otf(psf, shape), phi)
     out = apply_spectral_filter(padded, filt, crop=(height, width))
     if normalize:
         out = normalize_range(out, image)
@@ -183,45 +181,6 @@ def wiener_filter(otf: np.ndarray, phi: float = DEFAULT_PHI) -> np.ndarray:
     np.negative(filt.imag, out=filt.imag)
     filt[0, 0] = 1.0 / dc
     return filt
-
-
-def otf_of(psf: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Same result as :func:`~gyrodeblur.fftutils.psf_to_otf`, faster for small PSFs.
-
-    For a ``kh x kw`` PSF in an ``M x N`` FFT the OTF is a separable DFT,
-    ``H = E_y @ h @ E_x`` with ``E_y[k, j] = exp(-2 pi i k (j - kh//2) / M)`` (``M x kh``)
-    and ``E_x`` the ``kw x (N//2 + 1)`` half-spectrum counterpart. Two small matrix
-    products beat zero-padding the PSF to ``M x N`` and running an ``rfft2`` by about
-    10x for a 31 px PSF in a 720 x 720 FFT (the patchwise case); the DFT matrices are
-    cached per size. PSFs over ``_DIRECT_OTF_MAX`` px, or that do not fit, go through
-    ``psf_to_otf``. Agreement with ``psf_to_otf`` is float32 round-off (~1e-7).
-
-    Returns
-    -------
-    ndarray, complex64, shape (M, N // 2 + 1)
-    """
-    psf = np.asarray(psf, dtype=np.float32)
-    kh, kw = psf.shape
-    if max(kh, kw) > _DIRECT_OTF_MAX or kh > shape[0] or kw > shape[1]:
-        return psf_to_otf(psf, shape)
-    ey = _dft_matrix(int(shape[0]), kh, False)
-    ex = _dft_matrix(int(shape[1]), kw, True)
-    return ey @ (psf.astype(np.complex64) @ ex)
-
-
-#: Largest PSF side for which :func:`otf_of` uses the direct separable DFT.
-_DIRECT_OTF_MAX = 128
-
-
-@functools.lru_cache(maxsize=32)
-def _dft_matrix(n: int, k: int, half: bool) -> np.ndarray:
-    """``exp(-2 pi i f (j - k//2) / n)``: (n, k) for all f, or (k, n//2 + 1) for the half."""
-    freqs = np.arange(n // 2 + 1 if half else n, dtype=np.int64)
-    offsets = np.arange(k, dtype=np.int64) - k // 2
-    phase = np.outer(offsets, freqs) if half else np.outer(freqs, offsets)
-    mat = np.exp((-2j * np.pi / n) * (phase % n)).astype(np.complex64)
-    mat.flags.writeable = False
-    return mat
 
 
 def apply_spectral_filter(padded: np.ndarray, filt: np.ndarray,
