@@ -358,7 +358,8 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     return_report : bool
         Also return a :class:`DeblurReport`.
     **options
-        Method options (``phi`` for Wiener, ...).
+        Method options: ``phi`` for ``"wiener"``; ``iterations``, ``noise_sigma``, ``weight``,
+        ``exponent`` for ``"sparse"`` (see :func:`gyrodeblur.sparse.sparse_deconvolve`).
 
     Returns
     -------
