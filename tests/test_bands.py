@@ -62,3 +62,8 @@ def test_threaded_curves_match_per_element_formula():
     assert srgb_to_linear(np.float32(0.5)).shape == ()
     view = x[:, ::2]  # not contiguous
     np.testing.assert_array_equal(srgb_to_linear(view), srgb_to_linear(view.copy()))
+
+
+def test_curves_accept_empty_arrays():
+    assert srgb_to_linear(np.zeros((0, 4, 3), np.float32)).shape == (0, 4, 3)
+    assert linear_to_srgb(np.array([], np.float32)).shape == (0,)

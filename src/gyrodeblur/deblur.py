@@ -299,7 +299,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     else:
         out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress)
     out = np.asarray(out, np.float32)
-    if np.shares_memory(out, image):  # never clip the caller's array in place
+    if np.may_share_memory(out, image):  # never clip the caller's array in place
         out = out.copy()
     if clip:  # negative light is ringing; clip before the curve (in row bands, in place)
         _clip_rows(out, 0.0, None)

@@ -110,6 +110,8 @@ def _piecewise(image, threshold: float, slope: float, power_segment) -> np.ndarr
     if not x.flags.c_contiguous:
         x = np.ascontiguousarray(x)
     out = np.empty_like(x)
+    if x.size == 0:
+        return out
     if x.ndim == 0:
         flat_x, flat_out = x.reshape(1), out.reshape(1)
     else:
