@@ -169,10 +169,10 @@ def sparse_deconvolve(
 
     :math:`\rho_v = 0.15`; :math:`\rho_w = \beta\lambda` with :math:`\beta` doubling from 8
     to 32 (continuation, Krishnan & Fergus 2009). ``u`` starts as a Tikhonov solution
-    (gradient weight :math:`25\lambda` for TV, :math:`3\lambda` otherwise), except around small over-exposed blobs (point
-    lights), where it starts as the blurred image: the Tikhonov start would ring there and
-    ADMM is slow to undo ringing inside data-free areas. Over-relaxation 1.5 (Eckstein &
-    Bertsekas) on both splits.
+    (gradient weight :math:`25\lambda` for TV, :math:`3\lambda` otherwise), except around
+    small over-exposed blobs (point lights), where it starts as the blurred image: the
+    Tikhonov start would ring there and ADMM is slow to undo ringing inside data-free
+    areas. Over-relaxation 1.5 (Eckstein & Bertsekas) on both splits.
 
     *Cost.* Four real FFTs per channel and iteration plus about 30 array passes; with
     clipped pixels, one more Wiener solve on the luminance. Memory: about 20 float32
@@ -348,8 +348,9 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
         rho_w = weight * beta
         # w-step, per direction: z = relaxed(D u) + y; w = prox(z); y <- z - w (= c, what
         # the shrinkage removed); the u-step needs q = w - y = z - 2c.
-        for diff, diff_t_add, y, w_old in ((_dx, _dx_t_set, yx, wx_old),
-                                           (_dy, _dy_t_add, yy, wy_old)):
+        # r = D^T q accumulates over the directions: x writes it, y adds to it.
+        for diff, diff_t, y, w_old in ((_dx, _dx_t_set, yx, wx_old),
+                                       (_dy, _dy_t_add, yy, wy_old)):
             diff(u, out=z)
             z *= a
             w_old *= a1
@@ -358,7 +359,7 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
             _shrink_residual(z, beta, p, out=y)
             np.subtract(z, y, out=w_old)
             np.subtract(w_old, y, out=z)
-            diff_t_add(z, r)
+            diff_t(z, r)
         # v-step: z = relaxed(h*u) + y_v; v = z + e, e = mw (g - z); y_v <- -e; q = z + 2e.
         ku *= a
         v_old *= a1
