@@ -255,3 +255,33 @@ def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
     text = capsys.readouterr().out
     assert "coarse ranking" in text and "deblurred" in text
     assert out.exists()
+
+
+def test_cli_values_given_on_the_command_line_are_kept(cli_dir, case, capsys):
+    """A value stated with an option is known, not a starting guess: --time-offset fixes the
+    offset, --orientation the mapping (the JSON's wrong YXz is overridden), in calibrate and
+    in deblur --refine alike."""
+    _, true, _ = case
+    d = cli_dir
+    out = d / "out" / "given.json"
+    assert main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+                 "--time-offset", "0.004", "--orientation", TRUE_AXES, "--fix", "bias",
+                 "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    cap = load_capture(out)
+    assert cap.time_offset == pytest.approx(0.004)
+    assert axes_to_letters(cap.axes) == TRUE_AXES
+    assert " 1 axis mapping" in text             # one mapping given: no search over 24
+    refined = d / "out" / "refined_given.png"
+    assert main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--refine",
+                 "--time-offset", "0.004", "--fix", "axes,bias", "--grid", "2x3", "--quiet",
+                 "-o", str(refined)]) == 0
+    text = capsys.readouterr().out
+    assert "time offset" in text and "(fixed)" in text and refined.exists()
+
+
+def test_cli_fix_needs_refine(cli_dir, capsys):
+    d = cli_dir
+    rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--fix",
+               "offset", "-o", str(d / "out" / "nofix.png")])
+    assert rc == 2 and "--refine" in capsys.readouterr().err

@@ -105,7 +105,7 @@ from .orientation import Orientation, quat_multiply, quat_to_matrix
 from .tonecurve import get_transfer_curve
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "calibrate_command",
-           "format_estimates"]
+           "format_estimates", "fixed_parameters"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
@@ -1326,6 +1326,27 @@ def _fmt(u, mult) -> str:
     return f"{u * mult:.2g}"
 
 
+#: Capture options whose value, given on the command line, fixes a parameter.
+_FIXING_OPTIONS = (("time_offset", "offset"), ("bias", "bias"), ("readout_time", "readout"),
+                   ("fx", "focal"), ("fy", "focal"), ("orientation", "axes"))
+
+
+def fixed_parameters(args) -> set[str]:
+    """Parameters the user fixes on the command line: those named by ``--fix``, and those
+    whose value is given explicitly (``--time-offset``, ``--bias``, ``--readout-time``,
+    ``--fx``/``--fy``, ``--orientation``): a value stated on the command line is taken as
+    known, not as a starting guess."""
+    fix = {f.strip() for f in (getattr(args, "fix", None) or "").split(",") if f.strip()}
+    unknown = fix - set(PARAMETERS)
+    if unknown:
+        raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
+                                  f"known: {', '.join(PARAMETERS)}")
+    for option, name in _FIXING_OPTIONS:
+        if getattr(args, option, None) is not None:
+            fix.add(name)
+    return fix
+
+
 def calibrate_command(args, say, load_capture) -> None:
     """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json`.
 
@@ -1334,11 +1355,7 @@ def calibrate_command(args, say, load_capture) -> None:
     corrected description written is the first photo's (the corrections are shared)."""
     from .imageio import check_destination, read_photo
 
-    fix = {f.strip() for f in (args.fix or "").split(",") if f.strip()}
-    unknown = fix - set(PARAMETERS)
-    if unknown:
-        raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
-                                  f"known: {', '.join(PARAMETERS)}")
+    fix = fixed_parameters(args)
     photos = [read_photo(p) for p in args.photos]
     check_destination(args.output, None, args.overwrite, image=False)
     paths = [c for c in (args.capture or "").split(",") if c] or [args.capture]

@@ -233,10 +233,19 @@ def cmd_deblur(args, say) -> None:
                                        transfer=args.transfer, progress=progress, **options)
         mode_txt, grid_txt = "blind", ""
     else:
+        if args.fix and not args.refine:
+            raise InputError("--fix", "applies with --refine only")
+        fix = None
+        if args.refine:
+            from .calibrate import fixed_parameters
+            fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         if args.refine:
-            from .calibrate import calibrate
-            cap = calibrate([photo.pixels], cap, say=say).capture
+            from .calibrate import calibrate, format_estimates
+            res = calibrate([photo.pixels], cap, fix=fix, say=say)
+            for line in format_estimates(res.estimates):
+                say(line)
+            cap = res.capture
         restored, report = deblur(photo.pixels, cap, mode=args.mode, grid=grid,
                                   overlap=args.overlap, method=args.method,
                                   transfer=args.transfer, progress=progress,
@@ -330,7 +339,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
     s.add_argument("--kernel-size", type=int, default=31, help="blind kernel size, px (odd)")
     s.add_argument("--refine", action="store_true",
-                   help="self-calibrate time offset, bias, readout, focal length and axes first")
+                   help="self-calibrate time offset, bias, readout, focal length and axes first "
+                        "(a value given with --time-offset, --bias, --readout-time, --fx/--fy or "
+                        "--orientation is kept as given)")
+    s.add_argument("--fix", default="", metavar="NAMES",
+                   help="with --refine: parameters not to estimate, comma-separated from "
+                        "offset,bias,readout,focal,axes")
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
     s.add_argument("--overwrite", action="store_true")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -350,7 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("photos", nargs="+", metavar="PHOTO")
     s.add_argument("-o", "--output", required=True, metavar="CORRECTED.json")
     s.add_argument("--fix", default="", metavar="NAMES",
-                   help="comma-separated parameters not to estimate: offset,bias,readout,focal,axes")
+                   help="comma-separated parameters not to estimate: offset,bias,readout,focal,"
+                        "axes (a value given with --time-offset, --bias, --readout-time, "
+                        "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s, required=True)
     s.set_defaults(func=cmd_calibrate)
