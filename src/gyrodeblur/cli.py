@@ -198,7 +198,7 @@ def cmd_simulate(args, say) -> None:
 
 
 def cmd_deblur(args, say) -> None:
-    from .deblur import deblur
+    from .deblur import DEFAULT_METHOD, deblur
     from .imageio import read_photo, write_photo
     from .psfplot import field_image
 
@@ -206,17 +206,17 @@ def cmd_deblur(args, say) -> None:
     _check_output(args.output, photo, args.overwrite)
     if args.save_psf:
         _check_output(args.save_psf, photo, args.overwrite)
-    from .deblur import DEFAULT_METHOD
+    method = args.method or DEFAULT_METHOD
     options = {}
     if args.phi is not None:
-        if (args.method or DEFAULT_METHOD) != "wiener":
+        if method != "wiener":
             raise InputError("--phi", "applies to --method wiener only")
         options["phi"] = args.phi
     for name, value in (("iterations", args.iterations), ("noise_sigma", args.noise_sigma)):
         if value is None:
             continue
         flag = "--" + name.replace("_", "-")
-        if (args.method or DEFAULT_METHOD) != "sparse":
+        if method != "sparse":
             raise InputError(flag, "applies to --method sparse only")
         if (name == "iterations" and not 1 <= value <= 100) or (name == "noise_sigma"
                                                                 and not 0 <= value < 1):
@@ -258,7 +258,6 @@ def cmd_deblur(args, say) -> None:
     if args.save_psf:
         _write_picture(args.save_psf, field_image(field, w, h), args.overwrite)
     e = field.extents
-    method = args.method or DEFAULT_METHOD
     say(f"deblurred {args.photo} -> {args.output}: {w}x{h}, mode {mode_txt}{grid_txt}, "
         f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")
 

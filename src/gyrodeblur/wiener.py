@@ -106,8 +106,9 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
 
     The raw eq. 6.18 has DC gain :math:`1/(1+\\Phi)` and would darken the photo by about
     1 %; setting :math:`W(0) = 1/H(0)` keeps the mean, so a flat image stays flat.
-    All channels share one OTF (:func:`~gyrodeblur.fftutils.psf_to_otf`) and go through one ``rfft2``/``irfft2``
-    pair over axes (0, 1), in complex64, with ``workers=FFT_WORKERS``.
+    All channels share one OTF (:func:`~gyrodeblur.fftutils.psf_to_otf`) and go through
+    one ``rfft2``/``irfft2`` pair over axes (0, 1), in complex64, with
+    ``workers=FFT_WORKERS``.
 
     References
     ----------
