@@ -2,10 +2,8 @@
 
 import numpy as np
 import pytest
-from scipy import ndimage
 
 from gyrodeblur.bands import for_row_bands
-from gyrodeblur.deblur import WARP_ORDER, warp_by_displacement
 from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
 
@@ -26,30 +24,6 @@ def test_band_errors_reach_the_caller():
 
     with pytest.raises(RuntimeError, match="rows"):
         for_row_bands(job, 200, workers=2, min_rows=1)
-
-
-def _reference_warp(image, displacement, order):
-    """The warp written plainly: whole-image coordinates, one map_coordinates per channel."""
-    ys, xs, d = displacement
-    H, W = image.shape[:2]
-    gy = np.arange(H) * (len(ys) - 1) / ys[-1]
-    gx = np.arange(W) * (len(xs) - 1) / xs[-1]
-    grid = np.stack(np.meshgrid(gy, gx, indexing="ij"))
-    coords = np.stack([np.arange(H)[:, None] + ndimage.map_coordinates(d[..., 1], grid, order=1),
-                       np.arange(W)[None, :] + ndimage.map_coordinates(d[..., 0], grid, order=1)])
-    return np.stack([ndimage.map_coordinates(image[..., c].astype(np.float64), coords, order=order,
-                                             mode="mirror") for c in range(image.shape[2])], -1)
-
-
-def test_threaded_warp_matches_a_plain_one():
-    rng = np.random.default_rng(3)
-    img = ndimage.gaussian_filter(rng.random((300, 410, 3)), (1.5, 1.5, 0)).astype(np.float32)
-    field = (np.linspace(0, 299, 5), np.linspace(0, 409, 6), rng.normal(0, 4, (5, 6, 2)))
-    ref = _reference_warp(img, field, WARP_ORDER)
-    out = warp_by_displacement(img, field)
-    assert out.dtype == np.float32 and out.shape == img.shape
-    np.testing.assert_allclose(out, ref, atol=2e-5)
-    np.testing.assert_allclose(warp_by_displacement(img[..., 1], field), ref[..., 1], atol=2e-5)
 
 
 def test_threaded_curves_match_per_element_formula():

@@ -42,7 +42,7 @@ def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
     if noise_sigma is None:
         noise_sigma = estimate_noise_sigma(image if encoded is None else encoded)
     options.pop("phi", None)
-    return partial(sparse_deconvolve, noise_sigma=noise_sigma, workers=1, **options)
+    return partial(sparse_deconvolve, noise_sigma=noise_sigma, **options)
 
 
 #: name -> factory(image, **options) -> deconvolve(sub_image, psf). ``image`` is the
@@ -85,9 +85,10 @@ AUTO_GRID_TOLERANCE = 2.0
 #: only where the mean displacement changes faster than this (px per px), where it gained
 #: 1-5 dB on the same photos.
 ALIGN_MIN_SLOPE = 0.015
-#: B-spline order of the alignment warp: quadratic came within 0.015 dB of cubic on the 33
-#: warped cases of the 36-case benchmark and samples 9 rather than 16 pixels (25 % faster).
-WARP_ORDER = 2
+#: OpenCV interpolation of the alignment warp (see :func:`warp_by_displacement`).
+WARP_INTERPOLATION = 4  # cv2.INTER_LANCZOS4
+#: Rows per band of the alignment warp.
+_WARP_BAND = 1024
 #: Most patches :func:`auto_grid` chooses.
 AUTO_GRID_MAX_PATCHES = 96
 
@@ -207,42 +208,34 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
 
     ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`
     (a regular grid), interpolated bilinearly to every pixel; the image is sampled with
-    B-splines of order :data:`WARP_ORDER` (mirrored outside the frame). After this warp
-    every pixel's PSF is centred on it. Channels are spline-filtered and rows sampled in
-    bands on all cores (:func:`gyrodeblur.bands.for_row_bands`); memory: one float32 image
-    of spline coefficients besides the output, and coordinates for one band at a time.
+    OpenCV's ``remap`` and :data:`WARP_INTERPOLATION` (mirrored outside the frame, sample
+    positions rounded to 1/32 px). After this warp every pixel's PSF is centred on it.
+    Rows are done in bands of :data:`_WARP_BAND` (OpenCV spreads each over its threads);
+    memory: the output and one band's sample positions.
     """
-    from scipy import ndimage
-
-    from .bands import for_row_bands
+    import cv2
 
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)
     planes = img[..., None] if img.ndim == 2 else img
     H, W, C = planes.shape
-    coeffs = np.empty((C, H, W), np.float32)
-
-    def prefilter(c0: int, c1: int) -> None:
-        for c in range(c0, c1):
-            ndimage.spline_filter(planes[..., c], order=WARP_ORDER, output=coeffs[c],
-                                  mode="mirror")
-
-    for_row_bands(prefilter, C, min_rows=1)
     # Bilinear interpolation of the grid as two small matrix products per band.
     ax = _linear_weights(np.arange(W) * ((len(xs) - 1) / max(xs[-1], 1)), len(xs)).T
+    fields = [np.ascontiguousarray(d[..., k], dtype=np.float32) for k in (0, 1)]
     out = np.empty((H, W, C), np.float32)
-
-    def band(r0: int, r1: int) -> None:
+    # remap takes up to 4 interleaved channels (a copy only for more than 4)
+    groups = [np.ascontiguousarray(planes[..., c:c + 4]) for c in range(0, C, 4)]
+    for r0 in range(0, H, _WARP_BAND):
+        r1 = min(H, r0 + _WARP_BAND)
         ay = _linear_weights(np.arange(r0, r1) * ((len(ys) - 1) / max(ys[-1], 1)), len(ys))
-        coords = np.empty((2, r1 - r0, W), np.float32)
-        for k, axis_pixels in ((0, np.arange(r0, r1)[:, None]), (1, np.arange(W)[None, :])):
-            np.matmul(ay @ d[..., 1 - k].astype(np.float32), ax, out=coords[k])
-            coords[k] += axis_pixels
-        for c in range(C):
-            out[r0:r1, :, c] = ndimage.map_coordinates(coeffs[c], coords, order=WARP_ORDER,
-                                                       mode="mirror", prefilter=False)
-
-    for_row_bands(band, H)
+        map_x = (ay @ fields[0]) @ ax
+        map_x += np.arange(W, dtype=np.float32)[None, :]
+        map_y = (ay @ fields[1]) @ ax
+        map_y += np.arange(r0, r1, dtype=np.float32)[:, None]
+        for c0, src in zip(range(0, C, 4), groups):
+            res = cv2.remap(src, map_x, map_y, WARP_INTERPOLATION,
+                            borderMode=cv2.BORDER_REFLECT_101)
+            out[r0:r1, :, c0:c0 + src.shape[2]] = res.reshape(r1 - r0, W, -1)
     return out[..., 0] if img.ndim == 2 else out
 
 

@@ -20,11 +20,11 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft as sfft
 import scipy.ndimage as ndi
 
-from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
+from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad
 from .noise import estimate_noise_sigma
+from .packedfft import pack_spectrum, packed_irfft2, packed_multiply, packed_rfft2
 
 __all__ = ["sparse_deconvolve", "regularization_weight"]
 
@@ -95,7 +95,6 @@ def sparse_deconvolve(
     saturation_level: float | None = 0.98,
     saturation_dilation: int = 1,
     clip: bool = True,
-    workers: int | None = None,
 ) -> np.ndarray:
     r"""Deconvolve ``image`` by ``psf`` with a sparse gradient prior (TV by default).
 
@@ -132,8 +131,6 @@ def sparse_deconvolve(
         of a clipped streak is where a slightly wrong PSF or camera processing errs most.
     clip : bool, optional
         Clip the result to ``[0, 1]``.
-    workers : int, optional
-        Threads for ``scipy.fft``; default :data:`gyrodeblur.fftutils.FFT_WORKERS`.
 
     Returns
     -------
@@ -175,8 +172,10 @@ def sparse_deconvolve(
     areas. Over-relaxation 1.5 (Eckstein & Bertsekas) on both splits.
 
     *Cost.* Four real FFTs per channel and iteration plus about 30 array passes; with
-    clipped pixels, one more Wiener solve on the luminance. Memory: about 20 float32
-    arrays of the padded size per channel. Thread-safe (no shared mutable state).
+    clipped pixels, one more Wiener solve on the luminance. The FFTs are OpenCV's, in its
+    packed layout (:mod:`gyrodeblur.packedfft`); OpenCV may spread a large transform over
+    its own threads (``cv2.setNumThreads``). Memory: about 20 float32 arrays of the padded
+    size per channel. Thread-safe (no shared mutable state).
 
     References
     ----------
@@ -215,12 +214,11 @@ def sparse_deconvolve(
         weight = regularization_weight(noise_sigma, exponent)
     if weight <= 0:
         raise ValueError(f"weight must be positive, got {weight}")
-    nw = FFT_WORKERS if workers is None else int(workers)
 
     color = g.ndim == 3
     gc = np.moveaxis(g, 2, 0) if color else g[None]  # (C, H, W) view
     sat = _clipping(gc, saturation_level, saturation_dilation, h)
-    out = _admm(gc, h, float(weight), float(exponent), int(iterations), sat, nw)
+    out = _admm(gc, h, float(weight), float(exponent), int(iterations), sat)
     out = np.moveaxis(out, 0, 2) if color else out[0]
     if clip:
         np.clip(out, 0.0, 1.0, out=out)
@@ -275,44 +273,42 @@ def _wiener_luminance(lum: np.ndarray, h: np.ndarray, phi: float = 0.01) -> np.n
     H, W = lum.shape
     N = fast_shape((H + h.shape[0] - 1 + _PAD_EXTRA, W + h.shape[1] - 1 + _PAD_EXTRA))
     K = psf_to_otf(h, N)
-    U = sfft.rfft2(smooth_periodic_pad(lum, N)) * (np.conj(K) / (np.abs(K) ** 2 + phi))
-    return sfft.irfft2(U, s=N)[:H, :W]
+    U = packed_rfft2(smooth_periodic_pad(lum, N))
+    packed_multiply(U, pack_spectrum(np.conj(K) / (np.abs(K) ** 2 + phi), N[1]), out=U)
+    return packed_irfft2(U)[:H, :W]
 
 
 def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: int,
-          sat: _Clipping | None, workers: int) -> np.ndarray:
-    """The solver on a (C, H, W) stack; returns (C, H, W) float32 (a fresh array)."""
+          sat: _Clipping | None) -> np.ndarray:
+    """The solver on a (C, H, W) stack; returns (C, H, W) float32 (a fresh array).
+
+    Spectra are kept in the packed real layout of :mod:`gyrodeblur.packedfft` (float32,
+    the padded shape): products with the PSF's spectrum go through
+    :func:`~gyrodeblur.packedfft.packed_multiply`, real factors multiply element-wise.
+    """
     C, H, W = gc.shape
     kh, kw = h.shape
     N = fast_shape((H + kh - 1 + _PAD_EXTRA, W + kw - 1 + _PAD_EXTRA))
     f32 = np.float32
-
-    def fft(a):
-        return sfft.rfft2(a, workers=workers)
-
-    def ifft(A, disposable=False):
-        # A spectrum no longer needed may be overwritten: pocketfft's c2r then skips
-        # a copy (27 % faster on a 600 x 576 x 3 patch).
-        return sfft.irfft2(A, s=N, workers=workers,
-                           overwrite_x=disposable).astype(f32, copy=False)
 
     # Periodic domain: photo at the top-left, smooth fill elsewhere (used only to start).
     gp = np.empty((C,) + N, f32)
     for c in range(C):
         gp[c] = smooth_periodic_pad(gc[c], N)
     K = psf_to_otf(h, N)
-    K2 = (K.real * K.real + K.imag * K.imag).astype(f32)
+    K2 = K.real * K.real + K.imag * K.imag
     D2 = _laplacian_otf(N)
+    k_packed = pack_spectrum(K, N[1])
 
     # Start: Tikhonov solution of the (padded) data.
-    G = fft(gp)
     init = _INIT_TIKHONOV.get(p, _INIT_TIKHONOV_DEFAULT) * weight
-    U = G * (np.conj(K) / (K2 + f32(init) * D2))
-    u = ifft(U)
+    U = packed_rfft2(gp)
+    packed_multiply(U, pack_spectrum(np.conj(K) / (K2 + init * D2), N[1]), out=U)
+    u = packed_irfft2(U)
     zone = None if sat is None or sat.lights is None else _light_zone(sat.lights, kh, kw, N)
     if zone is not None:  # start from the blurred data around point lights
         u += zone * (gp - u)
-        U = fft(u)
+        packed_rfft2(u, out=U)
     if iterations == 0:
         return np.ascontiguousarray(u[:, :H, :W])
 
@@ -327,12 +323,13 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
             ms[:, :H, :W][sat.at_least] = 1.0 / (1.0 + _RHO_DATA)
             mw = np.where(ms > 0, f32(0), mw)  # per channel from here on: (C, N0, N1)
             t = np.empty_like(u)
-    kc_rho = (np.conj(K) * f32(_RHO_DATA)).astype(np.complex64)
-    k2_rho = K2 * f32(_RHO_DATA)
+    kc_rho = pack_spectrum(np.conj(K) * _RHO_DATA, N[1])
+    k2_rho = pack_spectrum(K2 * _RHO_DATA, N[1], real=True)
+    d2 = pack_spectrum(D2, N[1], real=True)
 
     a = f32(_RELAX)
     a1 = f32(1.0 - _RELAX)
-    ku = ifft(U * K, True)
+    ku = packed_irfft2(packed_multiply(U, k_packed, out=U))
     v_old = ku.copy()                    # last v (for over-relaxation)
     wx_old = _dx(u, out=np.empty_like(u))  # last w, per direction
     wy_old = _dy(u, out=np.empty_like(u))
@@ -342,6 +339,7 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
     z = np.empty_like(u)
     e = np.empty_like(u)
     r = np.empty_like(u)
+    num, R = U, np.empty_like(u)         # packed spectra
     beta = _BETA0
     factors: dict[float, tuple[np.ndarray, np.ndarray]] = {}
     for it in range(iterations):
@@ -379,21 +377,17 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
         # u-step (closed form in the Fourier domain): U = A Z + B R with, for this beta,
         # A = rho_v conj(H) / den and B = rho_w / den (real), den = rho_v |H|^2 + rho_w |D|^2.
         if beta not in factors:
-            inv = 1.0 / (k2_rho + f32(rho_w) * D2)
-            factors[beta] = ((kc_rho * inv).astype(np.complex64),
-                             (f32(rho_w) * inv).astype(f32)[..., None])
+            inv = 1.0 / (k2_rho + f32(rho_w) * d2)
+            factors[beta] = (np.ascontiguousarray(kc_rho * inv), f32(rho_w) * inv)
         A, B = factors[beta]
-        num = fft(z)
-        num *= A
-        R = fft(r)
-        _as_pairs(R)[...] *= B               # real factor: multiply re and im alike
+        packed_multiply(packed_rfft2(z, out=num), A, out=num)
+        packed_rfft2(r, out=R)
+        R *= B
         num += R
+        u = packed_irfft2(num, out=u)
         if it == iterations - 1:  # h*u is not needed after the last u-step
-            u = ifft(num, True)
             break
-        kn = num * K
-        u = ifft(num, True)
-        ku = ifft(kn, True)
+        packed_irfft2(packed_multiply(num, k_packed, out=num), out=ku)
         # Continuation: raise rho_w, rescale the scaled dual to keep the true dual fixed.
         nbeta = min(2.0 * beta, _BETA_MAX)
         if nbeta != beta:
@@ -418,11 +412,6 @@ def _light_zone(lights: np.ndarray, kh: int, kw: int,
     zone = np.zeros(shape, np.float32)
     zone[: lights.shape[0], : lights.shape[1]] = lights
     return ndi.uniform_filter(zone, (kh, kw), mode="wrap")
-
-
-def _as_pairs(spec: np.ndarray) -> np.ndarray:
-    """View a complex64 array as float32 (..., 2) pairs (real, imaginary)."""
-    return spec.view(np.float32).reshape(spec.shape + (2,))
 
 
 def _laplacian_otf(shape: tuple[int, int]) -> np.ndarray:
