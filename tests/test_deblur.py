@@ -136,8 +136,10 @@ def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
     img = ndimage.gaussian_filter(rng.random((300, 410, channels)), (1.5, 1.5, 0)).astype(np.float32)
     field = (np.linspace(0, 299, 5), np.linspace(0, 409, 6), rng.normal(0, 4, (5, 6, 2)))
     ref = _reference_warp(img, field)
-    monkeypatch.setattr(db, "_WARP_BAND", 128)  # three bands, the last one short
+    whole = db.warp_by_displacement(img, field)
+    monkeypatch.setattr(db, "_WARP_TILE", (128, 96))  # 3 x 5 tiles, the last ones short
     out = db.warp_by_displacement(img, field)
+    np.testing.assert_allclose(out, whole, atol=1e-5)
     assert out.dtype == np.float32 and out.shape == img.shape
     err = np.abs(out - ref)[8:-8, 8:-8]   # mirrored borders: the reference mirrors exactly
     assert err.max() < 0.004 and np.sqrt((err ** 2).mean()) < 6e-4  # bicubic: 0.0056, 0.0012
@@ -145,3 +147,14 @@ def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
         np.testing.assert_array_equal(db.warp_by_displacement(img[..., 0], field), out[..., 0])
     # moved the right way: content at x + c(x) lands on x
     assert np.sqrt(((out - img) ** 2).mean()) > 10 * np.sqrt((err ** 2).mean())
+
+
+def test_alignment_warp_takes_photos_wider_than_opencv_remap_does():
+    from gyrodeblur.deblur import warp_by_displacement
+
+    W = 33000                                      # remap alone stops at 32767 px
+    img = np.tile(np.sin(np.arange(W) / 7.0).astype(np.float32), (6, 1))
+    field = (np.array([0.0, 5.0]), np.array([0.0, W - 1.0]), np.tile([2.0, 0.0], (2, 2, 1)))
+    out = warp_by_displacement(img, field)          # every pixel samples x + 2
+    np.testing.assert_allclose(out[:, :-2], img[:, 2:], atol=1e-5)
+    np.testing.assert_allclose(out[:, -2:], img[:, -3:-1][:, ::-1], atol=1e-5)  # W -> W - 2

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
 
+import cv2
 import numpy as np
 
 from .capture import Capture
@@ -85,10 +86,14 @@ AUTO_GRID_TOLERANCE = 2.0
 #: only where the mean displacement changes faster than this (px per px), where it gained
 #: 1-5 dB on the same photos.
 ALIGN_MIN_SLOPE = 0.015
-#: OpenCV interpolation of the alignment warp (see :func:`warp_by_displacement`).
-WARP_INTERPOLATION = 4  # cv2.INTER_LANCZOS4
-#: Rows per band of the alignment warp.
-_WARP_BAND = 1024
+#: Interpolation of the alignment warp: Lanczos (8 x 8 taps). Against a quintic-spline
+#: reference on a smoothly warped photo it is 58 dB accurate; OpenCV's bicubic 47 dB and
+#: the quadratic B-spline used before 49 dB (0.5-1 s at 12 MP against 2 s for that spline).
+#: On the 36-case benchmark all three lie within 0.01 dB of each other (saturated photos:
+#: bicubic +0.05, Lanczos -0.08 dB against the spline).
+WARP_INTERPOLATION = cv2.INTER_LANCZOS4
+#: Output tile (rows, columns) of the alignment warp.
+_WARP_TILE = (1024, 8192)
 #: Most patches :func:`auto_grid` chooses.
 AUTO_GRID_MAX_PATCHES = 96
 
@@ -210,11 +215,11 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     (a regular grid), interpolated bilinearly to every pixel; the image is sampled with
     OpenCV's ``remap`` and :data:`WARP_INTERPOLATION` (mirrored outside the frame, sample
     positions rounded to 1/32 px). After this warp every pixel's PSF is centred on it.
-    Rows are done in bands of :data:`_WARP_BAND` (OpenCV spreads each over its threads);
-    memory: the output and one band's sample positions.
+    The output is made in tiles of :data:`_WARP_TILE` (OpenCV spreads each over its
+    threads), each from the part of the photo its samples need, so photos of any size
+    work (``remap`` itself takes images under 32767 px a side); memory: the output and
+    one tile's sample positions.
     """
-    import cv2
-
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)
     planes = img[..., None] if img.ndim == 2 else img
@@ -225,18 +230,37 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     out = np.empty((H, W, C), np.float32)
     # remap takes up to 4 interleaved channels (a copy only for more than 4)
     groups = [np.ascontiguousarray(planes[..., c:c + 4]) for c in range(0, C, 4)]
-    for r0 in range(0, H, _WARP_BAND):
-        r1 = min(H, r0 + _WARP_BAND)
+    rows, cols = _WARP_TILE
+    for r0 in range(0, H, rows):
+        r1 = min(H, r0 + rows)
         ay = _linear_weights(np.arange(r0, r1) * ((len(ys) - 1) / max(ys[-1], 1)), len(ys))
         map_x = (ay @ fields[0]) @ ax
         map_x += np.arange(W, dtype=np.float32)[None, :]
         map_y = (ay @ fields[1]) @ ax
         map_y += np.arange(r0, r1, dtype=np.float32)[:, None]
-        for c0, src in zip(range(0, C, 4), groups):
-            res = cv2.remap(src, map_x, map_y, WARP_INTERPOLATION,
-                            borderMode=cv2.BORDER_REFLECT_101)
-            out[r0:r1, :, c0:c0 + src.shape[2]] = res.reshape(r1 - r0, W, -1)
+        for c0 in range(0, W, cols):
+            c1 = min(W, c0 + cols)
+            mx, my = map_x[:, c0:c1], map_y[:, c0:c1]
+            y0, y1 = _source_window(my, H)
+            x0, x1 = _source_window(mx, W)
+            for k, src in zip(range(0, C, 4), groups):
+                res = cv2.remap(src[y0:y1, x0:x1], mx - np.float32(x0), my - np.float32(y0),
+                                WARP_INTERPOLATION, borderMode=cv2.BORDER_REFLECT_101)
+                out[r0:r1, c0:c1, k:k + src.shape[2]] = res.reshape(r1 - r0, c1 - c0, -1)
     return out[..., 0] if img.ndim == 2 else out
+
+
+def _source_window(positions: np.ndarray, size: int) -> tuple[int, int]:
+    """``[lo, hi)`` along one axis of length ``size`` that holds every sample position, its
+    interpolation taps (4 px either side) and, where samples fall outside the photo, the
+    pixels they mirror to: cropping the photo to it changes no sampled value."""
+    lo = int(np.floor(positions.min())) - 4
+    hi = int(np.ceil(positions.max())) + 5
+    if lo < 0:               # mirrored about 0: -k reads +k
+        hi = max(hi, 1 - lo)
+    if hi > size:            # mirrored about size - 1
+        lo = min(lo, 2 * size - 1 - hi)
+    return max(0, lo), min(size, hi)
 
 
 def _linear_weights(t: np.ndarray, n: int) -> np.ndarray:
