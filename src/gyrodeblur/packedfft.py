@@ -2,10 +2,10 @@
 
 A real ``(M, N)`` image has a Hermitian spectrum: ``rfft2`` keeps its ``(M, N // 2 + 1)``
 complex half. OpenCV's ``cv2.dft`` stores the same information in a real ``(M, N)`` float32
-array ("CCS" packing) and computes it about 1.4 times faster than ``scipy.fft`` on the
-patch sizes of :mod:`gyrodeblur.sparse` (0.75 ms against 1.05 ms for a 625 x 600 plane
-on one core; the inverse 0.86 against 1.02 ms), which makes the ADMM deconvolution about
-20 % faster end to end.
+array ("CCS" packing) and computes it faster than ``scipy.fft`` on the patch sizes of
+:mod:`gyrodeblur.sparse` (a 625 x 600 plane on one core: 0.75 against 1.05 ms forward,
+0.86 against 1.02 ms inverse). A whole ADMM patch gained about 10 % (238 -> 212 ms, one
+thread), the threaded 12 MP pipeline 5-10 %: there memory traffic limits both libraries.
 
 Layout, for column frequency ``j`` and row frequency ``k`` of ``Y = rfft2(image)``:
 
