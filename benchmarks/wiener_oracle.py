@@ -13,13 +13,17 @@ writes ``benchmarks/results/wiener_oracle.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
+import sys
+from pathlib import Path
 
 import numpy as np
 
-from gyrodeblur.deblur import DEFAULT_METHOD, deblur
-from gyrodeblur.metrics import default_border, psnr, ssim
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _common  # noqa: E402
+
+from gyrodeblur.deblur import DEFAULT_METHOD, deblur  # noqa: E402
+from gyrodeblur.metrics import default_border, psnr, ssim  # noqa: E402
 
 PHIS = (0.001, 0.003, 0.01, 0.03)
 
@@ -37,9 +41,9 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dataset", help="folder of cases (python -m gyrodeblur.dataset DIR)")
     ap.add_argument("--quick", action="store_true", help="2 small built cases")
-    ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results",
-                                                  "wiener_oracle.json"))
+    ap.add_argument("--out", type=Path, default=_common.RESULTS / "wiener_oracle.json")
     args = ap.parse_args(argv)
+    machine = _common.machine_info()     # at the start: the load before this run
     if not args.dataset and not args.quick:
         ap.error("give --dataset DIR or --quick")
     rows = []
@@ -71,9 +75,7 @@ def main(argv=None) -> dict:
           f"{summary['mean_psnr']['wiener_psnr']:.2f}, wiener(best phi) "
           f"{summary['mean_psnr']['oracle_psnr']:.2f} dB; gain {g.mean():+.2f} dB (min {g.min():+.2f}); "
           f"SSIM {summary['mean_ssim']['default_ssim']:.3f} vs {summary['mean_ssim']['wiener_ssim']:.3f}")
-    os.makedirs(os.path.dirname(args.out), exist_ok=True)
-    with open(args.out, "w", encoding="utf-8") as fh:
-        json.dump({"summary": summary, "per_case": rows}, fh, indent=2)
+    _common.write_json(args.out, {"summary": summary, "per_case": rows, "machine": machine})
     return summary
 
 
