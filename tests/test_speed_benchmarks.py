@@ -18,7 +18,6 @@ def test_psf_field_speed_quick(tmp_path):
 
 
 def test_deconv_speed_quick(tmp_path):
-    import json
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "deconv_speed.py"
     spec = importlib.util.spec_from_file_location("deconv_speed", path)
     mod = importlib.util.module_from_spec(spec)
