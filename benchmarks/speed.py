@@ -12,9 +12,11 @@ For every size (1, 3, 12, 24, 48 MP, RGB, 4:3), every method (default: all of
 2. times ``deblur(image, capture, mode=..., method=...)`` end to end (sRGB decode, PSF
    rendering, deconvolution, blending, encode): best of ``--repeat`` runs (default 3 up
    to 3 MP, 2 above, 1 with --quick);
-3. measures, in the same process right after, the FFT floor: one ``rfft2`` + ``irfft2``
-   of the 3-channel float32 image over axes (0, 1), zero-padded to the next fast FFT
-   shape, with all FFT workers; the least any whole-image FFT deconvolution can cost.
+3. measures, in the same process right after, the FFT floor: one forward and one inverse
+   real FFT of the 3-channel float32 image, zero-padded to the next fast FFT shape, the
+   faster of ``scipy.fft`` (axes (0, 1), all FFT workers) and OpenCV's packed transforms
+   (:mod:`gyrodeblur.packedfft`, which the sparse solver uses); the least any whole-image
+   FFT deconvolution can cost.
 
 Memory: the child's ``ru_maxrss`` (peak resident set, the whole process: interpreter,
 libraries, input image and the call, scipy.fft's buffers included) read after the first
@@ -95,6 +97,7 @@ def worker(mp: float, method: str, mode: str, repeat: int) -> dict:
     from deconv_speed import make_photo
     from gyrodeblur.deblur import deblur
     from gyrodeblur.fftutils import FFT_WORKERS, fast_shape
+    from gyrodeblur.packedfft import packed_irfft2, packed_rfft2
     from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
     height, width = dims(mp)
@@ -119,17 +122,25 @@ def worker(mp: float, method: str, mode: str, repeat: int) -> dict:
     padded = np.zeros(shape + (3,), np.float32)
     padded[:height, :width] = image
     del image
-    floor = []
+    floor_scipy, floor_cv = [], []
     for _ in range(repeat):
         t0 = time.perf_counter()
         spec = sfft.rfft2(padded, axes=(0, 1), workers=FFT_WORKERS)
         sfft.irfft2(spec, s=shape, axes=(0, 1), workers=FFT_WORKERS, overwrite_x=True)
-        floor.append(time.perf_counter() - t0)
+        floor_scipy.append(time.perf_counter() - t0)
         del spec
+    planes = np.ascontiguousarray(np.moveaxis(padded, 2, 0))
+    del padded
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        packed_irfft2(packed_rfft2(planes))
+        floor_cv.append(time.perf_counter() - t0)
+    floor = [min(a, b) for a, b in zip(floor_scipy, floor_cv)]
     lo, hi = report.extent_range
     return {"mp": mp, "width": width, "height": height, "megapixels": width * height / 1e6,
             "method": method, "mode": mode, "status": "ok", "seconds": min(runs),
             "runs_s": runs, "floor_s": min(floor), "floor_runs_s": floor,
+            "floor_scipy_s": min(floor_scipy), "floor_opencv_s": min(floor_cv),
             "floor_shape": list(shape), "ratio_to_floor": min(runs) / min(floor),
             "transfer_curve_s": min(curve),
             "peak_rss_mib": rss_after, "rss_before_call_mib": rss_before,
@@ -231,8 +242,10 @@ def main(argv: list[str] | None = None) -> int:
                     "focal_fraction": FOCAL},
         "time_note": "best of the timed runs of deblur() end to end (sRGB decode, PSFs, "
                      "deconvolution, blending, encode), float32 RGB input",
-        "floor_note": "rfft2 + irfft2 of the 3-channel float32 image zero-padded to the next "
-                      "fast shape, axes (0, 1), all FFT workers, same process, right after",
+        "floor_note": "forward + inverse real FFT of the 3-channel float32 image zero-padded "
+                      "to the next fast shape, the faster of scipy.fft (axes (0, 1), all "
+                      "workers) and OpenCV's packed cv2.dft/idft (per channel, its own "
+                      "threads), same process, right after",
         "transfer_note": "srgb_to_linear + linear_to_srgb of the image alone (part of the time)",
         "memory_note": "ru_maxrss of the measuring child process (whole process), read after "
                        "the first timed call; call_growth = its increase over the call",
@@ -293,7 +306,7 @@ def plot(result: dict, path: Path, dpi: int = 110) -> None:
                   label=f"{method}, {mode}: peak RSS")
     sizes = sorted({r["megapixels"] for r in ok})
     floor = [min(r["floor_s"] for r in ok if r["megapixels"] == s) for s in sizes]
-    ax_t.plot(sizes, floor, "k^:", label="FFT floor (rfft2+irfft2, 3 ch)")
+    ax_t.plot(sizes, floor, "k^:", label="FFT floor (forward + inverse, 3 ch)")
     ax_m.plot(sizes, [s * 1e6 * 12 / 2 ** 30 for s in sizes], "k:",
               label="one float32 RGB image")
     for ax in (ax_t, ax_m):
