@@ -139,7 +139,9 @@ def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
     whole = db.warp_by_displacement(img, field)
     monkeypatch.setattr(db, "_WARP_TILE", (128, 96))  # 3 x 5 tiles, the last ones short
     out = db.warp_by_displacement(img, field)
-    np.testing.assert_allclose(out, whole, atol=1e-5)
+    # same samples; a BLAS may round the sample positions differently per tile, which can
+    # move a rare one across remap's 1/32 px grid (a slope of ~0.1 per px: ~3e-3)
+    assert np.abs(out - whole).max() < 5e-3 and np.abs(out - whole).mean() < 1e-5
     assert out.dtype == np.float32 and out.shape == img.shape
     err = np.abs(out - ref)[8:-8, 8:-8]   # mirrored borders: the reference mirrors exactly
     assert err.max() < 0.004 and np.sqrt((err ** 2).mean()) < 6e-4  # bicubic: 0.0056, 0.0012

@@ -6,7 +6,7 @@ import scipy.fft as sfft
 
 from gyrodeblur.packedfft import pack_spectrum, packed_irfft2, packed_multiply, packed_rfft2
 
-SHAPES = [(6, 8), (7, 8), (6, 9), (7, 9), (1, 8), (2, 3), (48, 50)]
+SHAPES = [(6, 8), (7, 8), (6, 9), (7, 9), (1, 8), (2, 3), (5, 1), (6, 1), (48, 50)]
 
 
 @pytest.mark.parametrize("shape", SHAPES)
@@ -44,3 +44,12 @@ def test_bad_arguments_are_named():
         pack_spectrum(np.zeros((4, 5), complex), 8, real=True)
     with pytest.raises(ValueError, match="C-contiguous float32"):
         packed_rfft2(np.zeros((4, 8), np.float32), out=np.zeros((8, 8), np.float32)[::2])
+    a = np.ones((2, 8, 8), np.float32)
+    for wrong in (np.zeros((4, 16), np.float32), np.zeros((3, 8, 8), np.float32)):
+        with pytest.raises(ValueError, match="out has shape"):   # OpenCV would write elsewhere
+            packed_rfft2(a, out=wrong)
+        with pytest.raises(ValueError, match="out has shape"):
+            packed_irfft2(a, out=wrong)
+    with pytest.raises(ValueError, match="factor of shape"):
+        packed_multiply(a, np.ones((8, 6), np.float32))
+    np.testing.assert_array_equal(packed_multiply(a, np.ones((8, 8))).shape, a.shape)

@@ -316,3 +316,11 @@ def test_shrinkage_is_the_proximal_map(p):
 
 def test_doctests():
     assert doctest.testmod(sparse_mod).failed == 0
+
+
+def test_workers_argument_is_deprecated_and_ignored(textured_case):
+    _, blurred, psf = textured_case
+    with pytest.warns(DeprecationWarning, match="workers"):
+        old = sparse_deconvolve(blurred, psf, noise_sigma=0.01, iterations=2, workers=2)
+    np.testing.assert_array_equal(old, sparse_deconvolve(blurred, psf, noise_sigma=0.01,
+                                                         iterations=2))

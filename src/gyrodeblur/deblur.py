@@ -217,8 +217,9 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     positions rounded to 1/32 px). After this warp every pixel's PSF is centred on it.
     The output is made in tiles of :data:`_WARP_TILE` (OpenCV spreads each over its
     threads), each from the part of the photo its samples need, so photos of any size
-    work (``remap`` itself takes images under 32767 px a side); memory: the output and
-    one tile's sample positions.
+    work (``remap`` itself takes images under 32767 px a side); memory: the output, the
+    sample positions of one band of rows (2 x 1024 x width float32: 31 MiB at 4000 px) and
+    a float32 copy of the input if it is not one already.
     """
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)

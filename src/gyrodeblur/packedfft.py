@@ -46,7 +46,10 @@ def pack_spectrum(half: np.ndarray, width: int, *, real: bool = False) -> np.nda
     real : bool
         ``half`` is a real-valued factor to multiply spectra with: each value is written
         to both the real and the imaginary slot of its frequency, so that
-        ``packed * pack_spectrum(f, N, real=True)`` is the packing of ``Y * f``.
+        ``packed * pack_spectrum(f, N, real=True)`` is the packing of ``Y * f``. The
+        factor must be Hermitian-symmetric (``f[k, j] == f[-k, j]`` in the columns ``j = 0``
+        and ``N / 2``, as ``|H|^2`` is): only the rows ``k <= M / 2`` of those columns are
+        read.
 
     Returns
     -------
@@ -77,9 +80,10 @@ def pack_spectrum(half: np.ndarray, width: int, *, real: bool = False) -> np.nda
 
 
 def packed_rfft2(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Packed spectra of float32 images ``(..., M, N)``, one 2-D transform per plane."""
+    """Packed spectra of float32 images ``(..., M, N)``, one 2-D transform per plane.
+    ``out``, if given, is a C-contiguous float32 array of the same shape (may be ``image``)."""
     image = np.ascontiguousarray(image, dtype=np.float32)
-    out = np.empty_like(image) if out is None else out
+    out = _output(out, image)
     for src, dst in zip(_planes(image), _planes(out)):
         cv2.dft(src, dst=dst)
     return out
@@ -87,9 +91,9 @@ def packed_rfft2(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray
 
 def packed_irfft2(spectrum: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Real images ``(..., M, N)`` from their packed spectra (the inverse of
-    :func:`packed_rfft2`, scaled by ``1 / (M N)``)."""
+    :func:`packed_rfft2`, scaled by ``1 / (M N)``); ``out`` as for :func:`packed_rfft2`."""
     spectrum = np.ascontiguousarray(spectrum, dtype=np.float32)
-    out = np.empty_like(spectrum) if out is None else out
+    out = _output(out, spectrum)
     for src, dst in zip(_planes(spectrum), _planes(out)):
         cv2.idft(src, dst=dst, flags=_INVERSE_FLAGS)
     return out
@@ -99,9 +103,22 @@ def packed_multiply(spectra: np.ndarray, factor: np.ndarray,
                     out: np.ndarray | None = None) -> np.ndarray:
     """Products ``spectra * factor`` of packed spectra, ``factor`` (M, N) applied to every
     plane of ``spectra`` (..., M, N); ``out`` may be ``spectra`` itself."""
-    out = np.empty_like(spectra) if out is None else out
+    spectra = np.ascontiguousarray(spectra, dtype=np.float32)
+    factor = np.ascontiguousarray(factor, dtype=np.float32)
+    if factor.shape != spectra.shape[-2:]:
+        raise ValueError(f"factor of shape {factor.shape} for spectra of shape {spectra.shape}")
+    out = _output(out, spectra)
     for src, dst in zip(_planes(spectra), _planes(out)):
         cv2.mulSpectrums(src, factor, 0, c=dst)
+    return out
+
+
+def _output(out: np.ndarray | None, like: np.ndarray) -> np.ndarray:
+    """``out``, checked to match ``like`` (OpenCV would silently write elsewhere)."""
+    if out is None:
+        return np.empty_like(like)
+    if out.shape != like.shape:
+        raise ValueError(f"out has shape {out.shape}, expected {like.shape}")
     return out
 
 

@@ -17,6 +17,7 @@ patch tiler can use ``functools.partial(sparse_deconvolve, noise_sigma=s)``.
 from __future__ import annotations
 
 import functools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,6 +96,7 @@ def sparse_deconvolve(
     saturation_level: float | None = 0.98,
     saturation_dilation: int = 1,
     clip: bool = True,
+    workers: int | None = None,
 ) -> np.ndarray:
     r"""Deconvolve ``image`` by ``psf`` with a sparse gradient prior (TV by default).
 
@@ -131,6 +133,8 @@ def sparse_deconvolve(
         of a clipped streak is where a slightly wrong PSF or camera processing errs most.
     clip : bool, optional
         Clip the result to ``[0, 1]``.
+    workers : int, optional
+        Deprecated and ignored: the FFTs are OpenCV's now (see Notes, *Cost*).
 
     Returns
     -------
@@ -208,6 +212,10 @@ def sparse_deconvolve(
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations}")
     h = (h / total).astype(np.float32)
+    if workers is not None:
+        warnings.warn("sparse_deconvolve(workers=...) is ignored: its FFTs are OpenCV's, "
+                      "which threads them itself (cv2.setNumThreads)", DeprecationWarning,
+                      stacklevel=2)
     if weight is None:
         if noise_sigma is None:
             noise_sigma = estimate_noise_sigma(g)
