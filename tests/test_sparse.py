@@ -324,3 +324,16 @@ def test_workers_argument_is_deprecated_and_ignored(textured_case):
         old = sparse_deconvolve(blurred, psf, noise_sigma=0.01, iterations=2, workers=2)
     np.testing.assert_array_equal(old, sparse_deconvolve(blurred, psf, noise_sigma=0.01,
                                                          iterations=2))
+
+
+def test_large_photos_are_solved_one_channel_at_a_time_with_the_same_result(lights_case,
+                                                                              monkeypatch):
+    _, blurred, psf, _ = lights_case                     # with clipped and one-sided pixels
+    joint = sparse_deconvolve(blurred, psf, noise_sigma=0.01)
+    calls = []
+    admm = sparse_mod._admm
+    monkeypatch.setattr(sparse_mod, "_admm", lambda gc, *a: calls.append(gc.shape) or admm(gc, *a))
+    monkeypatch.setattr(sparse_mod, "_CHANNELWISE_PIXELS", 100)
+    split = sparse_deconvolve(blurred, psf, noise_sigma=0.01)
+    assert calls == [(1,) + blurred.shape[:2]] * 3
+    np.testing.assert_allclose(split, joint, atol=2e-5)
