@@ -285,3 +285,27 @@ def test_cli_fix_needs_refine(cli_dir, capsys):
     rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--fix",
                "offset", "-o", str(d / "out" / "nofix.png")])
     assert rc == 2 and "--refine" in capsys.readouterr().err
+
+
+def _noisy(cap: Capture, sigma: float, seed: int = 0) -> Capture:
+    rng = np.random.default_rng(seed)
+    log = cap.log
+    return cap.replace(log=GyroLog(log.t, log.omega + rng.normal(0, sigma, log.omega.shape)))
+
+
+def test_keep_margin_grows_with_gyro_noise():
+    from gyrodeblur.calibrate import _KEEP_MARGIN, _keep_margin
+    assert _keep_margin(float("nan")) == _keep_margin(0.002) == _KEEP_MARGIN
+    assert _keep_margin(0.021) == pytest.approx(3 * _KEEP_MARGIN)
+
+
+def test_noisy_gyro_keeps_a_correct_capture_but_still_fixes_an_offset(case):
+    sharp, true, blurred = case
+    noisy = _noisy(true, 0.03)
+    res = calibrate([blurred], noisy)
+    level = [float(n.split()[2]) for n in res.notes if n.startswith("gyro noise")]
+    assert level and level[0] == pytest.approx(0.03, rel=0.15)
+    assert any("kept the given parameters" in n for n in res.notes)
+    assert res.capture.time_offset == noisy.time_offset
+    off = calibrate([blurred], noisy.replace(time_offset=noisy.time_offset + 0.012)).capture
+    assert abs(off.time_offset - true.time_offset) < 0.003

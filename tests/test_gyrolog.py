@@ -109,3 +109,17 @@ def test_coverage_and_gaps():
         check_coverage(log, 0.05, 0.25)
     with pytest.raises(InputError, match="covers"):
         check_coverage(log, 0.25, 0.4)
+
+
+def test_rate_noise_measures_white_noise_not_hand_motion():
+    from gyrodeblur.gyrolog import rate_noise
+
+    t = np.arange(0.0, 3.0, 1 / 200)
+    shake = np.stack([0.6 * np.sin(2 * np.pi * 3.1 * t), 0.8 * np.cos(2 * np.pi * 8.9 * t),
+                      0.3 * np.sin(2 * np.pi * 4.3 * t + 0.7)], 1)
+    assert rate_noise(GyroLog(t, shake)) < 0.002          # smooth motion: almost nothing
+    rng = np.random.default_rng(0)
+    for sigma in (0.007, 0.02, 0.05):
+        noisy = GyroLog(t, shake + rng.normal(0, sigma, shake.shape))
+        assert rate_noise(noisy) == pytest.approx(sigma, rel=0.15)
+    assert np.isnan(rate_noise(GyroLog(t[:4], shake[:4])))

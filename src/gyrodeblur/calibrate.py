@@ -75,7 +75,11 @@ Search
 5. When the best mapping is the given one, the given parameters are kept unless the best
    found lowers the tempered objective by :data:`_KEEP_MARGIN`: a correct capture on a
    photo that says little (small blur) is left alone rather than moved along directions
-   the photo cannot tell apart.
+   the photo cannot tell apart. A noisy gyro makes its PSFs' fine structure noisy, and a
+   fit then gains objective by following that noise (at 0.02 rad/s per sample, gains of
+   3-17 with no better PSFs); so the margin grows with the log's white-noise variance
+   (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
+   0.007 rad/s: ``margin = 10 max(1, (noise / 0.007)^2)``.
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
 objective (priors included). The axis mapping's confidence is the objective gap to the
@@ -101,6 +105,7 @@ from scipy import ndimage
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .capture import Capture
 from .errors import InputError
+from .gyrolog import rate_noise
 from .orientation import Orientation, quat_multiply, quat_to_matrix
 from .tonecurve import get_transfer_curve
 
@@ -809,6 +814,8 @@ _N_PATCHES = 9             # patches in all, by default
 #: blur is left alone rather than moved along directions the photo cannot tell apart. (A
 #: different mapping is taken whenever it is better at all.)
 _KEEP_MARGIN = 10.0
+#: rad/s per sample: gyro noise above this raises the keep margin (by the variance ratio).
+_TYPICAL_GYRO_NOISE = 0.007
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
 _X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
 
@@ -1191,7 +1198,12 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         x0 = np.clip(np.zeros(6), lo, hi)
         f_given = _objective(stage, lambda v: search.theta_of(v, c0.axes, ubar), x0,
                              idx, prior, extra_for(c0.axes))
-        margin = _KEEP_MARGIN if np.allclose(M, c0.axes) else 0.0
+        noise = _gyro_noise(captures)
+        margin = _keep_margin(noise) if np.allclose(M, c0.axes) else 0.0
+        if np.isfinite(noise) and margin > _KEEP_MARGIN:
+            notes.append(f"gyro noise {noise:.4f} rad/s per sample: the given parameters are "
+                         f"kept unless the objective improves by {margin:.0f}")
+            say_("  " + notes[-1])
         if f_given - fx < margin:
             msg = (f"kept the given parameters: the best found ({axes_to_letters(M) or 'given'}) "
                    f"improves the objective by only {f_given - fx:.1f} (< {margin:g})")
@@ -1256,6 +1268,21 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     notes.append(f"{coarse.evaluations} coarse and {stage.evaluations} fine cost evaluations, "
                  f"{secs:.1f} s")
     return CalibrationResult(out_caps, est, ranking, stage.scale, fix, secs, notes)
+
+
+def _gyro_noise(captures) -> float:
+    """The largest white-noise level (rad/s per sample) of the captures' gyro logs."""
+    levels = [rate_noise(log) for log in {id(c.log): c.log for c in captures}.values()]
+    levels = [v for v in levels if np.isfinite(v)]
+    return max(levels) if levels else float("nan")
+
+
+def _keep_margin(noise: float) -> float:
+    """Objective gain needed to leave the given parameters (same mapping), for a gyro
+    with white noise ``noise`` rad/s per sample (``nan``: unknown, the base margin)."""
+    if not np.isfinite(noise):
+        return _KEEP_MARGIN
+    return _KEEP_MARGIN * max(1.0, noise / _TYPICAL_GYRO_NOISE)
 
 
 def _uncertainties(x, idx, F, scores, ubar) -> dict:
