@@ -309,3 +309,12 @@ def test_noisy_gyro_keeps_a_correct_capture_but_still_fixes_an_offset(case):
     assert res.capture.time_offset == noisy.time_offset
     off = calibrate([blurred], noisy.replace(time_offset=noisy.time_offset + 0.012)).capture
     assert abs(off.time_offset - true.time_offset) < 0.003
+
+
+def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
+    d = cli_dir
+    rc = main(["calibrate", str(d / "blurred.png"), str(d / "blurred.png"),
+               "--capture", str(d / "cap.json"), "--capture", str(d / "cap.json"),
+               "--capture", str(d / "cap.json"), "-o", str(d / "out" / "r.json")])
+    assert rc == 2                                   # three for two photos: counted, refused
+    assert "3 capture descriptions for 2 photos" in capsys.readouterr().err

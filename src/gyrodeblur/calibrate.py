@@ -1378,21 +1378,23 @@ def calibrate_command(args, say, load_capture) -> None:
     """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json`.
 
     Several photos of one session are calibrated together; each needs its own exposure
-    start, so ``--capture`` may list one description per photo (comma-separated). The
+    start, so ``--capture`` may list one description per photo (comma-separated, or the
+    option repeated). The
     corrected description written is the first photo's (the corrections are shared)."""
     from .imageio import check_destination, read_photo
 
     fix = fixed_parameters(args)
     photos = [read_photo(p) for p in args.photos]
     check_destination(args.output, None, args.overwrite, image=False)
-    paths = [c for c in (args.capture or "").split(",") if c] or [args.capture]
+    given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
+    paths = [c for entry in given for c in entry.split(",") if c] or given[:1]
     if len(paths) not in (1, len(photos)):
         raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
                                       "photos: give one, or one per photo (comma-separated)")
     if len(paths) == 1 and len(photos) > 1:
         say(f"note: all {len(photos)} photos take their exposure start from {paths[0]}; give "
-            "one capture per photo (--capture a.json,b.json,...) if they were taken at "
-            "different times")
+            "one capture per photo (--capture a.json,b.json,... or --capture repeated) if "
+            "they were taken at different times")
     caps = []
     for k, ph in enumerate(photos):
         a = argparse.Namespace(**vars(args))

@@ -45,11 +45,18 @@ def _bias(text: str | None):
     return vals
 
 
-def _add_capture_options(p: argparse.ArgumentParser, required: bool = False) -> None:
+def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
+                         per_photo: bool = False) -> None:
     g = p.add_argument_group("capture", "The capture description (JSON) and options that "
                              "override its fields. " + FRAMES_HELP)
-    g.add_argument("--capture", required=required, metavar="C.json",
-                   help="capture description (schema: see README)")
+    if per_photo:
+        g.add_argument("--capture", required=required, metavar="C.json", action="append",
+                       help="capture description (schema: see README); one for all photos, "
+                            "or one per photo, in their order: comma-separated or the option "
+                            "repeated")
+    else:
+        g.add_argument("--capture", required=required, metavar="C.json",
+                       help="capture description (schema: see README)")
     g.add_argument("--exposure-start", type=float, metavar="S",
                    help="camera-clock seconds when row 0 starts exposing")
     g.add_argument("--exposure-time", type=float, metavar="S", help="seconds each row integrates")
@@ -367,7 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "axes (a value given with --time-offset, --bias, --readout-time, "
                         "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--overwrite", action="store_true")
-    _add_capture_options(s, required=True)
+    _add_capture_options(s, required=True, per_photo=True)
     s.set_defaults(func=cmd_calibrate)
     return p
 
