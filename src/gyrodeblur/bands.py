@@ -1,9 +1,10 @@
 """Run an element-wise or row-local job over horizontal bands of an image, in threads.
 
-NumPy ufuncs, ``scipy.ndimage`` interpolation and ``scipy.fft`` release the GIL on large
-arrays, so splitting a whole-image pass into row bands and running them in a thread pool
-uses every core without copying the image (each band writes its own rows of a shared
-output). On 2 cores this halves the sRGB curves and the alignment warp of a 12 MP photo.
+NumPy ufuncs release the GIL on large arrays, so splitting a whole-image pass into row
+bands and running them in a thread pool uses every core without copying the image (each
+band writes its own rows of a shared output). On 2 cores this halves the sRGB curves and
+the final clipping of a 12 MP photo. (The alignment warp needs none of this: OpenCV's
+``remap`` threads itself.)
 """
 
 from __future__ import annotations

@@ -77,9 +77,10 @@ Search
    photo that says little (small blur) is left alone rather than moved along directions
    the photo cannot tell apart. A noisy gyro makes its PSFs' fine structure noisy, and a
    fit then gains objective by following that noise (at 0.02 rad/s per sample, gains of
-   3-17 with no better PSFs); so the margin grows with the log's white-noise variance
+   3-17 with no better PSFs); so the margin grows with the log's white-noise level
    (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
-   0.007 rad/s: ``margin = 10 max(1, (noise / 0.007)^2)``.
+   0.007 rad/s: ``margin = 10 max(1, noise / 0.007)`` (in proportion, not with the
+   variance: that kept real 5 ms offset errors under 0.02 rad/s noise).
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
 objective (priors included). The axis mapping's confidence is the objective gap to the
@@ -814,7 +815,7 @@ _N_PATCHES = 9             # patches in all, by default
 #: blur is left alone rather than moved along directions the photo cannot tell apart. (A
 #: different mapping is taken whenever it is better at all.)
 _KEEP_MARGIN = 10.0
-#: rad/s per sample: gyro noise above this raises the keep margin (by the variance ratio).
+#: rad/s per sample: gyro noise above this raises the keep margin (in proportion).
 _TYPICAL_GYRO_NOISE = 0.007
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
 _X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
@@ -1044,11 +1045,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     captures = list(captures)
     if len(captures) != len(images):
         raise InputError("--capture", f"{len(images)} photos but {len(captures)} captures")
-    fix = set(fix)
-    unknown = fix - set(PARAMETERS)
-    if unknown:
-        raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
-                                  f"known: {', '.join(PARAMETERS)}")
+    fix = _checked_fix(fix)
     say_ = say or (lambda msg: None)
     if n_patches is None:
         n_patches = _N_PATCHES
@@ -1358,16 +1355,22 @@ _FIXING_OPTIONS = (("time_offset", "offset"), ("bias", "bias"), ("readout_time",
                    ("fx", "focal"), ("fy", "focal"), ("orientation", "axes"))
 
 
+def _checked_fix(names) -> set[str]:
+    """``names`` (empty ones dropped) as a set, each one of :data:`PARAMETERS`."""
+    fix = {n for n in names if n}
+    unknown = fix - set(PARAMETERS)
+    if unknown:
+        raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
+                                  f"known: {', '.join(PARAMETERS)}")
+    return fix
+
+
 def fixed_parameters(args) -> set[str]:
     """Parameters the user fixes on the command line: those named by ``--fix``, and those
     whose value is given explicitly (``--time-offset``, ``--bias``, ``--readout-time``,
     ``--fx``/``--fy``, ``--orientation``): a value stated on the command line is taken as
     known, not as a starting guess."""
-    fix = {f.strip() for f in (getattr(args, "fix", None) or "").split(",") if f.strip()}
-    unknown = fix - set(PARAMETERS)
-    if unknown:
-        raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
-                                  f"known: {', '.join(PARAMETERS)}")
+    fix = _checked_fix(f.strip() for f in (getattr(args, "fix", None) or "").split(","))
     for option, name in _FIXING_OPTIONS:
         if getattr(args, option, None) is not None:
             fix.add(name)

@@ -18,8 +18,7 @@ from __future__ import annotations
 
 import functools
 import warnings
-import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.ndimage as ndi
@@ -296,7 +295,7 @@ def _one_channel(sat: _Clipping | None, c: int) -> _Clipping | None:
     if sat is None or sat.at_least is None:
         return sat
     at_least = sat.at_least[c:c + 1]
-    return dataclasses.replace(sat, at_least=at_least if at_least.any() else None)
+    return replace(sat, at_least=at_least if at_least.any() else None)
 
 
 def _wiener_luminance(lum: np.ndarray, h: np.ndarray, phi: float = 0.01) -> np.ndarray:
@@ -409,7 +408,7 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
         # A = rho_v conj(H) / den and B = rho_w / den (real), den = rho_v |H|^2 + rho_w |D|^2.
         if beta not in factors:
             inv = 1.0 / (k2_rho + f32(rho_w) * d2)
-            factors[beta] = (np.ascontiguousarray(kc_rho * inv), f32(rho_w) * inv)
+            factors[beta] = (kc_rho * inv, f32(rho_w) * inv)
         A, B = factors[beta]
         packed_multiply(packed_rfft2(z, out=num), A, out=num)
         packed_rfft2(r, out=R)
