@@ -121,10 +121,10 @@ def _piecewise(image, threshold: float, slope: float, power_segment) -> np.ndarr
         xs, o = flat_x[r0:r1], flat_out[r0:r1]
         np.abs(xs, out=o)
         small = o <= threshold
-        linear = o[small] * np.float32(slope)
         power_segment(o)
-        o[small] = linear
         np.copysign(o, xs, out=o)
+        # the linear segment is odd by itself; masked writes, not fancy indexing (3x faster)
+        np.multiply(xs, np.float32(slope), out=o, where=small)
 
     for_row_bands(band, flat_x.shape[0])
     return out
