@@ -337,3 +337,27 @@ def test_large_photos_are_solved_one_channel_at_a_time_with_the_same_result(ligh
     split = sparse_deconvolve(blurred, psf, noise_sigma=0.01)
     assert calls == [(1,) + blurred.shape[:2]] * 3
     np.testing.assert_allclose(split, joint, atol=2e-5)
+
+
+def test_reused_work_arrays_never_leak_between_calls_or_threads():
+    """The solver reuses per-thread work arrays: results must be fresh arrays, equal for
+    repeated and concurrent calls of different shapes (bigger after smaller and back)."""
+    from concurrent.futures import ThreadPoolExecutor
+    rng = np.random.default_rng(5)
+    psf = np.zeros((9, 9))
+    psf[4, 1:8] = 1.0
+    images = [rng.random(s).astype(np.float32) for s in
+              [(64, 48, 3), (90, 100, 3), (40, 40), (64, 48, 3)]]
+    serial = [sparse_deconvolve(im, psf, noise_sigma=0.01) for im in images]
+    again = [sparse_deconvolve(im, psf, noise_sigma=0.01) for im in images]
+    for a, b in zip(serial, again):
+        np.testing.assert_array_equal(a, b)
+        assert not np.shares_memory(a, b)
+    first = serial[0].copy()
+    sparse_deconvolve(images[0] * 0.5, psf, noise_sigma=0.01)   # same shape, other data
+    np.testing.assert_array_equal(serial[0], first)
+    with ThreadPoolExecutor(4) as pool:
+        threaded = list(pool.map(lambda im: sparse_deconvolve(im, psf, noise_sigma=0.01),
+                                 images * 3))
+    for k, out in enumerate(threaded):
+        np.testing.assert_array_equal(out, serial[k % len(images)])
