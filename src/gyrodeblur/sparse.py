@@ -327,10 +327,10 @@ def _wiener_luminance(lum: np.ndarray, h: np.ndarray, phi: float = 0.01) -> np.n
 class _Workspace(threading.local):
     """Work arrays of :func:`_admm` kept per thread from one call to the next.
 
-    A patch solve uses about 20 arrays of 1-4 MB (24 names in all). Freshly allocated, each is mapped anew and
-    every one of its pages faults on first touch (glibc maps blocks this large straight
-    from the kernel and unmaps them on free): about 20 000 page faults per 3 x 576 x 576
-    patch, a quarter of its time. Reusing the arrays avoids that. Each name keeps one
+    A patch solve uses about 20 arrays of 1-4 MB (24 names in all). Freshly allocated,
+    each is mapped anew and every one of its pages faults on first touch (glibc maps blocks
+    this large straight from the kernel and unmaps them on free): about 20 000 page faults
+    per 3 x 576 x 576 patch, a quarter of its time. Reusing the arrays avoids that. Each name keeps one
     flat buffer, grown when a call needs more; arrays over ``_WORKSPACE_MAX_BYTES`` are
     not kept. A thread's buffers go when the thread ends (the patch tiler's worker threads
     end with each photo); the calling thread keeps at most 24 x 8 MB.
