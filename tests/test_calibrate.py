@@ -97,6 +97,18 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
         assert word in text
     assert any("coarse ranking" in line for line in lines)
     assert res.ranking and res.ranking[0][1] == 0.0
+    assert not any("uncertain" in note for note in res.notes)
+
+
+def test_an_uncertain_axis_mapping_is_reported(case):
+    """A 6 ms exposure blurs by a few pixels: too little to tell the mapping (and its
+    mirror twin) apart. Whatever is chosen, the user is told it is uncertain."""
+    sharp, _, _ = case
+    true = Capture(0.5, 0.006, 0.03, Camera.centred(W, H, 1.3 * W), _log(), axes=TRUE_AXES)
+    res = calibrate([_blur(sharp, true)], _corrupt(true))
+    assert any("axis mapping is uncertain" in note and "--orientation" in note
+               for note in res.notes)
+    assert format_estimates(res.estimates)[-1].endswith("uncertain)")
 
 
 def test_deblurring_with_the_calibrated_capture_is_close_to_the_true_one(case, recovered):

@@ -89,7 +89,9 @@ Search
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
 objective (priors included). The axis mapping's confidence is the objective gap to the
-best other candidate mapping.
+best other candidate mapping; below :data:`_AXES_CONFIDENT_NATS` (8) the mapping is reported
+as uncertain, with a note that says what to do (on the benchmark every wrong mapping was
+below 5 and every gap from 8.9 up was right).
 
 Limits (measured, see ``benchmarks/calibration.py``): blur of a few pixels carries almost
 no information; scenes dominated by horizontal and vertical edges can prefer a mapping
@@ -805,6 +807,11 @@ _TEMPERATURE = 100.0
 _PRIOR_READOUT = 0.3
 _PRIOR_FOCAL = 0.1
 _PRIOR_BIAS = 0.05
+#: Objective gap (tempered nats) to the next best mapping under which the chosen axis
+#: mapping is reported as uncertain. On the 24-case calibration benchmark (session 4) the
+#: three wrong mappings had gaps of 3.6-4.9, every gap of 8.9 or more was right, and five
+#: right ones (blurs of 3-6 px) were below 3.
+_AXES_CONFIDENT_NATS = 8.0
 #: Spectral cost gap (nats per patch) under which mirror twins are told apart by phase.
 _TWIN_NATS = 40.0
 _ENVELOPE_ITERS = 3
@@ -1261,6 +1268,17 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         notes.append(msg)
         say_("  " + msg)
 
+    if "axes" not in fix and np.isfinite(gap) and gap < _AXES_CONFIDENT_NATS:
+        others = [r for r in results if not np.allclose(r[2], M)]
+        runner = min(others, key=lambda r: r[0])[2] if others else None
+        msg = (f"warning: the axis mapping is uncertain: the next best"
+               f"{' (' + (axes_to_letters(runner) or 'given') + ')' if runner is not None else ''}"
+               f" scores only {gap:.1f} worse (< {_AXES_CONFIDENT_NATS:g}); the blur says little"
+               f" about its direction. Give the mapping (--orientation) if it is known, or"
+               f" calibrate on several photos of the session")
+        notes.append(msg)
+        say_("  " + msg)
+
     theta = search.theta_of(x, M, ubar)
     unc = _uncertainties(x, idx, Fm, sc, ubar)
     out_caps = []
@@ -1355,6 +1373,8 @@ def format_estimates(est: dict) -> list[str]:
         conf = "only candidate"
     else:
         conf = f"next best mapping: objective {gap:+.1f} higher"
+        if gap < _AXES_CONFIDENT_NATS:
+            conf += ": uncertain"
     lines.append(f"  axes         {b} -> {a}  ({conf})")
     return lines
 
