@@ -280,13 +280,14 @@ def _clipping(gc: np.ndarray, level: float | None, dilation: int,
     # Element-wise passes over the channels: ``gc`` is often a strided view of an
     # (H, W, C) photo, where reductions along its first axis are several times slower.
     top = gc[0].copy()
-    lum = gc[0].astype(np.float32, copy=True)
     for plane in gc[1:]:
         np.maximum(top, plane, out=top)
-        lum += plane
     sat = top >= level
-    if not sat.any():
+    if not sat.any():                      # most patches of a daylight photo: done
         return None
+    lum = gc[0].astype(np.float32, copy=True)
+    for plane in gc[1:]:
+        lum += plane
     lum /= np.float32(gc.shape[0])
     lab, n = ndi.label(sat)
     u = _wiener_luminance(lum, h)
