@@ -219,7 +219,7 @@ def test_bad_image_raises():
                                                   ((1, 1), (8, 9)), ((15, 3), (15, 7)),
                                                   ((131, 5), (160, 40))])
 def test_psf_to_otf_matches_a_padded_fft(psf_shape, fft_shape):
-    """Both paths (separable DFT up to 128 px, padded FFT beyond) against the definition."""
+    """Against the definition: the PSF zero-padded, its centre rolled to (0, 0), rfft2."""
     psf = np.random.default_rng(0).random(psf_shape).astype(np.float32)
     psf /= psf.sum()
     padded = np.zeros(fft_shape)
