@@ -208,7 +208,12 @@ def _displacement_slope(displacement) -> float:
     return float(max(sx, sy))
 
 
-def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
+#: Linear values at or above this are clipped (8-bit 255 decodes to 1.0).
+CLIPPED = 0.999
+
+
+def warp_by_displacement(image: np.ndarray, displacement, *,
+                         clipped: float | None = None) -> np.ndarray:
     """``g(x + c(x))``: sample ``image`` where each pixel's light landed on average.
 
     ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`
@@ -220,6 +225,14 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     work (``remap`` itself takes images under 32767 px a side); memory: the output, the
     sample positions of one band of rows (2 x 1024 x width float32: 31 MiB at 4000 px) and
     a float32 copy of the input if it is not one already.
+
+    ``clipped``: values at or above it are clipped data, and stay so: where a channel's
+    clipped pixels cover at least half of a sample position (their indicator warped
+    bilinearly), the warped channel is set to the photo's clip value (its maximum).
+    Interpolating across a clipped plateau otherwise leaves it ragged (Lanczos lobes dip below the clip value), and the
+    deconvolution then cannot tell an over-exposed light's streak from ordinary data
+    (:func:`gyrodeblur.sparse.sparse_deconvolve`). Photos with values above 1 (linear
+    data with no clip ceiling) are warped as they are.
     """
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)
@@ -231,6 +244,10 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
     out = np.empty((H, W, C), np.float32)
     # remap takes up to 4 interleaved channels (a copy only for more than 4)
     groups = [np.ascontiguousarray(planes[..., c:c + 4]) for c in range(0, C, 4)]
+    masks = None
+    top = max(float(g.max()) for g in groups) if clipped is not None else 0.0
+    if clipped is not None and clipped <= top <= 1.0:    # values above 1: no clip ceiling
+        masks = [(g >= clipped).view(np.uint8) * np.uint8(255) for g in groups]
     rows, cols = _WARP_TILE
     for r0 in range(0, H, rows):
         r1 = min(H, r0 + rows)
@@ -245,9 +262,15 @@ def warp_by_displacement(image: np.ndarray, displacement) -> np.ndarray:
             y0, y1 = _source_window(my, H)
             x0, x1 = _source_window(mx, W)
             for k, src in zip(range(0, C, 4), groups):
-                res = cv2.remap(src[y0:y1, x0:x1], mx - np.float32(x0), my - np.float32(y0),
-                                WARP_INTERPOLATION, borderMode=cv2.BORDER_REFLECT_101)
-                out[r0:r1, c0:c1, k:k + src.shape[2]] = res.reshape(r1 - r0, c1 - c0, -1)
+                sx, sy = mx - np.float32(x0), my - np.float32(y0)
+                res = cv2.remap(src[y0:y1, x0:x1], sx, sy, WARP_INTERPOLATION,
+                                borderMode=cv2.BORDER_REFLECT_101)
+                res = res.reshape(r1 - r0, c1 - c0, -1)
+                if masks is not None:
+                    m = cv2.remap(masks[k // 4][y0:y1, x0:x1], sx, sy, cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_REFLECT_101)
+                    res[m.reshape(res.shape) >= 128] = top
+                out[r0:r1, c0:c1, k:k + src.shape[2]] = res
     return out[..., 0] if img.ndim == 2 else out
 
 
@@ -309,7 +332,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     img = curve.decode(encoded)
     deconvolve = METHODS[method](img, encoded=encoded, **options)
     if displacement is not None:
-        img = warp_by_displacement(img, displacement)
+        img = warp_by_displacement(img, displacement, clipped=CLIPPED)
     if len(patches) == 1 and patches[0].shape == img.shape[:2]:
         out = deconvolve(img, psfs[0])
         if progress:
