@@ -169,8 +169,9 @@ def test_street_lights_come_back_without_ripples():
     capture by the default method and by the chapter's Wiener filter. Each light must come
     back as a bright spot, and the residual's std in an annulus just outside its streak
     must be well below Wiener's: at least 3x without the alignment warp (measured 3.6-4.9x),
-    at least 1.5x with it, the default (measured 1.8-3.1x: the warped pipeline still
-    ripples more around lights in the lower rows; issue 5 asks for 3x)."""
+    at least 1.8x with it, the default (measured 1.9-3.2x; 1.2-3.2x when the warp does
+    not keep clipped plateaus clipped; the warped pipeline still ripples more around some
+    lights; issue 5 asks for 3x)."""
     from scipy import ndimage
 
     rng = np.random.default_rng(11)
@@ -193,7 +194,7 @@ def test_street_lights_come_back_without_ripples():
     lit, n = ndimage.label(blurred.min(axis=2) >= 0.99)
     assert n >= len(lights)                                  # the streaks are clipped
     yy, xx = np.mgrid[:H, :W]
-    for align, least in ((False, 3.0), (True, 1.5)):
+    for align, least in ((False, 3.0), (True, 1.8)):
         ours = deblur(blurred, cap, align=align)
         for y, x in lights:
             near = lit[y - 30:y + 31, x - 30:x + 31]

@@ -361,3 +361,25 @@ def test_reused_work_arrays_never_leak_between_calls_or_threads():
                                  images * 3))
     for k, out in enumerate(threaded):
         np.testing.assert_array_equal(out, serial[k % len(images)])
+
+
+def test_a_light_beside_a_white_area_is_judged_on_its_own_surroundings():
+    """``_inconsistency``: a point light at 40x the clip level, its streak fully clipped, 15 px
+    from a white sign (clipped, but consistent with a scene <= 1): the light scores far
+    above the threshold, the sign far below, although their regions touch (pooled over
+    the touching regions, both scored 0.05)."""
+    from scipy import ndimage
+
+    psf = np.zeros((15, 15), np.float32)
+    psf[7, 2:13] = 1.0 / 11                                  # an 11 px horizontal streak
+    scene = np.full((80, 120), 0.05, np.float32)
+    scene[20:60, 60:100] = 1.0                               # the white sign
+    scene[39:42, 42:45] = 40.0                               # the light, 15 px to its left
+    blurred = np.clip(ndimage.convolve(scene, psf, mode="nearest"), 0, 1)
+    sat = blurred >= 0.98
+    lab, n = ndimage.label(sat)
+    assert n == 2
+    score = sparse_mod._inconsistency(blurred, sat, lab, n, psf)
+    light, sign = lab[40, 43], lab[40, 80]
+    assert score[light] > 1.5 * sparse_mod._INCONSISTENT, score  # measured: 0.58
+    assert score[sign] < 0.5 * sparse_mod._INCONSISTENT, score   # measured: 0.0

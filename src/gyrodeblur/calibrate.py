@@ -59,8 +59,8 @@ Search
    (Gauss-Newton on the Whittle cost with the scale and noise profiled out,
    finite-difference Jacobians of the model spectra) on every free parameter, 4 iterations,
    the best of the three standing for the mapping. The best objective wins and is
-   refined for 10 more, and so are its other two starts (after four iterations the lowest
-   is not always the basin that ends lowest). The focal-bias valley has several local minima, and the start's
+   refined for 10 more, and so are its other starts (up to two; after four iterations the
+   lowest is not always the basin that ends lowest). The focal-bias valley has several local minima, and the start's
    focal guess can strand the refinement in one far from the given values (focal errors of
    11-28 % on 5 of the 24 benchmark cases, each with a higher objective than the truth
    refined); so the winner is also refined from its time shift and readout with the given

@@ -231,8 +231,10 @@ def warp_by_displacement(image: np.ndarray, displacement, *,
     bilinearly), the warped channel is set to the photo's clip value (its maximum).
     Interpolating across a clipped plateau otherwise leaves it ragged (Lanczos lobes dip below the clip value), and the
     deconvolution then cannot tell an over-exposed light's streak from ordinary data
-    (:func:`gyrodeblur.sparse.sparse_deconvolve`). Photos with values above 1 (linear
-    data with no clip ceiling) are warped as they are.
+    (:func:`gyrodeblur.sparse.sparse_deconvolve`). A clipped line exactly half a pixel
+    off the grid comes out two pixels wide (both neighbours are half covered). Photos with
+    values above 1 (linear data with no clip ceiling) are warped as they are. Memory, when
+    the photo has clipped pixels: one uint8 indicator per channel and pixel more.
     """
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)
