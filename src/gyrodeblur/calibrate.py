@@ -1255,11 +1255,12 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     # given values of the other parameters: the coarse start's line fits can miss a nearby
     # basin that the fine cost prefers; the best _SCAN_REFINED are refined as far.
     if "offset" not in fix:
-        scan = []
+        scan, tried = [], {round(float(x[0]), 6)}
         for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
-            if abs(dt) < 1e-9:
-                continue
             xs0 = np.clip(np.r_[x[0] + dt, np.zeros(5)], lo, hi)
+            if round(float(xs0[0]), 6) in tried:      # the winner's own, or clipped to a bound
+                continue
+            tried.add(round(float(xs0[0]), 6))
             scan.append(_gn_refine(stage, lambda v: search.theta_of(v, M, ubar), xs0, idx, lo,
                                    hi, hs, caps, prior, iters=4, extra=extra_for(M))[:2])
         scan.sort(key=lambda r: r[1])
