@@ -60,14 +60,15 @@ Search
    finite-difference Jacobians of the model spectra) on every free parameter, 4 iterations,
    the best of the three standing for the mapping. The best objective wins and is
    refined for 10 more, and so are its other starts (up to two; after four iterations the
-   lowest is not always the basin that ends lowest). The focal-bias valley has several local minima, and the start's
-   focal guess can strand the refinement in one far from the given values (focal errors of
-   11-28 % on 5 of the 24 benchmark cases, each with a higher objective than the truth
-   refined); so the winner is also refined from its time shift and readout with the given
-   focal length and bias (the bias first, the focal length held), and the lower objective
-   is kept. Last, time shifts every 2 ms up to 6 ms either side of the winner's are started
-   from the given values of the other parameters (four iterations each) and the best two
-   refined fully: the coarse line fits can miss a nearby basin that the fine cost prefers.
+   lowest is not always the basin that ends lowest). The focal-bias valley has several
+   local minima, and the start's focal guess can strand the refinement in one far from
+   the given values (focal errors of 11-28 % on 5 of the 24 benchmark cases, each with a
+   higher objective than the truth refined); so the winner is also refined from its time
+   shift and readout with the given focal length and bias (the bias first, the focal length
+   held), and the lower objective is kept. Last, time shifts every 2 ms up to 6 ms either
+   side of the winner's are started from the given values of the other parameters (four
+   iterations each) and the best two refined fully: the coarse line fits can miss a nearby
+   basin that the fine cost prefers.
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
    rolling shutter separate the two. The winner's "mirror twin" is compared at the same
@@ -816,13 +817,13 @@ _PRIOR_BIAS = 0.05
 #: than 1 got 22 rather than 21 mappings right and a mean PSNR gap of -3.67 rather than
 #: -4.05 dB, for 40 % more time.
 _CANDIDATE_STARTS = 3
+_DISTINCT_SHIFT = 0.004
+_DISTINCT_READOUT = 0.006
 #: Time shifts scanned around the winner's (s): step, reach either side, and how many of
 #: the best (after four iterations) are refined fully.
 _SCAN_STEP = 0.002
 _SCAN_REACH = 0.006
 _SCAN_REFINED = 2
-_DISTINCT_SHIFT = 0.004
-_DISTINCT_READOUT = 0.006
 #: Objective gap (tempered nats) to the next best mapping under which the chosen axis
 #: mapping is reported as uncertain. On the 24-case calibration benchmark (session 4) the
 #: three wrong mappings had gaps of 3.6-4.9, every gap of 8.9 or more was right, and five
@@ -1226,13 +1227,18 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     results = [candidate(r[1], r[2], r[4]) for r in top]
     results.sort(key=lambda r: r[0])
     fx, x, M, alts = results[0]
-    x, fx, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x, idx, lo, hi,
-                               hs, caps, prior, iters=10, extra=extra_for(M))
+
+    def refine(x0, iters, which=idx):
+        """Levenberg-Marquardt for the winning mapping ``M``: (x, f, F, scores)."""
+        return _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x0, which, lo, hi,
+                          hs, caps, prior, iters=iters, extra=extra_for(M))
+
+    x, fx, Fm, sc = refine(x, 10)
     # The winner's other starts, refined as far: four iterations do not always tell which
     # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
+    # Then (see below) two more kinds of start; the lowest objective is kept throughout.
     for xa in alts:
-        xa, fa, Fa, sca = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), xa, idx, lo,
-                                     hi, hs, caps, prior, iters=10, extra=extra_for(M))
+        xa, fa, Fa, sca = refine(xa, 10)
         if fa < fx:
             x, fx, Fm, sc = xa, fa, Fa, sca
     # Focal length and a bias along the motion trade off (see Criterion), and the valley
@@ -1243,12 +1249,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if any(j >= 2 for j in idx) and np.any(x[2:] != 0.0):
         xs = x.copy()
         xs[2:] = 0.0
-        xs = np.clip(xs, lo, hi)
-        xs = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), xs,
-                        [j for j in idx if j != 2], lo, hi, hs, caps, prior, iters=6,
-                        extra=extra_for(M))[0]
-        xa, fa, Fa, sca = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), xs, idx,
-                                     lo, hi, hs, caps, prior, iters=10, extra=extra_for(M))
+        xs = refine(np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
+        xa, fa, Fa, sca = refine(xs, 10)
         if fa < fx:
             x, fx, Fm, sc = xa, fa, Fa, sca
     # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from the
@@ -1261,12 +1263,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             if round(float(xs0[0]), 6) in tried:      # the winner's own, or clipped to a bound
                 continue
             tried.add(round(float(xs0[0]), 6))
-            scan.append(_gn_refine(stage, lambda v: search.theta_of(v, M, ubar), xs0, idx, lo,
-                                   hi, hs, caps, prior, iters=4, extra=extra_for(M))[:2])
+            scan.append(refine(xs0, 4)[:2])
         scan.sort(key=lambda r: r[1])
         for xs0, _ in scan[:_SCAN_REFINED]:
-            xa, fa, Fa, sca = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), xs0, idx,
-                                         lo, hi, hs, caps, prior, iters=10, extra=extra_for(M))
+            xa, fa, Fa, sca = refine(xs0, 10)
             if fa < fx:
                 x, fx, Fm, sc = xa, fa, Fa, sca
     gap = float(min(r[0] for r in results[1:]) - fx) if len(results) > 1 else np.nan

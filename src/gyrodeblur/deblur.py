@@ -20,6 +20,7 @@ import numpy as np
 from .capture import Capture
 from .errors import InputError
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
+from .sparse import _CLIP_VALUE
 from .tiling import DEFAULT_GRID, DEFAULT_OVERLAP, deconvolve_patchwise, patch_grid
 from .tonecurve import get_transfer_curve
 from .wiener import DEFAULT_PHI, wiener_deconvolve
@@ -208,8 +209,10 @@ def _displacement_slope(displacement) -> float:
     return float(max(sx, sy))
 
 
-#: Linear values at or above this are clipped (8-bit 255 decodes to 1.0).
-CLIPPED = 0.999
+#: Linear values at or above this are clipped (8-bit 255 decodes to 1.0): the sparse
+#: solver's own clip value, so that what the warp keeps clipped is what the solver treats
+#: as clipped.
+CLIPPED = _CLIP_VALUE
 
 
 def warp_by_displacement(image: np.ndarray, displacement, *,
@@ -229,8 +232,9 @@ def warp_by_displacement(image: np.ndarray, displacement, *,
     ``clipped``: values at or above it are clipped data, and stay so: where a channel's
     clipped pixels cover at least half of a sample position (their indicator warped
     bilinearly), the warped channel is set to the photo's clip value (its maximum).
-    Interpolating across a clipped plateau otherwise leaves it ragged (Lanczos lobes dip below the clip value), and the
-    deconvolution then cannot tell an over-exposed light's streak from ordinary data
+    Interpolating across a clipped plateau otherwise leaves it ragged (Lanczos lobes dip
+    below the clip value), and the deconvolution then cannot tell an over-exposed light's
+    streak from ordinary data
     (:func:`gyrodeblur.sparse.sparse_deconvolve`). A clipped line exactly half a pixel
     off the grid comes out two pixels wide (both neighbours are half covered). Photos with
     values above 1 (linear data with no clip ceiling) are warped as they are. Memory, when

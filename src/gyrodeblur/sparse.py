@@ -172,10 +172,11 @@ def sparse_deconvolve(
     value, i.e. the blob is an over-exposed light. A light whose whole streak is clipped
     deconvolves to a plateau instead; it is caught by the data beside it, darker than a
     scene at most 1 could leave there (:func:`_inconsistency`; one dilation and one
-    filter pass over the patch, only when some blob fails the first test). Such blobs (dilated) get ``M = 0``, so a
-    street light's clipped streak cannot pull dark ripples into its surroundings (Cho et
-    al. 2011; Whyte et al. 2014). Elsewhere, a channel at the clip value itself (>= 0.999)
-    gets the exact one-sided term :math:`\tfrac12\max(0, g - h*u)^2`, and every other
+    filter pass over the patch, only when some blob fails the first test). Such blobs
+    (dilated) get ``M = 0``, so a street light's clipped streak cannot pull dark ripples
+    into its surroundings (Cho et al. 2011; Whyte et al. 2014). Elsewhere, a channel at the
+    clip value itself (>= 0.999) gets the exact one-sided term
+    :math:`\tfrac12\max(0, g - h*u)^2`, and every other
     pixel keeps its plain data term: blurred photos whose clipped areas were already
     clipped before the blur (white paper, lit windows) are consistent data, and dropping
     them lost 2-5 dB on such photos.
