@@ -167,11 +167,15 @@ def test_street_lights_come_back_without_ripples():
     at 40x the clip level, blurred by ``simulate_blur`` (warping, no PSF) in linear light
     with a rolling shutter, sRGB-encoded, noisy, clipped and 8-bit; deblurred with the same
     capture by the default method and by the chapter's Wiener filter. Each light must come
-    back as a bright spot, and the residual's std in an annulus just outside its streak
-    must be well below Wiener's: at least 3x without the alignment warp (measured 3.6-4.9x),
-    at least 1.8x with it, the default (measured 1.9-3.2x; 1.2-3.2x when the warp does
-    not keep clipped plateaus clipped; the warped pipeline still ripples more around some
-    lights; issue 5 asks for 3x)."""
+    back as a bright spot where it was, and the residual's std in an annulus just outside
+    its streak must be at least 3x below Wiener's, with the alignment warp (the default;
+    measured 4.3-5.2x over four noise seeds) and without (3.3-5.6x).
+
+    The annulus leaves out the light's own 7 x 7 neighbourhood: the result is referenced
+    to the first row's orientation, so the rolling shutter puts a lower light outside its
+    own streak, inside the annulus; there the residual measures the light's size (a
+    clipped light's brightness is unknown, and TV spreads it over about 5 x 5 px where the
+    truth is 3 x 3), not ripples. With it, two of the four lights measure about 2x."""
     from scipy import ndimage
 
     rng = np.random.default_rng(11)
@@ -194,7 +198,7 @@ def test_street_lights_come_back_without_ripples():
     lit, n = ndimage.label(blurred.min(axis=2) >= 0.99)
     assert n >= len(lights)                                  # the streaks are clipped
     yy, xx = np.mgrid[:H, :W]
-    for align, least in ((False, 3.0), (True, 1.8)):
+    for align in (False, True):
         ours = deblur(blurred, cap, align=align)
         for y, x in lights:
             near = lit[y - 30:y + 31, x - 30:x + 31]
@@ -202,9 +206,10 @@ def test_street_lights_come_back_without_ripples():
             cy, cx = yy[blob].mean(), xx[blob].mean()
             reach = np.hypot(yy[blob] - cy, xx[blob] - cx).max()
             d = np.hypot(yy - cy, xx - cx)
-            ring = (d >= reach + 4) & (d <= reach + 16)
+            own = (np.abs(yy - y) <= 3) & (np.abs(xx - x) <= 3)
+            ring = (d >= reach + 4) & (d <= reach + 16) & ~own
             ratio = (wiener - sharp)[ring].std() / (ours - sharp)[ring].std()
-            assert ratio >= least, (align, (y, x), ratio)
+            assert ratio >= 3.0, (align, (y, x), ratio)
             spot = ours[y - 1:y + 2, x - 1:x + 2].min(axis=2).max()   # the 3 x 3 light
             assert spot > 0.9, (align, (y, x), spot)
 
@@ -212,8 +217,9 @@ def test_street_lights_come_back_without_ripples():
 def test_alignment_warp_keeps_clipped_plateaus_clipped():
     """A clipped block moved by a sub-pixel warp stays one flat block at the clip value
     (Lanczos lobes would leave its rim below it, and the deconvolution would no longer
-    see one clipped streak)."""
-    from gyrodeblur.deblur import CLIPPED, warp_by_displacement
+    see one clipped streak), with no dark halo of undershoot beside it if it is small
+    enough to be a light; away from it the warp is the plain Lanczos one."""
+    from gyrodeblur.deblur import _CLIPPED_REACH, CLIPPED, warp_by_displacement
 
     img = np.full((64, 80, 3), 0.05, np.float32)
     img[20:34, 24:45] = 1.0
@@ -225,4 +231,11 @@ def test_alignment_warp_keeps_clipped_plateaus_clipped():
     assert (plain[..., 0] >= CLIPPED).sum() < 0.8 * block        # the rim dips below the clip
     at_clip = kept[..., 0] >= CLIPPED
     assert abs(at_clip.sum() - block) <= 14 + 21 and np.all(kept[at_clip] == 1.0)
-    np.testing.assert_array_equal(kept[~at_clip], plain[~at_clip])
+    assert plain.min() < 0.0                                    # Lanczos undershoots...
+    assert kept.min() >= 0.05 - 1e-6                            # ...clamped, it does not
+    big = warp_by_displacement(img, field, clipped=CLIPPED, light_area=block - 1)
+    assert big.min() == plain.min()         # a blob over light_area is an ordinary edge
+    r = _CLIPPED_REACH + 2                                      # + the sub-pixel shift
+    far = np.ones((64, 80), bool)
+    far[20 - r:34 + r, 24 - r:45 + r] = False
+    np.testing.assert_array_equal(kept[far], plain[far])
