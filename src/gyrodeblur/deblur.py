@@ -97,6 +97,9 @@ WARP_INTERPOLATION = cv2.INTER_LANCZOS4
 #: clamped to their neighbours' range: Lanczos4 reads the 8 x 8 pixels around a sample,
 #: up to 4 px away (see :func:`warp_by_displacement`).
 _CLIPPED_REACH = 4
+#: Blocks (rows, columns) of the warp's output in which that clamp is worked out, only
+#: where a block holds such samples.
+_CLAMP_BLOCK = (64, 256)
 #: Output tile (rows, columns) of the alignment warp.
 _WARP_TILE = (1024, 8192)
 #: Most patches :func:`auto_grid` chooses.
@@ -301,9 +304,10 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
 def _beside_small_blobs(masks: list, light_area: int | None) -> np.ndarray | None:
     """uint8 (H, W): 255 within :data:`_CLIPPED_REACH` px of a clipped blob (any channel,
     8-connected) of at most ``light_area`` pixels; ``None`` when there is no such blob."""
-    clipped = masks[0].max(axis=2)
-    for m in masks[1:]:
-        np.maximum(clipped, m.max(axis=2), out=clipped)
+    clipped = masks[0][..., 0].copy()   # element-wise: reductions over the last axis are slow
+    for m in masks:
+        for c in range(m.shape[2]):
+            np.maximum(clipped, m[..., c], out=clipped)
     if light_area is not None:
         n, labels, stats, _ = cv2.connectedComponentsWithStats(clipped, connectivity=8)
         small = stats[:, cv2.CC_STAT_AREA] <= light_area
@@ -320,32 +324,35 @@ def _clamp_beside_lights(res: np.ndarray, src: np.ndarray, nearby: np.ndarray,
     """Clamp, in place, the warped samples ``res`` (rows, cols, c) at positions
     ``(mx, my)`` of the photo ``src`` (H, W, c) that ``nearby`` marks, to the range of
     their four nearest pixels (``floor(s)`` and ``floor(s) + 1`` along each axis), the
-    range bilinear interpolation stays in. Only the rows holding marked samples are
-    worked on."""
+    range bilinear interpolation stays in. Only blocks of :data:`_CLAMP_BLOCK` that
+    hold marked samples are worked on."""
     H, W = src.shape[:2]
     y0, y1 = _source_window(my, H)
     x0, x1 = _source_window(mx, W)
     near = cv2.remap(nearby[y0:y1, x0:x1], mx - np.float32(x0), my - np.float32(y0),
                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101) > 0
-    rows = np.flatnonzero(near.any(axis=1))
-    if rows.size == 0:
-        return
-    a, b = rows[0], rows[-1] + 1
-    mx, my, near, part = mx[a:b], my[a:b], near[a:b], res[a:b]
-    y0, y1 = _source_window(my, H)
-    x0, x1 = _source_window(mx, W)
-    # nearest-neighbour sampling rounds: s - 1/2 rounds to floor(s)
-    sx, sy = mx - np.float32(x0 + 0.5), my - np.float32(y0 + 0.5)
+    bh, bw = _CLAMP_BLOCK
     box = np.ones((2, 2), np.uint8)     # anchor (0, 0): pixel (i, j) and the three after it
-    window = src[y0:y1, x0:x1]
-    bounds = []
-    for morph in (cv2.erode, cv2.dilate):
-        extreme = morph(window, box, anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101)
-        bounds.append(cv2.remap(extreme, sx, sy, cv2.INTER_NEAREST,
-                                borderMode=cv2.BORDER_REFLECT_101).reshape(part.shape))
-    lo, hi = bounds
-    np.clip(part, lo, hi, out=lo)
-    part[near] = lo[near]
+    for a in range(0, near.shape[0], bh):
+        band = near[a:a + bh].any(axis=0)
+        for c in range(0, near.shape[1], bw):
+            if not band[c:c + bw].any():
+                continue
+            bx, by = mx[a:a + bh, c:c + bw], my[a:a + bh, c:c + bw]
+            part, mark = res[a:a + bh, c:c + bw], near[a:a + bh, c:c + bw]
+            y0, y1 = _source_window(by, H)
+            x0, x1 = _source_window(bx, W)
+            # nearest-neighbour sampling rounds: s - 1/2 rounds to floor(s)
+            sx, sy = bx - np.float32(x0 + 0.5), by - np.float32(y0 + 0.5)
+            window = src[y0:y1, x0:x1]
+            bounds = []
+            for morph in (cv2.erode, cv2.dilate):
+                extreme = morph(window, box, anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101)
+                bounds.append(cv2.remap(extreme, sx, sy, cv2.INTER_NEAREST,
+                                        borderMode=cv2.BORDER_REFLECT_101).reshape(part.shape))
+            lo, hi = bounds
+            np.clip(part, lo, hi, out=lo)
+            part[mark] = lo[mark]
 
 
 def _source_window(positions: np.ndarray, size: int) -> tuple[int, int]:
