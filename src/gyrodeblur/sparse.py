@@ -198,7 +198,7 @@ def sparse_deconvolve(
     Tikhonov start would ring there and ADMM is slow to undo ringing inside data-free
     areas. Over-relaxation 1.5 (Eckstein & Bertsekas) on both splits.
 
-    *Cost.* Four real FFTs per channel and iteration plus about 30 array passes; with
+    *Cost.* Four real FFTs per channel and iteration plus about 22 array passes; with
     clipped pixels, one more Wiener solve on the luminance. The FFTs are OpenCV's, in its
     packed layout (:mod:`gyrodeblur.packedfft`); OpenCV may spread a large transform over
     its own threads (``cv2.setNumThreads``). Memory: about 20 float32 arrays of the padded
@@ -478,13 +478,15 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
     a = f32(_RELAX)
     a1 = f32(1.0 - _RELAX)
     ku = packed_irfft2(packed_multiply(U, k_packed, out=U), out=work("ku"))
-    v_old = work("v_old")                # last v (for over-relaxation)
-    np.copyto(v_old, ku)
-    wx_old = _dx(u, out=work("wx_old"))  # last w, per direction
-    wy_old = _dy(u, out=work("wy_old"))
-    yv = work("yv", zero=True)           # scaled duals
-    yx = work("yx", zero=True)
-    yy = work("yy", zero=True)
+    # Each split enters the next iteration only through m = (1 - a) * (its last value)
+    # + (its scaled dual), which is kept instead of both (fewer passes over the arrays).
+    mv = np.multiply(ku, a1, out=work("mv"))         # v = h*u, y_v = 0
+    mx = _dx(u, out=work("mx"))                      # w = D u, y_w = 0, per direction
+    mx *= a1
+    my = _dy(u, out=work("my"))
+    my *= a1
+    yx = work("yx")                                  # scaled duals of w (for continuation)
+    yy = work("yy")
     z = work("z")
     e = work("e")
     r = work("r")
@@ -493,25 +495,20 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
     factors: dict[float, tuple[np.ndarray, np.ndarray]] = {}
     for it in range(iterations):
         rho_w = weight * beta
-        # w-step, per direction: z = relaxed(D u) + y; w = prox(z); y <- z - w (= c, what
-        # the shrinkage removed); the u-step needs q = w - y = z - 2c.
-        # r = D^T q accumulates over the directions: x writes it, y adds to it.
-        for diff, diff_t, y, w_old in ((_dx, _dx_t_set, yx, wx_old),
-                                       (_dy, _dy_t_add, yy, wy_old)):
+        # w-step, per direction: z = a D u + m (the relaxed D u plus the dual); w = prox(z);
+        # y <- z - w (= c, what the shrinkage removed); m <- (1 - a) w + y; the u-step needs
+        # q = w - y = z - 2c. r = D^T q accumulates over the directions: x writes it, y
+        # adds to it.
+        for diff, diff_t, y, m in ((_dx, _dx_t_set, yx, mx), (_dy, _dy_t_add, yy, my)):
             diff(u, out=z)
-            z *= a
-            w_old *= a1
-            z += w_old
-            z += y
+            _scale_add(a, z, m, out=z)
             _shrink_residual(z, beta, p, out=y)
-            np.subtract(z, y, out=w_old)
-            np.subtract(w_old, y, out=z)
+            _weighted_sum(a1, z, a, y, out=m)        # (1 - a)(z - y) + y
+            _scale_add(f32(-2.0), y, z, out=z)
             diff_t(z, r)
-        # v-step: z = relaxed(h*u) + y_v; v = z + e, e = mw (g - z); y_v <- -e; q = z + 2e.
-        ku *= a
-        v_old *= a1
-        np.add(ku, v_old, out=z)
-        z += yv
+        # v-step: z = a h*u + m_v; v = z + e, e = mw (g - z); y_v <- -e, so
+        # m_v <- (1 - a)(z + e) - e; q = v - y_v = z + 2e.
+        _scale_add(a, ku, mv, out=z)
         np.subtract(gp, z, out=e)
         e *= mw
         if ms is not None:  # one-sided: pull z up to the clipped value only when below it
@@ -519,10 +516,8 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
             np.maximum(t, 0.0, out=t)
             t *= ms
             e += t
-        np.negative(e, out=yv)
-        np.add(z, e, out=v_old)
-        z += e
-        z += e
+        _weighted_sum(a1, z, -a, e, out=mv)
+        _scale_add(f32(2.0), e, z, out=z)
         # u-step (closed form in the Fourier domain): U = A Z + B R with, for this beta,
         # A = rho_v conj(H) / den and B = rho_w / den (real), den = rho_v |H|^2 + rho_w |D|^2.
         if beta not in factors:
@@ -542,13 +537,29 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
             break
         packed_irfft2(packed_multiply(num, k_packed, out=num), out=ku)
         # Continuation: raise rho_w, rescale the scaled dual to keep the true dual fixed.
+        # (m = (1 - a) w + y becomes (1 - a) w + s y; y itself is overwritten next).
         nbeta = min(2.0 * beta, _BETA_MAX)
         if nbeta != beta:
             s = f32(beta / nbeta)
-            yx *= s
-            yy *= s
+            _scale_add(s - 1, yx, mx, out=mx)
+            _scale_add(s - 1, yy, my, out=my)
             beta = nbeta
     return u[:, :H, :W].copy()
+
+
+def _scale_add(alpha, x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """``out = alpha x + y`` in one pass (OpenCV; C-contiguous float32 arrays of one shape,
+    ``out`` may be ``x`` or ``y``)."""
+    width = x.shape[-1]
+    cv2.scaleAdd(x.reshape(-1, width), float(alpha), y.reshape(-1, width),
+                 dst=out.reshape(-1, width))
+
+
+def _weighted_sum(alpha, x: np.ndarray, beta, y: np.ndarray, out: np.ndarray) -> None:
+    """``out = alpha x + beta y`` in one pass (as :func:`_scale_add`)."""
+    width = x.shape[-1]
+    cv2.addWeighted(x.reshape(-1, width), float(alpha), y.reshape(-1, width), float(beta),
+                    0.0, dst=out.reshape(-1, width))
 
 
 def _light_zone(lights: np.ndarray, kh: int, kw: int,
