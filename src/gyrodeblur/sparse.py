@@ -530,8 +530,8 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
         A, B = factors[beta]
         packed_multiply(packed_rfft2(z, out=num), A, out=num)
         packed_rfft2(r, out=R)
-        R *= B
-        num += R
+        for c in range(C):               # num += R B, one pass
+            cv2.accumulateProduct(R[c], B, num[c])
         u = packed_irfft2(num, out=u)
         if it == iterations - 1:  # h*u is not needed after the last u-step
             break
