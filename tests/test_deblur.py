@@ -168,8 +168,9 @@ def test_street_lights_come_back_without_ripples():
     with a rolling shutter, sRGB-encoded, noisy, clipped and 8-bit; deblurred with the same
     capture by the default method and by the chapter's Wiener filter. Each light must come
     back as a bright spot where it was, and the residual's std in an annulus just outside
-    its streak must be at least 3x below Wiener's, with the alignment warp (the default;
-    measured 4.3-5.2x over four noise seeds) and without (3.3-5.6x).
+    its streak must be at least 3x below Wiener's (issue 5): 4x with the alignment warp
+    (the default; measured 4.3-5.2x over four noise seeds; 2.98-3.56x without its clamp
+    beside lights) and 3x without it (3.3-5.6x).
 
     The annulus leaves out the light's own 7 x 7 neighbourhood: the result is referenced
     to the first row's orientation, so the rolling shutter puts a lower light outside its
@@ -198,7 +199,7 @@ def test_street_lights_come_back_without_ripples():
     lit, n = ndimage.label(blurred.min(axis=2) >= 0.99)
     assert n >= len(lights)                                  # the streaks are clipped
     yy, xx = np.mgrid[:H, :W]
-    for align in (False, True):
+    for align, least in ((False, 3.0), (True, 4.0)):
         ours = deblur(blurred, cap, align=align)
         for y, x in lights:
             near = lit[y - 30:y + 31, x - 30:x + 31]
@@ -209,7 +210,7 @@ def test_street_lights_come_back_without_ripples():
             own = (np.abs(yy - y) <= 3) & (np.abs(xx - x) <= 3)
             ring = (d >= reach + 4) & (d <= reach + 16) & ~own
             ratio = (wiener - sharp)[ring].std() / (ours - sharp)[ring].std()
-            assert ratio >= 3.0, (align, (y, x), ratio)
+            assert ratio >= least, (align, (y, x), ratio)
             spot = ours[y - 1:y + 2, x - 1:x + 2].min(axis=2).max()   # the 3 x 3 light
             assert spot > 0.9, (align, (y, x), spot)
 
@@ -225,17 +226,42 @@ def test_alignment_warp_keeps_clipped_plateaus_clipped():
     img[20:34, 24:45] = 1.0
     ys, xs = np.array([0.0, 63.0]), np.array([0.0, 79.0])
     field = (ys, xs, np.tile([0.37, -0.61], (2, 2, 1)))
-    plain = warp_by_displacement(img, field)
-    kept = warp_by_displacement(img, field, clipped=CLIPPED)
     block = 14 * 21
+    plain = warp_by_displacement(img, field)
+    kept = warp_by_displacement(img, field, clipped=CLIPPED, light_area=block)
     assert (plain[..., 0] >= CLIPPED).sum() < 0.8 * block        # the rim dips below the clip
     at_clip = kept[..., 0] >= CLIPPED
     assert abs(at_clip.sum() - block) <= 14 + 21 and np.all(kept[at_clip] == 1.0)
     assert plain.min() < 0.0                                    # Lanczos undershoots...
     assert kept.min() >= 0.05 - 1e-6                            # ...clamped, it does not
-    big = warp_by_displacement(img, field, clipped=CLIPPED, light_area=block - 1)
-    assert big.min() == plain.min()         # a blob over light_area is an ordinary edge
     r = _CLIPPED_REACH + 2                                      # + the sub-pixel shift
     far = np.ones((64, 80), bool)
     far[20 - r:34 + r, 24 - r:45 + r] = False
     np.testing.assert_array_equal(kept[far], plain[far])
+    # a blob bigger than light_area is an ordinary edge: plain Lanczos beside it
+    big = warp_by_displacement(img, field, clipped=CLIPPED, light_area=block - 1)
+    np.testing.assert_array_equal(big[~at_clip], plain[~at_clip])
+
+
+def test_alignment_warp_clamps_beside_a_light_at_the_frame_edge():
+    """Samples that fall outside the photo beside a clipped blob at its edge are clamped
+    to the range of the two pixels they mirror between (the warp mirrors the photo about
+    its edge pixels), not of pixels one further in (which moved 24 of these 96 samples)."""
+    from gyrodeblur.deblur import CLIPPED, warp_by_displacement
+
+    W = 80
+    ramp = np.linspace(0.05, 0.6, W, dtype=np.float32) ** 2  # varies along x only
+    img = np.repeat(np.tile(ramp, (64, 1))[..., None], 3, axis=2)
+    img[30:33, 0:3] = 1.0                                   # a light at the left edge
+    ys, xs = np.array([0.0, 63.0]), np.array([0.0, W - 1.0])
+    rows = [27, 28, 34, 35]     # clamped (within 4 px of the light), ramp pixels only
+    for shift in (-1.6, -0.4):  # the first columns sample left of the photo
+        field = (ys, xs, np.tile([shift, 0.0], (2, 2, 1)))
+        plain = warp_by_displacement(img, field, clipped=CLIPPED)
+        kept = warp_by_displacement(img, field, clipped=CLIPPED, light_area=9)
+        s = np.arange(8) + shift
+        f = np.floor(s).astype(int)
+        pair = np.abs(np.stack([f, f + 1]))                 # mirrored about pixel 0
+        lo, hi = ramp[pair].min(axis=0), ramp[pair].max(axis=0)
+        expected = np.clip(plain[rows][:, :8], lo[None, :, None], hi[None, :, None])
+        np.testing.assert_allclose(kept[rows][:, :8], expected, atol=1e-6)

@@ -220,8 +220,9 @@ def _displacement_slope(displacement) -> float:
 #: solver's own clip value, so that what the warp keeps clipped is what the solver treats
 #: as clipped.
 CLIPPED = _CLIP_VALUE
-#: Clipped blobs no bigger than this many PSF boxes are point lights' streaks to the
-#: alignment warp, as to the sparse solver (it starts from the data around them).
+#: Clipped blobs no bigger than this many boxes of the largest PSF are point lights'
+#: streaks to the alignment warp (the sparse solver's bound for the over-exposed blobs it
+#: starts from the data around, ``_ZONE_AREA``, per patch PSF).
 LIGHT_AREA = _ZONE_AREA
 
 
@@ -245,18 +246,24 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     Interpolating across a clipped plateau otherwise leaves it ragged (Lanczos lobes dip
     below the clip value), and the deconvolution then cannot tell an over-exposed light's
     streak from ordinary data
-    (:func:`gyrodeblur.sparse.sparse_deconvolve`). Beside small clipped blobs (at most
-    ``light_area`` pixels: point lights' streaks; ``None``: any size), samples whose
-    Lanczos taps reach the blob (within :data:`_CLIPPED_REACH` px) are clamped to the
-    range of their four nearest pixels: a light 40x over the clip level falls from 10 to
-    the background within a pixel, and Lanczos lobes would leave a dark halo of
-    undershoot beside its streak that the data term reads as the scene (ripples around
-    street lights). Big clipped areas (white paper, sky) keep plain Lanczos at their
-    edges: they are ordinary edges, and clamping there cost up to 0.3 dB on the
-    benchmark's text photos. A clipped line exactly half a pixel off the grid comes out
-    two pixels wide (both neighbours are half covered). Photos with values above 1
-    (linear data with no clip ceiling) are warped as they are. Memory, when the photo has
-    clipped pixels: one uint8 indicator per channel and pixel, and two per pixel, more.
+    (:func:`gyrodeblur.sparse.sparse_deconvolve`).
+
+    ``light_area`` (pixels, needs ``clipped``): beside clipped blobs no bigger than this
+    (8-connected, any channel: point lights' streaks), samples whose Lanczos taps reach
+    the blob (within :data:`_CLIPPED_REACH` px) are clamped to the range of their four
+    nearest pixels. A clipped streak is a step far steeper than the blurred scene around it
+    (in the photo, a light far over the clip level drops from the clip value to the
+    background within a pixel), and Lanczos lobes would leave a dark halo of undershoot
+    beside it that the deconvolution reads as scene: ripples around street lights. Bigger
+    clipped areas (white paper, sky) keep plain Lanczos at their edges: those are ordinary
+    edges, and clamping there cost up to 0.3 dB on the benchmark's text photos. ``None``
+    (default): no clamping.
+
+    A clipped line exactly half a pixel off the grid comes out two pixels wide (both
+    neighbours are half covered). Photos with values above 1 (linear data with no clip
+    ceiling) are warped as they are. Memory, when the photo has clipped pixels: one uint8
+    indicator per channel and pixel; with ``light_area``, two more uint8 and, for a moment,
+    one int32 per pixel (blob labels).
     """
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)
@@ -272,7 +279,8 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     top = max(float(g.max()) for g in groups) if clipped is not None else 0.0
     if clipped is not None and clipped <= top <= 1.0:    # values above 1: no clip ceiling
         masks = [(g >= clipped).view(np.uint8) * np.uint8(255) for g in groups]
-        nearby = _beside_small_blobs(masks, light_area)
+        if light_area is not None:
+            nearby = _beside_small_blobs(masks, light_area)
     rows, cols = _WARP_TILE
     for r0 in range(0, H, rows):
         r1 = min(H, r0 + rows)
@@ -286,13 +294,17 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
             mx, my = map_x[:, c0:c1], map_y[:, c0:c1]
             y0, y1 = _source_window(my, H)
             x0, x1 = _source_window(mx, W)
+            sx, sy = mx - np.float32(x0), my - np.float32(y0)
+            near = None
+            if nearby is not None and nearby[y0:y1, x0:x1].any():
+                near = cv2.remap(nearby[y0:y1, x0:x1], sx, sy, cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_REFLECT_101) > 0
             for k, src in zip(range(0, C, 4), groups):
-                sx, sy = mx - np.float32(x0), my - np.float32(y0)
                 res = cv2.remap(src[y0:y1, x0:x1], sx, sy, WARP_INTERPOLATION,
                                 borderMode=cv2.BORDER_REFLECT_101)
                 res = res.reshape(r1 - r0, c1 - c0, -1)
-                if nearby is not None and nearby[y0:y1, x0:x1].any():
-                    _clamp_beside_lights(res, src, nearby, mx, my)
+                if near is not None:
+                    _clamp_beside_lights(res, src, near, mx, my)
                 if masks is not None:
                     m = cv2.remap(masks[k // 4][y0:y1, x0:x1], sx, sy, cv2.INTER_LINEAR,
                                   borderMode=cv2.BORDER_REFLECT_101)
@@ -301,58 +313,84 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     return out[..., 0] if img.ndim == 2 else out
 
 
-def _beside_small_blobs(masks: list, light_area: int | None) -> np.ndarray | None:
+def _beside_small_blobs(masks: list, light_area: int) -> np.ndarray | None:
     """uint8 (H, W): 255 within :data:`_CLIPPED_REACH` px of a clipped blob (any channel,
     8-connected) of at most ``light_area`` pixels; ``None`` when there is no such blob."""
     clipped = masks[0][..., 0].copy()   # element-wise: reductions over the last axis are slow
     for m in masks:
         for c in range(m.shape[2]):
             np.maximum(clipped, m[..., c], out=clipped)
-    if light_area is not None:
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(clipped, connectivity=8)
-        small = stats[:, cv2.CC_STAT_AREA] <= light_area
-        small[0] = False
-        if not small[1:].any():
-            return None
-        clipped = small[labels].view(np.uint8) * np.uint8(255)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(clipped, connectivity=8)
+    small = stats[:, cv2.CC_STAT_AREA] <= light_area
+    small[0] = False
+    if not small[1:].any():
+        return None
+    clipped = small[labels].view(np.uint8) * np.uint8(255)
     reach = np.ones((2 * _CLIPPED_REACH + 1,) * 2, np.uint8)
     return cv2.dilate(clipped, reach)
 
 
-def _clamp_beside_lights(res: np.ndarray, src: np.ndarray, nearby: np.ndarray,
+def _clamp_beside_lights(res: np.ndarray, src: np.ndarray, near: np.ndarray,
                          mx: np.ndarray, my: np.ndarray) -> None:
-    """Clamp, in place, the warped samples ``res`` (rows, cols, c) at positions
-    ``(mx, my)`` of the photo ``src`` (H, W, c) that ``nearby`` marks, to the range of
-    their four nearest pixels (``floor(s)`` and ``floor(s) + 1`` along each axis), the
-    range bilinear interpolation stays in. Only blocks of :data:`_CLAMP_BLOCK` that
-    hold marked samples are worked on."""
-    H, W = src.shape[:2]
-    y0, y1 = _source_window(my, H)
-    x0, x1 = _source_window(mx, W)
-    near = cv2.remap(nearby[y0:y1, x0:x1], mx - np.float32(x0), my - np.float32(y0),
-                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101) > 0
+    """Clamp the marked samples of a warped tile to their four nearest pixels' range.
+
+    Parameters
+    ----------
+    res : ndarray (rows, cols, c) float32
+        Warped samples; changed in place where ``near`` is true.
+    src : ndarray (H, W, c) float32
+        The photo they were sampled from.
+    near : ndarray (rows, cols) bool
+        Samples to clamp (beside a light's streak).
+    mx, my : ndarray (rows, cols) float32
+        Sample positions in ``src`` (x, y pixels).
+
+    Only blocks of :data:`_CLAMP_BLOCK` that hold marked samples are worked on.
+    """
     bh, bw = _CLAMP_BLOCK
-    box = np.ones((2, 2), np.uint8)     # anchor (0, 0): pixel (i, j) and the three after it
-    for a in range(0, near.shape[0], bh):
-        band = near[a:a + bh].any(axis=0)
+    for r in range(0, near.shape[0], bh):
+        band = near[r:r + bh].any(axis=0)
         for c in range(0, near.shape[1], bw):
             if not band[c:c + bw].any():
                 continue
-            bx, by = mx[a:a + bh, c:c + bw], my[a:a + bh, c:c + bw]
-            part, mark = res[a:a + bh, c:c + bw], near[a:a + bh, c:c + bw]
-            y0, y1 = _source_window(by, H)
-            x0, x1 = _source_window(bx, W)
-            # nearest-neighbour sampling rounds: s - 1/2 rounds to floor(s)
-            sx, sy = bx - np.float32(x0 + 0.5), by - np.float32(y0 + 0.5)
-            window = src[y0:y1, x0:x1]
-            bounds = []
-            for morph in (cv2.erode, cv2.dilate):
-                extreme = morph(window, box, anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101)
-                bounds.append(cv2.remap(extreme, sx, sy, cv2.INTER_NEAREST,
-                                        borderMode=cv2.BORDER_REFLECT_101).reshape(part.shape))
-            lo, hi = bounds
+            part, mark = res[r:r + bh, c:c + bw], near[r:r + bh, c:c + bw]
+            lo, hi = _neighbour_range(src, mx[r:r + bh, c:c + bw], my[r:r + bh, c:c + bw])
+            lo, hi = lo.reshape(part.shape), hi.reshape(part.shape)
             np.clip(part, lo, hi, out=lo)
             part[mark] = lo[mark]
+
+
+def _neighbour_range(src: np.ndarray, mx: np.ndarray, my: np.ndarray):
+    """Least and greatest value of the four pixels around each sample position: pixels
+    ``floor(s)`` and ``floor(s) + 1`` along each axis, the range bilinear interpolation
+    keeps to. Positions outside the photo are first mirrored into it (OpenCV's
+    ``BORDER_REFLECT_101``, as the warp samples them: Lanczos weights are symmetric, so a
+    mirrored position samples the same value).
+
+    Returns
+    -------
+    lo, hi : ndarray (rows, cols[, c]) float32
+    """
+    H, W = src.shape[:2]
+    mx, my = _reflect_101(mx, W), _reflect_101(my, H)
+    y0, y1 = _source_window(my, H)
+    x0, x1 = _source_window(mx, W)
+    window = src[y0:y1, x0:x1]
+    # Nearest-neighbour sampling of s - 1/2 reads pixel floor(s) (at an integer s, where
+    # OpenCV rounds half to even, floor(s) - 1: harmless, Lanczos returns pixel s there,
+    # which both pairs hold).
+    sx, sy = mx - np.float32(x0 + 0.5), my - np.float32(y0 + 0.5)
+    box = np.ones((2, 2), np.uint8)     # anchor (0, 0): pixel (i, j) and the three after it
+    return tuple(cv2.remap(morph(window, box, anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101),
+                           sx, sy, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REFLECT_101)
+                 for morph in (cv2.erode, cv2.dilate))
+
+
+def _reflect_101(s: np.ndarray, n: int) -> np.ndarray:
+    """Positions mirrored into ``[0, n - 1]`` about the end pixels (``-s`` and
+    ``2 (n - 1) - s``; one reflection, enough for positions less than ``n - 1`` outside)."""
+    last = np.float32(max(n - 1, 0))
+    return last - np.abs(last - np.abs(s))
 
 
 def _source_window(positions: np.ndarray, size: int) -> tuple[int, int]:

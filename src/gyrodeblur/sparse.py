@@ -392,13 +392,13 @@ def _wiener_luminance(lum: np.ndarray, h: np.ndarray, phi: float = 0.01) -> np.n
 class _Workspace(threading.local):
     """Work arrays of :func:`_admm` kept per thread from one call to the next.
 
-    A patch solve uses about 20 arrays of 1-4 MB (24 names in all). Freshly allocated,
+    A patch solve uses about 20 arrays of 1-4 MB (23 names in all). Freshly allocated,
     each is mapped anew and every one of its pages faults on first touch (glibc maps blocks
     this large straight from the kernel and unmaps them on free): about 20 000 page faults
     per 3 x 576 x 576 patch, a quarter of its time. Reusing the arrays avoids that. Each name keeps one
     flat buffer, grown when a call needs more; arrays over ``_WORKSPACE_MAX_BYTES`` are
     not kept. A thread's buffers go when the thread ends (the patch tiler's worker threads
-    end with each photo); the calling thread keeps at most 24 x 8 MB.
+    end with each photo); the calling thread keeps at most 23 x 8 MB.
     """
 
     def __init__(self):
@@ -550,6 +550,7 @@ def _admm(gc: np.ndarray, h: np.ndarray, weight: float, p: float, iterations: in
 def _scale_add(alpha, x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """``out = alpha x + y`` in one pass (OpenCV; C-contiguous float32 arrays of one shape,
     ``out`` may be ``x`` or ``y``)."""
+    _check_views(x, y, out)
     width = x.shape[-1]
     cv2.scaleAdd(x.reshape(-1, width), float(alpha), y.reshape(-1, width),
                  dst=out.reshape(-1, width))
@@ -557,9 +558,18 @@ def _scale_add(alpha, x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
 
 def _weighted_sum(alpha, x: np.ndarray, beta, y: np.ndarray, out: np.ndarray) -> None:
     """``out = alpha x + beta y`` in one pass (as :func:`_scale_add`)."""
+    _check_views(x, y, out)
     width = x.shape[-1]
     cv2.addWeighted(x.reshape(-1, width), float(alpha), y.reshape(-1, width), float(beta),
                     0.0, dst=out.reshape(-1, width))
+
+
+def _check_views(*arrays: np.ndarray) -> None:
+    """OpenCV writes into ``dst`` only through a 2-D view of it, which needs C-contiguous
+    float32 arrays; anything else would leave the result in a copy, silently."""
+    for a in arrays:
+        if a.dtype != np.float32 or not a.flags.c_contiguous:
+            raise ValueError("expected C-contiguous float32 work arrays")
 
 
 def _light_zone(lights: np.ndarray, kh: int, kw: int,
