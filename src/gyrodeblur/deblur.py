@@ -376,9 +376,9 @@ def _neighbour_range(src: np.ndarray, mx: np.ndarray, my: np.ndarray):
     y0, y1 = _source_window(my, H)
     x0, x1 = _source_window(mx, W)
     window = src[y0:y1, x0:x1]
-    # Nearest-neighbour sampling of s - 1/2 reads pixel floor(s) (at an integer s, where
-    # OpenCV rounds half to even, floor(s) - 1: harmless, Lanczos returns pixel s there,
-    # which both pairs hold).
+    # Nearest-neighbour sampling of s - 1/2 reads pixel floor(s); at an integer s OpenCV
+    # rounds the half to even, so it may read s - 1: harmless, Lanczos returns pixel s
+    # there, which both pairs hold.
     sx, sy = mx - np.float32(x0 + 0.5), my - np.float32(y0 + 0.5)
     box = np.ones((2, 2), np.uint8)     # anchor (0, 0): pixel (i, j) and the three after it
     return tuple(cv2.remap(morph(window, box, anchor=(0, 0), borderType=cv2.BORDER_REFLECT_101),
