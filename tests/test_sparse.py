@@ -383,3 +383,31 @@ def test_a_light_beside_a_white_area_is_judged_on_its_own_surroundings():
     light, sign = lab[40, 43], lab[40, 80]
     assert score[light] > 1.5 * sparse_mod._INCONSISTENT, score  # measured: 0.58
     assert score[sign] < 0.5 * sparse_mod._INCONSISTENT, score   # measured: 0.0
+
+
+def test_a_clipped_streak_starts_as_its_light():
+    """``_start_lights_at_their_cores``: a light whose whole streak is clipped starts where
+    the light must be (the streak eroded by the PSF's footprint: here exactly the 3 x 3
+    light), holding the energy the clipped streak shows above its surroundings; the rest of
+    the streak starts at the surroundings' level, and pixels outside it are untouched."""
+    from scipy import ndimage
+
+    psf = np.zeros((15, 15), np.float32)
+    psf[7, 2:13] = 1.0 / 11                                  # an 11 px horizontal streak
+    scene = np.full((60, 80), 0.05, np.float32)
+    scene[29:32, 39:42] = 40.0                               # the light
+    blurred = np.clip(ndimage.convolve(scene, psf, mode="nearest"), 0, 1)
+    small = blurred >= 0.999
+    assert small.sum() == 3 * 13                             # the clipped streak
+    N = (72, 96)
+    gp = np.zeros((1,) + N, np.float32)
+    gp[0, :60, :80] = blurred
+    u = gp.copy()
+    sparse_mod._start_lights_at_their_cores(u, gp, small, psf)
+    start = u[0, :60, :80]
+    light = np.zeros_like(small)
+    light[29:32, 39:42] = True
+    np.testing.assert_allclose(start[small & ~light], 0.05, atol=1e-6)
+    energy = (blurred[small] - 0.05).sum()
+    np.testing.assert_allclose(start[light] - 0.05, energy / 9, rtol=1e-5)
+    np.testing.assert_array_equal(start[~small], blurred[~small])
