@@ -194,9 +194,11 @@ def sparse_deconvolve(
     :math:`\rho_v = 0.15`; :math:`\rho_w = \beta\lambda` with :math:`\beta` doubling from 8
     to 32 (continuation, Krishnan & Fergus 2009). ``u`` starts as a Tikhonov solution
     (gradient weight :math:`25\lambda` for TV, :math:`3\lambda` otherwise), except around
-    small over-exposed blobs (point lights), where it starts as the blurred image: the
-    Tikhonov start would ring there and ADMM is slow to undo ringing inside data-free
-    areas. Over-relaxation 1.5 (Eckstein & Bertsekas) on both splits.
+    small over-exposed blobs (point lights), where it starts as the blurred image with each
+    light's clipped streak gathered into the streak's core, where the light must be
+    (:func:`_start_lights_at_their_cores`): the Tikhonov start would ring there, and ADMM is
+    slow to undo ringing, or to gather a streak into its light, inside data-free areas.
+    Over-relaxation 1.5 (Eckstein & Bertsekas) on both splits.
 
     *Cost.* Four real FFTs per channel and iteration plus about 22 array passes; with
     clipped pixels, one more Wiener solve on the luminance. The FFTs are OpenCV's, in its
