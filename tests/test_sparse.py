@@ -403,7 +403,7 @@ def test_a_clipped_streak_starts_as_its_light():
     gp = np.zeros((1,) + N, np.float32)
     gp[0, :60, :80] = blurred
     u = gp.copy()
-    sparse_mod._start_lights_at_their_cores(u, gp, small, psf)
+    sparse_mod._start_lights_at_their_cores(u, gp, ndi.label(small)[0], psf)
     start = u[0, :60, :80]
     light = np.zeros_like(small)
     light[29:32, 39:42] = True
