@@ -58,8 +58,9 @@ from gyrodeblur.metrics import default_border, psnr  # noqa: E402
 TARGETS = {"offset_ms": 3.0, "psnr_gap_db": -0.5, "seconds_12mp": 20.0}
 
 
-def inject(capture, rng: np.random.Generator):
-    """The corrupted capture and what was injected."""
+def draw_errors(capture, rng: np.random.Generator) -> dict:
+    """The errors to inject: a time offset, a bias, readout and focal factors and a wrong
+    axis mapping (one of the 23 proper signed permutations other than ``capture``'s)."""
     while True:
         off = float(rng.uniform(-0.03, 0.03))
         if abs(off) >= 0.005:
@@ -70,26 +71,53 @@ def inject(capture, rng: np.random.Generator):
     true_letters = axes_to_letters(capture.axes)
     wrong = [a for a in PROPER_AXIS_LETTERS if a != true_letters]
     axes = str(rng.choice(wrong))
-    bad = capture.replace(time_offset=capture.time_offset + off,
-                          readout_time=capture.readout_time * ro,
-                          camera=capture.camera.with_focal_scale(fo),
-                          bias=capture.bias + bias, axes=parse_axes(axes))
-    return bad, {"offset_ms": off * 1e3, "bias": bias.tolist(), "readout_factor": ro,
-                 "focal_factor": fo, "axes": axes}
+    return {"offset_ms": off * 1e3, "bias": bias.tolist(), "readout_factor": ro,
+            "focal_factor": fo, "axes": axes}
+
+
+def corrupt(capture, errors: dict):
+    """``capture`` with the ``errors`` of :func:`draw_errors` injected."""
+    return capture.replace(time_offset=capture.time_offset + errors["offset_ms"] * 1e-3,
+                           readout_time=capture.readout_time * errors["readout_factor"],
+                           camera=capture.camera.with_focal_scale(errors["focal_factor"]),
+                           bias=capture.bias + np.asarray(errors["bias"]),
+                           axes=parse_axes(errors["axes"]))
+
+
+def inject(capture, rng: np.random.Generator):
+    """The corrupted capture and what was injected."""
+    errors = draw_errors(capture, rng)
+    return corrupt(capture, errors), errors
 
 
 def run_case(case, rng, *, say, method=None) -> dict:
-    cap = case.capture
-    bad, injected = inject(cap, rng)
+    """Calibrate one case's photo alone, from its capture with errors injected."""
+    return run_session([case], rng, say=say, method=method)[0]
+
+
+def run_session(cases, rng, *, say, method=None) -> list[dict]:
+    """Calibrate the photos of one session together: every case's capture gets the same
+    injected errors (one gyro, one camera), and ``calibrate`` sees all the photos at once.
+    One row per photo (``seconds`` is the whole session's calibration time)."""
+    errors = draw_errors(cases[0].capture, rng)
+    bads = [corrupt(case.capture, errors) for case in cases]
     t0 = time.perf_counter()
     try:
-        res = calibrate([case.blurred], bad)
+        res = calibrate([case.blurred for case in cases], bads)
     except InputError as exc:
-        say(f"  {case.name:24s} calibration refused: {exc}")
-        return {"case": case.name, "blur_px": case.meta.get("blur_px"), "injected": injected,
-                "failed": str(exc), "seconds": time.perf_counter() - t0}
+        for case in cases:
+            say(f"  {case.name:24s} calibration refused: {exc}")
+        return [{"case": case.name, "blur_px": case.meta.get("blur_px"), "injected": errors,
+                 "failed": str(exc), "seconds": time.perf_counter() - t0} for case in cases]
     secs = time.perf_counter() - t0
-    got = res.capture
+    return [evaluate(case, bad, got, errors, res, secs, say=say, method=method)
+            for case, bad, got in zip(cases, bads, res.captures)]
+
+
+def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
+    """One photo's row: the calibrated capture ``got`` against the truth, and the PSNR of
+    the photo deblurred with the true, the calibrated and the corrupted (``bad``) capture."""
+    cap = case.capture
     border = default_border(case.sharp.shape)
     with _common.quiet():
         out_true = deblur(case.blurred, cap, method=method)
@@ -126,6 +154,15 @@ def run_case(case, rng, *, say, method=None) -> dict:
         f"PSNR {p_cal:5.2f} vs {p_true:5.2f} ({p_cal - p_true:+.2f} dB; registered "
         f"{r_cal - r_true:+.2f}; aligned {a_cal - p_true:+.2f}; corrupted {p_bad:5.2f})  {secs:5.1f} s")
     return row
+
+
+def group_sessions(cases) -> list[list]:
+    """The cases grouped by source photo (its shake windows), in order: each group stands
+    for the photos of one session (one camera and gyro, several exposures)."""
+    groups: dict = {}
+    for case in cases:
+        groups.setdefault(case.meta.get("photo", case.name), []).append(case)
+    return list(groups.values())
 
 
 def field_aligned(restored: np.ndarray, estimated, true) -> np.ndarray:
@@ -200,7 +237,8 @@ def summarise(all_rows: list[dict]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="2 cases at 512 px")
+    ap.add_argument("--quick", action="store_true",
+                    help="2 cases at 512 px (with --sessions: one photo's 2 windows)")
     ap.add_argument("--dataset", help="dataset folder (loaded, or built there if absent)")
     ap.add_argument("--cases", type=int, default=None, help="use only the first N cases")
     ap.add_argument("--windows", type=int, default=2, help="shake windows per photo (built cases)")
@@ -209,12 +247,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", default=None, help="deconvolution method (default: the project's)")
     ap.add_argument("--timing", action="store_true",
                     help="also time calibrate on the first case's photo upscaled to 12 MP")
-    ap.add_argument("--out", type=Path, default=_common.RESULTS / "calibration.json")
+    ap.add_argument("--sessions", action="store_true",
+                    help="calibrate the windows of each photo together, as one session's "
+                         "photos sharing one set of injected errors")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="JSON report (default: results/calibration.json, or "
+                         "results/calibration_sessions.json with --sessions)")
     args = ap.parse_args(argv)
+    if args.out is None:
+        args.out = _common.RESULTS / ("calibration_sessions.json" if args.sessions
+                                      else "calibration.json")
     if args.quick:
         args.cases = args.cases or 2
         args.max_size = args.max_size or 512
-        args.windows = 1
+        args.windows = 2 if args.sessions else 1
     say = _common.say
     t_start = time.perf_counter()
     opts = {"windows_per_photo": args.windows, "max_size": args.max_size}
@@ -225,12 +271,22 @@ def main(argv: list[str] | None = None) -> int:
     cases = _common.get_cases(dataset=args.dataset, **opts)
     if args.cases:
         cases = cases[:args.cases]
-    say(f"calibration benchmark: {len(cases)} case(s), errors injected with seed {args.seed}")
     rows = []
-    for k, case in enumerate(cases):
-        rng = np.random.default_rng([args.seed, 6, k])
-        rows.append(run_case(case, rng, say=say, method=args.method))
+    if args.sessions:
+        sessions = group_sessions(cases)
+        say(f"calibration benchmark: {len(cases)} photo(s) in {len(sessions)} session(s), "
+            f"errors injected with seed {args.seed}")
+        for k, group in enumerate(sessions):
+            rng = np.random.default_rng([args.seed, 7, k])
+            rows += run_session(group, rng, say=say, method=args.method)
+    else:
+        say(f"calibration benchmark: {len(cases)} case(s), errors injected with seed {args.seed}")
+        for k, case in enumerate(cases):
+            rng = np.random.default_rng([args.seed, 6, k])
+            rows.append(run_case(case, rng, say=say, method=args.method))
     summary = summarise(rows)
+    if args.sessions:
+        summary["sessions"] = len(sessions)
     if args.timing:
         summary["timing_12mp"] = time_12mp(cases[0], np.random.default_rng([args.seed, 12]),
                                            say=say)
@@ -240,6 +296,7 @@ def main(argv: list[str] | None = None) -> int:
     if "offset_abs_error_ms" in s:
         report(dict(s, cases=s["calibrated"]), say)
     result = {"benchmark": "calibration", "quick": args.quick, "seed": args.seed,
+              "mode": "sessions" if args.sessions else "single photos",
               "targets": TARGETS, "summary": summary, "cases": rows,
               "total_seconds": time.perf_counter() - t_start, "machine": _common.machine_info()}
     _common.write_json(args.out, result)

@@ -102,3 +102,22 @@ def test_speed_quick(tmp_path):
         assert run["width"] * 3 == run["height"] * 4
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert "| 1 | 1152x864 |" in out.with_suffix(".md").read_text()
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_calibration_sessions_quick(tmp_path):
+    """Two photos of one session share the injected errors and are calibrated together."""
+    _need_shared()
+    out = tmp_path / "cal.json"
+    assert _load("calibration").main(["--quick", "--sessions", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    rows = r["cases"]
+    assert r["mode"] == "sessions" and r["summary"]["sessions"] == 1 and len(rows) == 2
+    assert rows[0]["injected"] == rows[1]["injected"]
+    assert abs(rows[0]["injected"]["offset_ms"]) >= 5
+    for row in rows:
+        assert row["axes_correct"], row["estimates"]
+        assert abs(row["offset_error_ms"]) < 3, row["estimates"]
+        assert row["psnr_calibrated"] > row["psnr_corrupted"] + 5
+    # one calibration for the session: the same corrections for both photos
+    assert rows[0]["offset_error_ms"] == pytest.approx(rows[1]["offset_error_ms"])

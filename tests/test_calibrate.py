@@ -330,3 +330,24 @@ def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
                "--capture", str(d / "cap.json"), "-o", str(d / "out" / "r.json")])
     assert rc == 2                                   # three for two photos: counted, refused
     assert "3 capture descriptions for 2 photos" in capsys.readouterr().err
+
+
+def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
+    """Negating the camera's x and y rates reflects the PSFs only if the bias is negated with
+    them: the twin's parameters give exactly the winner's camera rates, x and y negated."""
+    from gyrodeblur.calibrate import _TWIN, _Theta, _twin_parameters
+
+    cap = _true_capture(0.5).replace(bias=np.array([0.03, -0.01, 0.02]))
+    x = np.array([0.004, -0.002, 0.05, 0.01, 0.04, -0.03])
+    M = parse_axes("Xyz")
+
+    def rates(v, axes):
+        th = _Theta(axes=axes, offset=v[0], readout=v[1], focal=float(np.exp(v[2])),
+                    bias=np.asarray(v[3:6], float))
+        return th.apply(cap).camera_rates()[1]
+
+    xt = _twin_parameters(x, cap.bias)
+    np.testing.assert_allclose(xt[:3], x[:3])
+    np.testing.assert_allclose(rates(xt, _TWIN @ M), rates(x, M) @ _TWIN, atol=1e-12)
+    # left as it is, the bias turns the twin's rates away from the reflection
+    assert np.abs(rates(x, _TWIN @ M) - rates(x, M) @ _TWIN).max() > 0.05

@@ -72,9 +72,12 @@ Search
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
    rolling shutter separate the two. The winner's "mirror twin" is compared at the same
-   parameters: by the frame registration below when there is one, else by the spectra,
-   and when those differ by less than :data:`_TWIN_NATS` nats per patch by the phase
-   (normalised gradient sparsity of the Wiener-deconvolved patches).
+   parameters, its bias mirrored with the rates (a bias is a rate: left as it is, it would
+   turn the twin's PSFs, not reflect them): by the frame registration below when there is
+   one; else the twin is taken when the spectra do not prefer the winner by
+   :data:`_TWIN_NATS` nats per patch or more and the phase (normalised gradient sparsity
+   of the Wiener-deconvolved patches) prefers the twin, by two standard errors over the
+   patches.
 4. Several photos of one session share every correction (each keeps its own exposure
    start and given values). Consecutive photos less than a second apart are also
    registered to each other once (phase correlation of the whole frames): the gyro
@@ -831,6 +834,9 @@ _SCAN_REFINED = 2
 _AXES_CONFIDENT_NATS = 8.0
 #: Spectral cost gap (nats per patch) under which mirror twins are told apart by phase.
 _TWIN_NATS = 40.0
+#: ... and the phase must prefer the twin by this many standard errors of its mean over
+#: the patches (a blur of a few pixels has hardly any phase: a coin toss keeps the winner).
+_TWIN_SIGMAS = 2.0
 _ENVELOPE_ITERS = 3
 _ENVELOPE_ITERS_HELD = 6
 _TARGET_EXTENT = 32.0      # px: working scale makes the largest PSF about this long
@@ -838,7 +844,8 @@ _PATCH = 128               # px: patch side at working scale
 _COARSE_EXTENT = 16.0      # px: the same for the coarse search
 _COARSE_PATCH = 64
 _COARSE_STEP = 0.002       # s: time-shift grid of the coarse search
-_N_PATCHES = 9             # patches in all, by default
+_N_PATCHES = 9             # patches per photo, by default ...
+_MAX_PATCHES = 18          # ... and at most this many in all (at least 3 per photo)
 #: With the given axis mapping, the given parameters are kept unless the best found lowers
 #: the (tempered) objective by at least this much: a correct capture on a photo with little
 #: blur is left alone rather than moved along directions the photo cannot tell apart. (A
@@ -1054,8 +1061,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         Seconds searched on each side of the given time offset.
     transfer : str
         Transfer curve of the photos' values (``"srgb"`` or ``"linear"``).
-    n_patches : int
-        Patches in all (spread over the photos, and over each frame).
+    n_patches : int, optional
+        Patches in all (spread over the photos, and over each frame). Default: 9 per
+        photo, at most 18 in all but at least 3 per photo (a photo with little blur says
+        little: its share of a session's patches must not crowd out the others').
     say : callable(str), optional
         Progress messages.
     mappings : list of str, optional
@@ -1077,7 +1086,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     fix = _checked_fix(fix)
     say_ = say or (lambda msg: None)
     if n_patches is None:
-        n_patches = _N_PATCHES
+        n_patches = min(_N_PATCHES * len(images), max(_MAX_PATCHES, 3 * len(images)))
     photos = [_Photo(img, cap, transfer, i) for i, (img, cap) in enumerate(zip(images, captures))]
     search = _Search(photos, fix, offset_range, say_)
     c0 = photos[0].cap
@@ -1301,13 +1310,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
     if "axes" not in fix and len(cand) > 1 and not kept:
         Mt = _TWIN @ M
+        xt = x if "bias" in fix else _twin_parameters(x, c0.bias)
         th_w = search.theta_of(x, M, ubar)
-        th_t = search.theta_of(x, Mt, ubar)
+        th_t = search.theta_of(xt, Mt, ubar)
         per_patch = (stage.cost(th_t) - stage.cost(th_w)) / len(stage.points)
         d = np.log(stage.sparsity(th_t) / stage.sparsity(th_w))
         margin = float(d.mean())
+        sem = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else np.inf
         msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
-               f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} (log ratio; "
+               f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
                f"{int((d > 0).sum())}/{d.size} patches prefer {axes_to_letters(M)})")
         if reg is not None and reg.pairs:
             r_w = float(np.sum(reg.residuals(th_w) ** 2))
@@ -1315,10 +1326,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             msg += f", registration chi2 {r_w:.1f} vs {r_t:.1f}"
             swap = r_t < r_w
         else:
-            swap = per_patch < _TWIN_NATS and margin < 0
+            swap = per_patch < _TWIN_NATS and margin + _TWIN_SIGMAS * sem < 0
         if swap:
-            x, fx, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, Mt, ubar), x, idx,
-                                       lo, hi, hs, caps, prior, iters=6, extra=extra_for(Mt))
+            x, fx, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, Mt, ubar),
+                                       np.clip(xt, lo, hi), idx, lo, hi, hs, caps, prior,
+                                       iters=6, extra=extra_for(Mt))
             msg += f": {axes_to_letters(Mt)} taken"
             M = Mt
         notes.append(msg)
@@ -1360,6 +1372,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     notes.append(f"{coarse.evaluations} coarse and {stage.evaluations} fine cost evaluations, "
                  f"{secs:.1f} s")
     return CalibrationResult(out_caps, est, ranking, stage.scale, fix, secs, notes)
+
+
+def _twin_parameters(x: np.ndarray, given_bias: np.ndarray) -> np.ndarray:
+    """The parameter vector under which the mirror twin's camera rates are the winner's,
+    x and y negated: the same time shift, readout and focal scale, and the bias (camera
+    frame, ``given_bias`` + the correction ``x[3:6]``) mirrored as well."""
+    xt = np.array(x, float)
+    xt[3:6] = _TWIN @ (given_bias + xt[3:6]) - given_bias
+    return xt
 
 
 def _gyro_noise(captures) -> float:
