@@ -299,6 +299,18 @@ def test_cli_fix_needs_refine(cli_dir, capsys):
     assert rc == 2 and "--refine" in capsys.readouterr().err
 
 
+def test_cli_downscale_needs_refine_and_a_factor_up_to_one(cli_dir, capsys):
+    d = cli_dir
+    rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+               "--downscale", "0.5", "-o", str(d / "out" / "nods.png")])
+    assert rc == 2 and "--refine" in capsys.readouterr().err
+    rc = main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+               "--downscale", "2", "-o", str(d / "out" / "ds.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--downscale" in err and "(0, 1]" in err
+    assert not (d / "out" / "ds.json").exists()
+
+
 def _noisy(cap: Capture, sigma: float, seed: int = 0) -> Capture:
     rng = np.random.default_rng(seed)
     log = cap.log
@@ -394,3 +406,23 @@ def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):
     assert abs(got.camera.fx / 2010.0 - 1) < 0.05, got.camera.fx
     off, sigma = res.estimates["offset"][1:]
     assert abs(off - 0.0176) < max(3 * sigma, 0.006), (off, sigma)
+
+
+def test_a_photo_softer_than_its_pixels_is_calibrated_shrunk(case):
+    """The test photo upscaled x2 (nothing above a quarter cycle per pixel) with its capture
+    scaled alike: ``downscale=0.5`` calibrates it as well as the original, and the corrected
+    capture keeps the upscaled photo's resolution. (At full size it takes the mapping YxZ:
+    the empty top octave reads as blur.)"""
+    import cv2
+
+    _, true, blurred = case
+    big = cv2.resize(blurred, (2 * W, 2 * H), interpolation=cv2.INTER_LINEAR)
+    true2 = true.scaled_to(2 * W, 2 * H)
+    res = calibrate([big], _corrupt(true2), downscale=0.5)
+    got = res.capture
+    assert (got.camera.width, got.camera.height) == (2 * W, 2 * H)
+    assert axes_to_letters(got.axes) == TRUE_AXES
+    assert abs(got.time_offset - true.time_offset) < 0.003
+    assert abs(got.camera.fx / true2.camera.fx - 1) < 0.06
+    with pytest.raises(InputError, match="downscale"):
+        calibrate([blurred], true, downscale=1.5)

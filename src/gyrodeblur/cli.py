@@ -242,6 +242,8 @@ def cmd_deblur(args, say) -> None:
     else:
         if args.fix and not args.refine:
             raise InputError("--fix", "applies with --refine only")
+        if args.downscale != 1.0 and not args.refine:
+            raise InputError("--downscale", "applies with --refine only")
         fix = None
         if args.refine:
             from .calibrate import fixed_parameters
@@ -249,7 +251,7 @@ def cmd_deblur(args, say) -> None:
         cap = _load_capture(args, photo, say)
         if args.refine:
             from .calibrate import calibrate, format_estimates
-            res = calibrate([photo.pixels], cap, fix=fix, say=say)
+            res = calibrate([photo.pixels], cap, fix=fix, say=say, downscale=args.downscale)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
@@ -280,6 +282,11 @@ def cmd_calibrate(args, say) -> None:
 
 
 # ----------------------------------------------------------------------------- parser
+
+DOWNSCALE_HELP = ("calibrate on the photos shrunk by this factor, 0 < F <= 1 (default 1): for "
+                  "photos softer than their pixel grid, e.g. upscaled or heavily denoised, "
+                  "try 0.5; the corrected capture keeps the given resolution")
+
 
 def build_parser() -> argparse.ArgumentParser:
     from .deblur import METHODS
@@ -351,6 +358,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fix", default="", metavar="NAMES",
                    help="with --refine: parameters not to estimate, comma-separated from "
                         "offset,bias,readout,focal,axes")
+    s.add_argument("--downscale", type=float, default=1.0, metavar="F",
+                   help="with --refine: " + DOWNSCALE_HELP)
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
     s.add_argument("--overwrite", action="store_true")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -373,6 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated parameters not to estimate: offset,bias,readout,focal,"
                         "axes (a value given with --time-offset, --bias, --readout-time, "
                         "--fx/--fy or --orientation is fixed too)")
+    s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s, required=True, per_photo=True)
     s.set_defaults(func=cmd_calibrate)
