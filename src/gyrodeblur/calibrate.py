@@ -72,22 +72,22 @@ Search
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
    rolling shutter separate the two. The winner's "mirror twin" is compared at the same
-   parameters, its bias mirrored with the rates unless the bias is fixed (a bias is a rate:
-   left as it is, it would turn the twin's PSFs, not reflect them): by the frame registration below when there is
-   one; else the twin is taken when the spectra do not prefer the winner by
-   :data:`_TWIN_NATS` nats per patch or more and the phase (normalised gradient sparsity
-   of the Wiener-deconvolved patches) prefers the twin, by two standard errors over the
-   patches.
+   parameters, its bias mirrored with the rates unless the bias is fixed (a bias is a
+   rate: left as it is, it would turn the twin's PSFs, not reflect them): by the frame
+   registration below when there is one; else the twin is taken when the spectra do not
+   prefer the winner by :data:`_TWIN_NATS` nats per patch or more and the phase
+   (normalised gradient sparsity of the Wiener-deconvolved patches) prefers the twin, by
+   two standard errors over the patches.
 4. Several photos of one session share every correction (each keeps its own exposure
    start and given values); each photo has its own patches (9 each, or 18 shared out), so
    that one with little blur does not take the patches of one that says more (on the
    calibration benchmark's two-photo sessions: the right mapping for 24 of 24 photos and a
    median offset error of 0.44 ms, against 22/24 and 1.65 ms one photo at a time).
-   Consecutive photos less than a second apart are also
-   registered to each other once (phase correlation of the whole frames): the gyro
-   predicts that image motion (mean displacement of the blurred image of a grid of scene
-   points), which pins the sign of the motion and the focal length, and weakly the time
-   offset, where blur alone is ambiguous (a straight pan).
+   Consecutive photos less than a second apart are also registered to each other once
+   (phase correlation of the whole frames): the gyro predicts that image motion (mean
+   displacement of the blurred image of a grid of scene points), which pins the sign of
+   the motion and the focal length, and weakly the time offset, where blur alone is
+   ambiguous (a straight pan).
 
 5. When the best mapping is the given one, the given parameters are kept unless the best
    found lowers the tempered objective by :data:`_KEEP_MARGIN`: a correct capture on a
