@@ -108,7 +108,9 @@ below 5 and every gap from 8.9 up was right).
 Limits (measured, see ``benchmarks/calibration.py``): blur of a few pixels carries almost
 no information; scenes dominated by horizontal and vertical edges can prefer a mapping
 that turns the blur by 90 degrees; focal length and bias trade off along nearly uniform
-motion; the time offset is weakly determined where the gyro rate is nearly constant.
+motion; the time offset is weakly determined where the gyro rate is nearly constant; a
+photo softer than its pixel grid (upscaled, heavily denoised) has an empty top octave that
+reads as blur, and is calibrated shrunk (``downscale``).
 """
 
 from __future__ import annotations
