@@ -9,12 +9,7 @@ data=../../../shared/data/real/shield-tablet
 mkdir -p shield-out
 photos=()
 captures=()
-i=0
-while read -r ts exposure; do
-  i=$((i + 1))
-  frame=$(printf "%04d" "$i")
-  case $frame in 0002|0003|0004|0005|0006) ;; *) continue ;; esac
-  start=$(python3 -c "print($ts * 1e-9)")
+while read -r frame start; do
   sed -e "s/\"exposure_start\": [0-9.]*/\"exposure_start\": $start/" \
       -e 's/"fx": 2010.0, "fy": 2010.0/"fx": 1558.69, "fy": 1558.69/' \
       -e 's/"orientation": "yxz"/"orientation": "YXz"/' \
@@ -23,5 +18,5 @@ while read -r ts exposure; do
       capture_0003.json > "shield-out/published_$frame.json"
   photos+=("$data/$frame.jpg")
   captures+=(--capture "shield-out/published_$frame.json")
-done < "$data/frames.txt"
+done < <(./frames_in_log.sh)
 gyrodeblur calibrate "${photos[@]}" "${captures[@]}" -o shield-out/calibrated.json --overwrite "$@"
