@@ -380,6 +380,19 @@ def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
     np.testing.assert_array_equal(_twin_parameters(x, [caps[0].bias], fix={"bias"}), x)
 
 
+def test_the_twin_needs_a_clear_phase_preference():
+    """Without frame registration the twin replaces the winner only when its spectra are not
+    clearly worse and the phase prefers it by two standard errors, not by a coin toss."""
+    from gyrodeblur.calibrate import _phase_prefers_twin
+
+    clear = np.array([-0.05, -0.04, -0.06, -0.03, -0.05])
+    toss = np.array([0.02, -0.03, 0.01, -0.04, 0.015, -0.02, -0.01, 0.01, -0.03])   # mean < 0
+    assert _phase_prefers_twin(-14.0, clear)
+    assert not _phase_prefers_twin(-14.0, toss)
+    assert not _phase_prefers_twin(60.0, clear)          # the spectra favour the winner
+    assert not _phase_prefers_twin(-14.0, clear[:1])     # one patch: no standard error
+
+
 def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):
     """The real Shield-tablet pan (examples/shield-tablet): from the published focal length,
     no time offset and the wrong one of the two proper mappings next to the published matrix,
@@ -392,7 +405,8 @@ def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):
 
     data = shared_data / "real" / "shield-tablet"
     example = Path(__file__).resolve().parents[1] / "examples" / "shield-tablet"
-    base = load_capture(example / "capture_0003.json")
+    base = load_capture(example / "capture_0003.json",
+                        overrides={"gyro_path": str(data / "sensor_events.txt")})
     starts = [int(line.split()[0]) * 1e-9
               for line in (data / "frames.txt").read_text().splitlines() if line.strip()]
     frames = (2, 3, 4, 5, 6)
@@ -405,6 +419,7 @@ def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):
     assert axes_to_letters(got.axes) == "yxz", res.notes
     assert abs(got.camera.fx / 2010.0 - 1) < 0.05, got.camera.fx
     off, sigma = res.estimates["offset"][1:]
+    assert sigma < 0.008, sigma                           # pinned, not just allowed
     assert abs(off - 0.0176) < max(3 * sigma, 0.006), (off, sigma)
 
 
@@ -426,3 +441,5 @@ def test_a_photo_softer_than_its_pixels_is_calibrated_shrunk(case):
     assert abs(got.camera.fx / true2.camera.fx - 1) < 0.06
     with pytest.raises(InputError, match="downscale"):
         calibrate([blurred], true, downscale=1.5)
+    with pytest.raises(InputError, match="too small"):
+        calibrate([blurred], true, downscale=0.1)

@@ -6,17 +6,22 @@
 # Usage (from this folder): ./calibrate_frames.sh [extra gyrodeblur calibrate options]
 set -euo pipefail
 data=../../../shared/data/real/shield-tablet
+frames=$(./frames_in_log.sh)
 mkdir -p shield-out
 photos=()
 captures=()
 while read -r frame start; do
-  sed -e "s/\"exposure_start\": [0-9.]*/\"exposure_start\": $start/" \
-      -e 's/"fx": 2010.0, "fy": 2010.0/"fx": 1558.69, "fy": 1558.69/' \
-      -e 's/"orientation": "yxz"/"orientation": "YXz"/' \
-      -e 's/"time_offset": 0.0176/"time_offset": 0.0/' \
-      -e 's#"path": "../../../shared#"path": "../../../../shared#' \
-      capture_0003.json > "shield-out/published_$frame.json"
+  python3 - "$start" "shield-out/published_$frame.json" <<'PY'
+import json, sys
+start, out = float(sys.argv[1]), sys.argv[2]
+cap = json.load(open("capture_0003.json"))
+cap["exposure_start"] = start
+cap["camera"].update(fx=1558.69, fy=1558.69)          # the published focal length
+cap["gyro"].update(orientation="YXz", time_offset=0.0,
+                   path="../" + cap["gyro"]["path"])   # the file sits one folder down
+json.dump(cap, open(out, "w"), indent=2)
+PY
   photos+=("$data/$frame.jpg")
   captures+=(--capture "shield-out/published_$frame.json")
-done < <(./frames_in_log.sh)
+done <<< "$frames"
 gyrodeblur calibrate "${photos[@]}" "${captures[@]}" -o shield-out/calibrated.json --overwrite "$@"

@@ -161,7 +161,8 @@ class CalibrationResult:
     ranking : list of (letters, cost)
         Axis mappings by coarse score (nats), best first, relative to the best.
     scale : float
-        Working scale of the fine stage.
+        Working scale of the fine stage (relative to the photos as calibrated: after
+        ``downscale``).
     fixed : set of str
         The parameters that were not estimated.
     seconds : float
@@ -1100,11 +1101,12 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     say_ = say or (lambda msg: None)
     if not 0 < downscale <= 1:
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
+    work_caps = captures
     if downscale < 1:
-        images = [_shrunk(np.asarray(img), downscale) for img in images]
+        images, work_caps = _shrunk_photos(images, captures, downscale)
     if n_patches is None:
         n_patches = min(_N_PATCHES * len(images), _MAX_PATCHES)
-    photos = [_Photo(img, cap, transfer, i) for i, (img, cap) in enumerate(zip(images, captures))]
+    photos = [_Photo(img, cap, transfer, i) for i, (img, cap) in enumerate(zip(images, work_caps))]
     search = _Search(photos, fix, offset_range, say_)
     c0 = photos[0].cap
     theta0 = _Theta(axes=c0.axes)
@@ -1332,8 +1334,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         th_t = search.theta_of(xt, Mt, ubar)
         per_patch = (stage.cost(th_t) - stage.cost(th_w)) / len(stage.points)
         d = np.log(stage.sparsity(th_t) / stage.sparsity(th_w))
-        margin = float(d.mean())
-        sem = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else np.inf
+        margin, sem = _mean_and_error(d)
         msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
                f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
                f"{int((d > 0).sum())}/{d.size} patches prefer {axes_to_letters(M)})")
@@ -1343,7 +1344,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             msg += f", registration chi2 {r_w:.1f} vs {r_t:.1f}"
             swap = r_t < r_w
         else:
-            swap = per_patch < _TWIN_NATS and margin + _TWIN_SIGMAS * sem < 0
+            swap = _phase_prefers_twin(per_patch, d)
         if swap:
             x, fx, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, Mt, ubar),
                                        xt, idx, lo, hi, hs, caps, prior,
@@ -1391,6 +1392,26 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     return CalibrationResult(out_caps, est, ranking, stage.scale, fix, secs, notes)
 
 
+def _shrunk_photos(images, captures, factor: float):
+    """The photos resized by ``factor`` (< 1, area averaging, float32) and their captures
+    scaled to the sizes they got (checked against the full-size photos first: rounding
+    the size may change the aspect ratio slightly, which the scaled cameras follow)."""
+    out_imgs, out_caps = [], []
+    for img, cap in zip(images, captures):
+        img = np.asarray(img)
+        h, w = img.shape[:2]
+        cap.scaled_to(w, h, source=cap.source)           # the photo fits its capture
+        small = _shrunk(img, factor)
+        hs, ws = small.shape[:2]
+        if min(hs, ws) < 64:
+            raise InputError("--downscale", f"{factor:g} shrinks a {w}x{h} photo to {ws}x{hs}: "
+                                            "too small to calibrate on")
+        cam = cap.camera.scaled_to(w, h).scaled_to(ws, hs, tolerance=1.0)
+        out_imgs.append(small)
+        out_caps.append(cap.replace(camera=cam))
+    return out_imgs, out_caps
+
+
 def _shrunk(image: np.ndarray, factor: float) -> np.ndarray:
     """``image`` resized by ``factor`` (< 1) with area averaging, float32."""
     import cv2
@@ -1402,6 +1423,22 @@ def _shrunk(image: np.ndarray, factor: float) -> np.ndarray:
         return np.stack([cv2.resize(img[..., c], size, interpolation=cv2.INTER_AREA)
                          for c in range(img.shape[2])], axis=2)
     return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+
+
+def _mean_and_error(d: np.ndarray) -> tuple[float, float]:
+    """Mean of ``d`` and its standard error (infinite for fewer than two values)."""
+    d = np.asarray(d, float)
+    sem = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else np.inf
+    return float(d.mean()), sem
+
+
+def _phase_prefers_twin(per_patch: float, log_ratio: np.ndarray) -> bool:
+    """Whether the mirror twin replaces the winner when no frame registration decides:
+    its spectra (cost, nats per patch, twin minus winner) do not favour the winner by
+    :data:`_TWIN_NATS` or more, and the per-patch log sparsity ratios (twin over winner)
+    favour the twin by :data:`_TWIN_SIGMAS` standard errors of their mean."""
+    margin, sem = _mean_and_error(log_ratio)
+    return bool(per_patch < _TWIN_NATS and margin + _TWIN_SIGMAS * sem < 0)
 
 
 def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
