@@ -1,5 +1,6 @@
 """Self-calibration benchmark (issue 6): errors injected into benchmark captures, then
-``gyrodeblur.calibrate`` recovers them from the blurred photo alone.
+``gyrodeblur.calibrate`` recovers them from the blurred photo alone (or, ``--sessions``, from
+the photos of one session together).
 
 Protocol: each case of the benchmark dataset (a sharp photo blurred by a real hand-shake
 gyro window, rolling shutter, 40 dB noise, 8-bit; see :mod:`gyrodeblur.dataset`) gets a
@@ -33,6 +34,12 @@ Usage::
     python benchmarks/calibration.py --quick         # 2 cases at 512 px
     python benchmarks/calibration.py --dataset DIR   # a dataset folder (built if absent)
     python benchmarks/calibration.py --cases 6 --max-size 768
+    python benchmarks/calibration.py --sessions      # each photo's windows as one session
+
+With ``--sessions`` the windows of each source photo are one session's photos: one set of
+errors is injected into all their captures (a session's seeds differ from the single-photo
+run's), ``calibrate`` sees them together, and ``seconds`` is the session's time. Windows
+under 2 s apart are left out of a session (:func:`group_sessions`).
 
 Writes ``benchmarks/results/calibration.json`` (``--out``).
 """

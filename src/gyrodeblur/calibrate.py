@@ -1400,13 +1400,13 @@ def _shrunk_photos(images, captures, factor: float):
     for img, cap in zip(images, captures):
         img = np.asarray(img)
         h, w = img.shape[:2]
-        cap.scaled_to(w, h, source=cap.source)           # the photo fits its capture
+        full = cap.scaled_to(w, h, source=cap.source)    # the photo fits its capture
         small = _shrunk(img, factor)
         hs, ws = small.shape[:2]
         if min(hs, ws) < 64:
             raise InputError("--downscale", f"{factor:g} shrinks a {w}x{h} photo to {ws}x{hs}: "
                                             "too small to calibrate on")
-        cam = cap.camera.scaled_to(w, h).scaled_to(ws, hs, tolerance=1.0)
+        cam = full.camera.scaled_to(ws, hs, tolerance=1.0)
         out_imgs.append(small)
         out_caps.append(cap.replace(camera=cam))
     return out_imgs, out_caps

@@ -592,7 +592,7 @@ def _light_zone(small: np.ndarray, kh: int, kw: int, shape: tuple[int, int]) -> 
     return ndi.uniform_filter(zone, (kh, kw), mode="wrap")
 
 
-def _start_lights_at_their_cores(u: np.ndarray, gp: np.ndarray, small: np.ndarray,
+def _start_lights_at_their_cores(u: np.ndarray, gp: np.ndarray, labels: np.ndarray,
                                  h: np.ndarray) -> None:
     """Put each point light's start where the light must be, in place.
 
@@ -610,13 +610,13 @@ def _start_lights_at_their_cores(u: np.ndarray, gp: np.ndarray, small: np.ndarra
     ----------
     u, gp : ndarray (C, N0, N1) float32
         The start (changed) and the padded data; the photo is their top-left (H, W).
-    small : ndarray (H, W) int
+    labels : ndarray (H, W) int
         The point lights' labels (:func:`_small_lights`).
     h : ndarray (kh, kw) float32
         The PSF.
     """
-    H, W = small.shape
-    lab, n = small, int(small.max())
+    H, W = labels.shape
+    lab, n = labels, int(labels.max())
     small = lab > 0
     core = cv2.erode(small.view(np.uint8), _footprint(h), borderType=cv2.BORDER_CONSTANT,
                      borderValue=0) > 0
