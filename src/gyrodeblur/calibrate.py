@@ -42,6 +42,19 @@ before weak Gaussian priors around the given values are added: readout +-30 %, f
 against a bias along a nearly uniform motion (a constant rate ``w`` with focal ``f`` and
 ``w + b`` with ``f w / (w + b)`` give the same blur).
 
+A bias barely shows in one exposure (0.03 rad/s over 20 ms lengthens a PSF by half a
+pixel at f = 1000 px), yet it moves the deblurred image, which is referenced to the first
+row's start: by f b t at a row exposed t later. A long log says more: over seconds, the
+rate of a hand-held camera averages out, and a gyro's bias does not. So when the logs hold
+:data:`_REST_MIN_SECONDS` s or more within :data:`_REST_SPAN` s of the photos, their mean
+rate (:func:`gyrodeblur.gyrolog.mean_rate`, an error bar from 1 s block means, plus
+:data:`_REST_FLOOR` for the camera's own mean rate) becomes a second Gaussian on the bias,
+combined with the given bias's; each candidate mapping turns it into its own camera frame,
+and the searches start from its centre. A mean rate above :data:`_REST_MAX_RATE` on an axis
+is a pan, not a bias, and is not used (said in the notes). On the calibration benchmark
+with 10 s of the (deliberately shaken) source trace on each side of each photo
+(``--log-seconds 10``): see BENCHMARKS.md section 4.
+
 Search
 ------
 1. Coarse (half the working scale, 64 px, one row per patch): for every allowed mapping,
@@ -127,7 +140,7 @@ from scipy import ndimage
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .capture import Capture
 from .errors import InputError
-from .gyrolog import rate_noise
+from .gyrolog import GyroLog, mean_rate, rate_noise
 from .orientation import Orientation, quat_multiply, quat_to_matrix
 from .tonecurve import get_transfer_curve
 
@@ -862,6 +875,14 @@ _KEEP_MARGIN = 10.0
 #: rad/s per sample: gyro noise above this raises the keep margin (in proportion).
 _TYPICAL_GYRO_NOISE = 0.007
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
+#: The bias from the log's mean rate (see :func:`_rest_rate`): seconds of log used on each
+#: side of the photos' exposures, the shortest log that counts (s), the spread of a
+#: hand-held camera's true mean rate over such a log (rad/s, added to the statistical
+#: error in quadrature) and the largest mean rate taken for a bias (rad/s; more is motion).
+_REST_SPAN = 30.0
+_REST_MIN_SECONDS = 4.0
+_REST_FLOOR = 0.005
+_REST_MAX_RATE = 0.1
 _X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
 
 
@@ -1112,6 +1133,33 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     theta0 = _Theta(axes=c0.axes)
     notes: list[str] = []
 
+    # the bias that the log's mean rate implies, when the log is long (hand motion
+    # averages out over seconds; a gyro's bias does not)
+    rest = None
+    if "bias" not in fix:
+        m_log, se_log, secs_log = _rest_rate(captures)
+        if secs_log >= _REST_MIN_SECONDS:
+            if np.max(np.abs(m_log)) > _REST_MAX_RATE:
+                notes.append(f"the gyro log's mean rate over {secs_log:.0f} s, "
+                             f"{_vec(m_log)} rad/s (log axes), is motion, not a bias: "
+                             f"the bias is not taken from it")
+            else:
+                rest = (m_log, np.hypot(se_log, _REST_FLOOR))
+                notes.append(f"the gyro log's mean rate over {secs_log:.0f} s: {_vec(m_log)} "
+                             f"+- {_vec(rest[1])} rad/s (log axes), a prior on the bias")
+            say_(notes[-1])
+    b_given = np.mean([np.asarray(cap.bias, float) for cap in captures], axis=0)
+
+    def rest_bias(M):
+        """Prior mean and sd of the bias correction (rad/s, camera frame) for mapping
+        ``M``: the given bias +- _PRIOR_BIAS, combined with the log's mean rate."""
+        if rest is None:
+            return np.zeros(3), np.full(3, _PRIOR_BIAS)
+        m_cam = M @ rest[0]
+        p_log = 1.0 / ((M ** 2) @ rest[1] ** 2)
+        p_given = 1.0 / _PRIOR_BIAS ** 2
+        return p_log * (m_cam - b_given) / (p_given + p_log), 1.0 / np.sqrt(p_given + p_log)
+
     # candidate mappings
     given_letters = axes_to_letters(c0.axes)
     if "axes" in fix:
@@ -1179,7 +1227,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         coarse.envelope = envelope
         scored = []
         for M in cand:
-            C = coarse.costs(theta0.copy(axes=M), taus=taus)
+            C = coarse.costs(theta0.copy(axes=M, bias=rest_bias(M)[0]), taus=taus)
             tot, tau0, kap = _line_fit(C, taus, uc, kappas)
             scored.append((tot, tau0, kap, 1.0, M))
         scored.sort(key=lambda r: r[0])
@@ -1202,11 +1250,20 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     lo, hi = search.bounds(ubar)
     hs = np.array([0.0005, 0.001, 0.01, 0.004, 0.004, 0.004])          # finite differences
     caps = np.array([0.004, max(0.15 * search.r0, 0.004), 0.08, 0.03, 0.03, 0.03])
-    prior = (np.zeros(6), np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
-                                    _PRIOR_BIAS, _PRIOR_BIAS, _PRIOR_BIAS]), _TEMPERATURE)
+    prior_sig = np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
+                          _PRIOR_BIAS, _PRIOR_BIAS, _PRIOR_BIAS])
 
-    def start_vec(tau0, kap, fo=1.0):
+    def prior_for(M):
+        """(mean, sd, temperature) of the priors for mapping ``M``: the bias's combines
+        the given bias with the log's mean rate, when the log is long enough."""
+        mu, sig = np.zeros(6), prior_sig.copy()
+        mu[3:6], sig[3:6] = rest_bias(M)
+        return mu, sig, _TEMPERATURE
+
+    def start_vec(tau0, kap, fo=1.0, M=None):
         x = np.zeros(6)
+        if M is not None:
+            x[3:6] = rest_bias(M)[0]
         x[1] = kap
         x[0] = 0.0 if "offset" in fix else tau0 + kap * (0.5 - ubar)
         x[2] = np.log(fo)
@@ -1222,10 +1279,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
             if tm.size == 0:
                 tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
-        stage.set_envelope(search.theta_of(start_vec(tau0, kap), M, ubar))
+        stage.set_envelope(search.theta_of(start_vec(tau0, kap, M=M), M, ubar))
         starts = []
         for fo in fgrid:
-            C = stage.costs(theta0.copy(axes=M, focal=fo), taus=tm, rows=(0.0,))
+            C = stage.costs(theta0.copy(axes=M, focal=fo, bias=rest_bias(M)[0]), taus=tm,
+                            rows=(0.0,))
             for kap in kappas:
                 tot, t0, kp = _line_fit(C, tm, uc, [kap])
                 starts.append((tot, t0, kp, fo))
@@ -1241,9 +1299,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                 chosen.append(r)
         fx, alts = np.inf, []
         for best in chosen:
-            x1 = start_vec(best[1], best[2], best[3])
+            x1 = start_vec(best[1], best[2], best[3], M)
             x1, f1, _, _ = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x1, idx, lo,
-                                      hi, hs, caps, prior, iters=4, extra=extra_for(M))
+                                      hi, hs, caps, prior_for(M), iters=4, extra=extra_for(M))
             alts.append(x1)
             if f1 < fx:
                 x, fx = x1, f1
@@ -1259,7 +1317,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     def refine(x0, iters, which=idx):
         """Levenberg-Marquardt for the winning mapping ``M``: (x, f, F, scores)."""
         return _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x0, which, lo, hi,
-                          hs, caps, prior, iters=iters, extra=extra_for(M))
+                          hs, caps, prior_for(M), iters=iters, extra=extra_for(M))
 
     x, fx, Fm, sc = refine(x, 10)
     # The winner's other starts, refined as far: four iterations do not always tell which
@@ -1272,22 +1330,24 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     # Focal length and a bias along the motion trade off (see Criterion), and the valley
     # between them holds several local minima: the coarse start's focal guess can leave
     # the refinement in one far from the given values. So the winner is refined once more
-    # from the given focal length and bias (first with the focal length held, so that the
-    # bias settles on its own), and the lower objective is kept.
-    if any(j >= 2 for j in idx) and np.any(x[2:] != 0.0):
+    # from the given focal length and bias (the prior's: with a long log, the log's; first
+    # with the focal length held, so that the bias settles on its own), and the lower
+    # objective is kept.
+    b_prior = rest_bias(M)[0]
+    if any(j >= 2 for j in idx) and np.any(x[2:] != np.r_[0.0, b_prior]):
         xs = x.copy()
-        xs[2:] = 0.0
+        xs[2:] = np.r_[0.0, b_prior]
         xs = refine(np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
         xa, fa, Fa, sca = refine(xs, 10)
         if fa < fx:
             x, fx, Fm, sc = xa, fa, Fa, sca
     # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from the
-    # given values of the other parameters: the coarse start's line fits can miss a nearby
+    # given (prior) values of the other parameters: the coarse start's line fits can miss a nearby
     # basin that the fine cost prefers; the best _SCAN_REFINED are refined as far.
     if "offset" not in fix:
         scan, tried = [], {round(float(x[0]), 6)}
         for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
-            xs0 = np.clip(np.r_[x[0] + dt, np.zeros(5)], lo, hi)
+            xs0 = np.clip(np.r_[x[0] + dt, 0.0, 0.0, b_prior], lo, hi)
             if round(float(xs0[0]), 6) in tried:      # the winner's own, or clipped to a bound
                 continue
             tried.add(round(float(xs0[0]), 6))
@@ -1306,7 +1366,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if idx or len(cand) > 1:
         x0 = np.clip(np.zeros(6), lo, hi)
         f_given = _objective(stage, lambda v: search.theta_of(v, c0.axes, ubar), x0,
-                             idx, prior, extra_for(c0.axes))
+                             idx, prior_for(c0.axes), extra_for(c0.axes))
         noise = _gyro_noise(captures)
         margin = _keep_margin(noise) if np.allclose(M, c0.axes) else 0.0
         if np.isfinite(noise) and margin > _KEEP_MARGIN:
@@ -1318,7 +1378,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                    f"improves the objective by only {f_given - fx:.1f} (< {margin:g})")
             x, M, fx = x0, c0.axes, f_given
             _, _, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x, idx,
-                                      lo, hi, hs, caps, prior, iters=0, extra=extra_for(M))
+                                      lo, hi, hs, caps, prior_for(M), iters=0,
+                                      extra=extra_for(M))
             kept = True
             notes.append(msg)
             say_("  " + msg)
@@ -1347,7 +1408,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             swap = _phase_prefers_twin(per_patch, d)
         if swap:
             x, fx, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, Mt, ubar),
-                                       xt, idx, lo, hi, hs, caps, prior,
+                                       xt, idx, lo, hi, hs, caps, prior_for(Mt),
                                        iters=6, extra=extra_for(Mt))
             msg += f": {axes_to_letters(Mt)} taken"
             M = Mt
@@ -1457,6 +1518,38 @@ def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
         b = np.mean(np.asarray(given_biases, float).reshape(-1, 3), axis=0)
         xt[3:6] = _TWIN @ xt[3:6] + (_TWIN - np.eye(3)) @ b
     return xt
+
+
+def _rest_rate(captures) -> tuple[np.ndarray, np.ndarray, float]:
+    """Mean rate of the captures' gyro logs (rad/s, log axes), its standard error and the
+    seconds it spans (:func:`gyrodeblur.gyrolog.mean_rate`): the samples within
+    :data:`_REST_SPAN` s of any photo's exposure, pooled over the photos (one session
+    shares one gyro clock; a sample logged twice counts once)."""
+    ts, ws = [], []
+    for log, caps in _by_log(captures):
+        near = np.zeros(len(log.t), bool)
+        for c in caps:
+            t0, t1 = (v - c.time_offset for v in c.window)
+            near |= (log.t >= t0 - _REST_SPAN) & (log.t <= t1 + _REST_SPAN)
+        ts.append(log.t[near])
+        ws.append(log.omega[near])
+    t, first = np.unique(np.concatenate(ts), return_index=True)
+    if t.size < 2:
+        nan = np.full(3, np.nan)
+        return nan, nan.copy(), 0.0
+    return mean_rate(GyroLog(t, np.concatenate(ws)[first]))
+
+
+def _by_log(captures):
+    """``(log, [captures using it])`` for each distinct gyro log."""
+    groups: dict[int, tuple] = {}
+    for c in captures:
+        groups.setdefault(id(c.log), (c.log, []))[1].append(c)
+    return list(groups.values())
+
+
+def _vec(v) -> str:
+    return "(" + ", ".join(f"{x:+.4f}" for x in np.asarray(v, float)) + ")"
 
 
 def _gyro_noise(captures) -> float:

@@ -46,6 +46,7 @@ __all__ = [
     "write_gcsv",
     "check_coverage",
     "rate_noise",
+    "mean_rate",
     "FORMATS",
     "TIME_UNITS",
     "RATE_UNITS",
@@ -160,6 +161,42 @@ def rate_noise(log: GyroLog) -> float:
         return float("nan")
     d4 = np.diff(np.asarray(log.omega, np.float64), n=4, axis=0)
     return float(np.median(np.median(np.abs(d4), axis=0)) / (0.6745 * np.sqrt(70.0)))
+
+
+def mean_rate(log: GyroLog, *, block: float = 1.0) -> tuple[np.ndarray, np.ndarray, float]:
+    """Mean measured rate of a log (rad/s, the log's axes) and its standard error.
+
+    The log is cut into blocks of ``block`` seconds from its first sample; blocks less
+    than 80 % as full as the median block (the end of the log, the edges of a gap) are
+    dropped. The mean is the mean of the block means, its standard error theirs (batch
+    means: hand motion is correlated over a fraction of a second, so the samples
+    themselves would understate it). Over a long log of a hand-held camera the true rate
+    averages out, and what is left is the gyro's bias (see
+    :func:`gyrodeblur.calibrate.calibrate`).
+
+    Returns
+    -------
+    mean : ndarray (3,)
+        rad/s (``nan`` when fewer than two blocks are kept).
+    standard_error : ndarray (3,)
+        rad/s, likewise.
+    seconds : float
+        Seconds of log in the blocks kept (``0.0`` when fewer than two).
+    """
+    t = np.asarray(log.t, np.float64)
+    nan = np.full(3, np.nan)
+    if t.size < 2:
+        return nan, nan.copy(), 0.0
+    k = ((t - t[0]) // block).astype(np.int64)
+    counts = np.bincount(k)
+    full = counts >= 0.8 * np.median(counts[counts > 0])
+    if full.sum() < 2:
+        return nan, nan.copy(), 0.0
+    w = np.asarray(log.omega, np.float64)
+    means = np.stack([np.bincount(k, weights=w[:, a], minlength=counts.size)
+                      for a in range(3)], axis=1)[full] / counts[full, None]
+    se = means.std(axis=0, ddof=1) / np.sqrt(len(means))
+    return means.mean(axis=0), se, float(full.sum() * block)
 
 
 # ----------------------------------------------------------------------------- readers
