@@ -296,8 +296,9 @@ def main(argv: list[str] | None = None) -> int:
                          "photos sharing one set of injected errors")
     ap.add_argument("--log-seconds", type=float, default=None,
                     help="give each capture this many seconds of the source gyro trace on "
-                         "each side of its exposure (default: the dataset's 0.3 s); from "
-                         "4 s, calibrate also takes a prior on the bias from the log's mean")
+                         "each side of its exposure (default: the dataset's 0.3 s); with 8 s "
+                         "or more in all, calibrate also takes a prior on the bias from the "
+                         "log's typical rate")
     ap.add_argument("--out", type=Path, default=None,
                     help="JSON report (default: results/calibration.json, or "
                          "results/calibration_sessions.json with --sessions)")

@@ -125,34 +125,41 @@ def test_rate_noise_measures_white_noise_not_hand_motion():
     assert np.isnan(rate_noise(GyroLog(t[:4], shake[:4])))
 
 
-def test_mean_rate_finds_a_bias_under_hand_motion_with_an_honest_error():
-    from gyrodeblur.gyrolog import mean_rate
+def test_median_rate_finds_a_bias_under_hand_motion_with_an_honest_error():
+    from gyrodeblur.gyrolog import median_rate
 
     t = np.arange(0.0, 20.0, 1 / 200)
     bias = np.array([0.03, -0.02, 0.01])
-    errors, ses = [], []
+    errors, ses, naive = [], [], []
     for seed in range(40):
         rng = np.random.default_rng(seed)
         # hand motion: oscillations plus a slow random wander of the rate, correlated
         # over ~0.5 s (its mean over the log is what the error bar must cover)
         wander = np.stack([np.convolve(rng.normal(0, 0.3, t.size), np.ones(100) / 100,
                                        "same") for _ in range(3)], 1)
-        shake = np.stack([0.6 * np.sin(2 * np.pi * 3.1 * t + seed),
-                          0.8 * np.cos(2 * np.pi * 8.9 * t), 0.3 * np.sin(2 * np.pi * 4.3 * t)],
+        shake = np.stack([0.15 * np.sin(2 * np.pi * 3.1 * t + seed),
+                          0.2 * np.cos(2 * np.pi * 8.9 * t), 0.12 * np.sin(2 * np.pi * 4.3 * t)],
                          1) + wander
-        m, se, secs = mean_rate(GyroLog(t, shake + bias))
+        m, se, secs = median_rate(GyroLog(t, shake + bias))
         assert secs == pytest.approx(20.0)
         errors.append(m - bias)
         ses.append(se)
+        naive.append(shake.std(axis=0) / np.sqrt(t.size))
     rms = np.sqrt(np.mean(np.square(errors), axis=0))
     typical = np.sqrt(np.mean(np.square(ses), axis=0))
     assert np.all(rms < 0.01)
     assert np.all((typical > 0.6 * rms) & (typical < 1.7 * rms))   # the error bar is honest
+    assert np.all(np.mean(naive, axis=0) < 0.6 * rms)   # which per-sample statistics are not
+    # a few seconds of deliberate motion (a 3 s pan at 0.5 rad/s) move it little
+    pan = shake + bias
+    pan[(t > 8) & (t < 11), 1] += 0.5
+    m_pan = median_rate(GyroLog(t, pan))[0]
+    assert abs(m_pan[1] - m[1]) < 0.02 < 0.5 * 3 / 20
     # two stretches of log a minute apart (one session's photos): the time between them
     # and the half-filled blocks at their ends are not counted
     apart = np.r_[t[:1100], t[:1100] + 60.0] + 0.3
-    m, se, secs = mean_rate(GyroLog(apart, np.r_[shake[:1100], shake[:1100]]))
+    m, se, secs = median_rate(GyroLog(apart, np.r_[shake[:1100], shake[:1100]]))
     assert secs == pytest.approx(10.0)
     # under two whole blocks: nothing
-    m, se, secs = mean_rate(GyroLog(t[:300], shake[:300]))
+    m, se, secs = median_rate(GyroLog(t[:300], shake[:300]))
     assert secs == 0.0 and np.all(np.isnan(m)) and np.all(np.isnan(se))

@@ -46,12 +46,17 @@ A bias barely shows in one exposure (0.03 rad/s over 20 ms lengthens a PSF by ha
 pixel at f = 1000 px), yet it moves the deblurred image, which is referenced to the first
 row's start: by f b t at a row exposed t later. A long log says more: over seconds, the
 rate of a hand-held camera averages out, and a gyro's bias does not. So when the logs hold
-:data:`_REST_MIN_SECONDS` s or more within :data:`_REST_SPAN` s of the photos, their mean
-rate (:func:`gyrodeblur.gyrolog.mean_rate`, an error bar from 1 s block means, plus
-:data:`_REST_FLOOR` for the camera's own mean rate) becomes a second Gaussian on the bias,
-combined with the given bias's; each candidate mapping turns it into its own camera frame,
-and the searches start from its centre. A mean rate above :data:`_REST_MAX_RATE` on an axis
-is a pan, not a bias, and is not used (said in the notes). On the calibration benchmark
+:data:`_REST_MIN_SECONDS` s or more within :data:`_REST_SPAN` s of the photos, their typical
+rate (:func:`gyrodeblur.gyrolog.median_rate`: the median of 1 s block means, which a few
+seconds of deliberate motion barely move, with an error bar from their spread; to that, in
+quadrature, what the camera's own turning may leave: 0.05 rad over the log's length, at
+least :data:`_REST_FLOOR`) becomes a second Gaussian on the bias, combined with the given
+bias's (a bias given as ``"auto"`` came from the same log; the given one's +-0.05 rad/s
+then adds little). Each candidate mapping turns it into its own camera frame, the searches
+start from its centre, and the "given parameters" that are kept unless the photo prefers
+others carry it. A typical rate more than :data:`_REST_MAX_RATE` from the given bias on an
+axis is a pan, not a bias, and is not used (said in the notes); a slower steady pan is
+indistinguishable from a bias and is taken for one. On the calibration benchmark
 with 10 s of the (deliberately shaken) source trace on each side of each photo
 (``--log-seconds 10``): see BENCHMARKS.md section 4.
 
@@ -140,7 +145,7 @@ from scipy import ndimage
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .capture import Capture
 from .errors import InputError
-from .gyrolog import GyroLog, mean_rate, rate_noise
+from .gyrolog import GyroLog, median_rate, rate_noise
 from .orientation import Orientation, quat_multiply, quat_to_matrix
 from .tonecurve import get_transfer_curve
 
@@ -875,12 +880,14 @@ _KEEP_MARGIN = 10.0
 #: rad/s per sample: gyro noise above this raises the keep margin (in proportion).
 _TYPICAL_GYRO_NOISE = 0.007
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
-#: The bias from the log's mean rate (see :func:`_rest_rate`): seconds of log used on each
-#: side of the photos' exposures, the shortest log that counts (s), the spread of a
-#: hand-held camera's true mean rate over such a log (rad/s, added to the statistical
-#: error in quadrature) and the largest mean rate taken for a bias (rad/s; more is motion).
+#: The bias from the log's typical rate (see :func:`_rest_rate`): seconds of log used on
+#: each side of the photos' exposures; the shortest log that counts (s); what a hand-held
+#: camera's own rate may leave in it, added to the statistical error in quadrature: a net
+#: turn of _REST_TURN rad over the log's seconds, at least _REST_FLOOR rad/s; and the
+#: largest difference from the given bias taken for a bias (rad/s; more is motion).
 _REST_SPAN = 30.0
-_REST_MIN_SECONDS = 4.0
+_REST_MIN_SECONDS = 8.0
+_REST_TURN = 0.05
 _REST_FLOOR = 0.005
 _REST_MAX_RATE = 0.1
 _X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
@@ -1133,26 +1140,28 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     theta0 = _Theta(axes=c0.axes)
     notes: list[str] = []
 
-    # the bias that the log's mean rate implies, when the log is long (hand motion
+    # the bias that the log's typical rate implies, when the log is long (hand motion
     # averages out over seconds; a gyro's bias does not)
     rest = None
+    b_given = np.mean([np.asarray(cap.bias, float) for cap in captures], axis=0)
     if "bias" not in fix:
         m_log, se_log, secs_log = _rest_rate(captures)
         if secs_log >= _REST_MIN_SECONDS:
-            if np.max(np.abs(m_log)) > _REST_MAX_RATE:
-                notes.append(f"the gyro log's mean rate over {secs_log:.0f} s, "
+            if np.max(np.abs(m_log - c0.axes.T @ b_given)) > _REST_MAX_RATE:
+                notes.append(f"the gyro log's typical rate over {secs_log:.0f} s, "
                              f"{_vec(m_log)} rad/s (log axes), is motion, not a bias: "
                              f"the bias is not taken from it")
             else:
-                rest = (m_log, np.hypot(se_log, _REST_FLOOR))
-                notes.append(f"the gyro log's mean rate over {secs_log:.0f} s: {_vec(m_log)} "
-                             f"+- {_vec(rest[1])} rad/s (log axes), a prior on the bias")
+                floor = max(_REST_FLOOR, _REST_TURN / secs_log)
+                rest = (m_log, np.hypot(se_log, floor))
+                notes.append(f"the gyro log's typical rate over {secs_log:.0f} s: "
+                             f"{_vec(m_log)} +- {_vec(rest[1])} rad/s (log axes), a prior "
+                             f"on the bias")
             say_(notes[-1])
-    b_given = np.mean([np.asarray(cap.bias, float) for cap in captures], axis=0)
 
     def rest_bias(M):
         """Prior mean and sd of the bias correction (rad/s, camera frame) for mapping
-        ``M``: the given bias +- _PRIOR_BIAS, combined with the log's mean rate."""
+        ``M``: the given bias +- _PRIOR_BIAS, combined with the log's typical rate."""
         if rest is None:
             return np.zeros(3), np.full(3, _PRIOR_BIAS)
         m_cam = M @ rest[0]
@@ -1255,7 +1264,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
 
     def prior_for(M):
         """(mean, sd, temperature) of the priors for mapping ``M``: the bias's combines
-        the given bias with the log's mean rate, when the log is long enough."""
+        the given bias with the log's typical rate, when the log is long enough."""
         mu, sig = np.zeros(6), prior_sig.copy()
         mu[3:6], sig[3:6] = rest_bias(M)
         return mu, sig, _TEMPERATURE
@@ -1361,10 +1370,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if np.isfinite(gap) and gap < 0:        # a runner-up's refinement was cut short
         gap = 0.0
 
-    # the given parameters stay unless the photo(s) clearly prefer others
+    # the given parameters (with a long log, its bias) stay unless the photo(s) clearly
+    # prefer others
     kept = False
     if idx or len(cand) > 1:
-        x0 = np.clip(np.zeros(6), lo, hi)
+        x0 = np.clip(np.r_[0.0, 0.0, 0.0, rest_bias(c0.axes)[0]], lo, hi)
         f_given = _objective(stage, lambda v: search.theta_of(v, c0.axes, ubar), x0,
                              idx, prior_for(c0.axes), extra_for(c0.axes))
         noise = _gyro_noise(captures)
@@ -1374,8 +1384,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                          f"kept unless the objective improves by {margin:.0f}")
             say_("  " + notes[-1])
         if f_given - fx < margin:
-            msg = (f"kept the given parameters: the best found ({axes_to_letters(M) or 'given'}) "
-                   f"improves the objective by only {f_given - fx:.1f} (< {margin:g})")
+            msg = (f"kept the given parameters{' (the bias from the log)' if rest else ''}: "
+                   f"the best found ({axes_to_letters(M) or 'given'}) improves the objective "
+                   f"by only {f_given - fx:.1f} (< {margin:g})")
             x, M, fx = x0, c0.axes, f_given
             _, _, Fm, sc = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x, idx,
                                       lo, hi, hs, caps, prior_for(M), iters=0,
@@ -1521,8 +1532,8 @@ def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
 
 
 def _rest_rate(captures) -> tuple[np.ndarray, np.ndarray, float]:
-    """Mean rate of the captures' gyro logs (rad/s, log axes), its standard error and the
-    seconds it spans (:func:`gyrodeblur.gyrolog.mean_rate`): the samples within
+    """Typical rate of the captures' gyro logs (rad/s, log axes), its standard error and
+    the seconds it spans (:func:`gyrodeblur.gyrolog.median_rate`): the samples within
     :data:`_REST_SPAN` s of any photo's exposure, pooled over the photos (one session
     shares one gyro clock; a sample logged twice counts once)."""
     ts, ws = [], []
@@ -1537,7 +1548,7 @@ def _rest_rate(captures) -> tuple[np.ndarray, np.ndarray, float]:
     if t.size < 2:
         nan = np.full(3, np.nan)
         return nan, nan.copy(), 0.0
-    return mean_rate(GyroLog(t, np.concatenate(ws)[first]))
+    return median_rate(GyroLog(t, np.concatenate(ws)[first]))
 
 
 def _by_log(captures):

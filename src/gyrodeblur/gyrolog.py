@@ -46,7 +46,7 @@ __all__ = [
     "write_gcsv",
     "check_coverage",
     "rate_noise",
-    "mean_rate",
+    "median_rate",
     "FORMATS",
     "TIME_UNITS",
     "RATE_UNITS",
@@ -163,20 +163,22 @@ def rate_noise(log: GyroLog) -> float:
     return float(np.median(np.median(np.abs(d4), axis=0)) / (0.6745 * np.sqrt(70.0)))
 
 
-def mean_rate(log: GyroLog, *, block: float = 1.0) -> tuple[np.ndarray, np.ndarray, float]:
-    """Mean measured rate of a log (rad/s, the log's axes) and its standard error.
+def median_rate(log: GyroLog, *, block: float = 1.0) -> tuple[np.ndarray, np.ndarray, float]:
+    """Typical measured rate of a log (rad/s, the log's axes) and its standard error.
 
     The log is cut into blocks of ``block`` seconds from its first sample; blocks less
     than 80 % as full as the median block (the end of the log, the edges of a gap) are
-    dropped. The mean is the mean of the block means, its standard error theirs (batch
-    means: hand motion is correlated over a fraction of a second, so the samples
-    themselves would understate it). Over a long log of a hand-held camera the true rate
-    averages out, and what is left is the gyro's bias (see
-    :func:`gyrodeblur.calibrate.calibrate`).
+    dropped. The result is the median of the block means, per axis, and its standard
+    error from their spread (median absolute deviation; ``1.2533 * 1.4826 * MAD /
+    sqrt(n)``, the Gaussian values). Blocks, not samples: hand motion is correlated over a
+    fraction of a second, so the samples themselves would understate the error. The
+    median, not the mean: a few seconds of deliberate motion (raising the camera, a short
+    pan) move it little. Over a long log of a hand-held camera the true rate averages out
+    and what is left is the gyro's bias (see :func:`gyrodeblur.calibrate.calibrate`).
 
     Returns
     -------
-    mean : ndarray (3,)
+    rate : ndarray (3,)
         rad/s (``nan`` when fewer than two blocks are kept).
     standard_error : ndarray (3,)
         rad/s, likewise.
@@ -195,8 +197,10 @@ def mean_rate(log: GyroLog, *, block: float = 1.0) -> tuple[np.ndarray, np.ndarr
     w = np.asarray(log.omega, np.float64)
     means = np.stack([np.bincount(k, weights=w[:, a], minlength=counts.size)
                       for a in range(3)], axis=1)[full] / counts[full, None]
-    se = means.std(axis=0, ddof=1) / np.sqrt(len(means))
-    return means.mean(axis=0), se, float(full.sum() * block)
+    med = np.median(means, axis=0)
+    mad = np.median(np.abs(means - med), axis=0)
+    se = 1.2533 * 1.4826 * mad / np.sqrt(len(means))
+    return med, se, float(full.sum() * block)
 
 
 # ----------------------------------------------------------------------------- readers
