@@ -67,9 +67,13 @@ from gyrodeblur.metrics import default_border, psnr  # noqa: E402
 TARGETS = {"offset_ms": 3.0, "psnr_gap_db": -0.5, "seconds_12mp": 20.0}
 
 
-def draw_errors(capture, rng: np.random.Generator) -> dict:
+def draw_errors(capture, rng: np.random.Generator, *, none: bool = False) -> dict:
     """The errors to inject: a time offset, a bias, readout and focal factors and a wrong
-    axis mapping (one of the 23 proper signed permutations other than ``capture``'s)."""
+    axis mapping (one of the 23 proper signed permutations other than ``capture``'s).
+    ``none``: no error at all (the true capture is calibrated)."""
+    if none:
+        return {"offset_ms": 0.0, "bias": [0.0, 0.0, 0.0], "readout_factor": 1.0,
+                "focal_factor": 1.0, "axes": axes_to_letters(capture.axes)}
     while True:
         off = float(rng.uniform(-0.03, 0.03))
         if abs(off) >= 0.005:
@@ -99,16 +103,18 @@ def inject(capture, rng: np.random.Generator):
     return corrupt(capture, errors), errors
 
 
-def run_case(case, rng, *, say, method=None, n_patches=None) -> dict:
+def run_case(case, rng, *, say, method=None, n_patches=None, no_errors=False) -> dict:
     """Calibrate one case's photo alone, from its capture with errors injected."""
-    return run_session([case], rng, say=say, method=method, n_patches=n_patches)[0]
+    return run_session([case], rng, say=say, method=method, n_patches=n_patches,
+                       no_errors=no_errors)[0]
 
 
-def run_session(cases, rng, *, say, method=None, n_patches=None) -> list[dict]:
+def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False) -> list[dict]:
     """Calibrate the photos of one session together: every case's capture gets the same
-    injected errors (one gyro, one camera), and ``calibrate`` sees all the photos at once.
-    One row per photo (``seconds`` is the whole session's calibration time)."""
-    errors = draw_errors(cases[0].capture, rng)
+    injected errors (one gyro, one camera; none with ``no_errors``), and ``calibrate`` sees
+    all the photos at once. One row per photo (``seconds`` is the whole session's
+    calibration time)."""
+    errors = draw_errors(cases[0].capture, rng, none=no_errors)
     bads = [corrupt(case.capture, errors) for case in cases]
     t0 = time.perf_counter()
     try:
@@ -299,6 +305,9 @@ def main(argv: list[str] | None = None) -> int:
                          "each side of its exposure (default: the dataset's 0.3 s); with 8 s "
                          "or more in all, calibrate also takes a prior on the bias from the "
                          "log's typical rate")
+    ap.add_argument("--no-errors", action="store_true",
+                    help="inject nothing: calibrate the true captures (how far calibration "
+                         "moves a right capture; the PSNR gap is what that costs)")
     ap.add_argument("--out", type=Path, default=None,
                     help="JSON report (default: results/calibration.json, or "
                          "results/calibration_sessions.json with --sessions)")
@@ -307,6 +316,8 @@ def main(argv: list[str] | None = None) -> int:
         stem = "calibration_sessions" if args.sessions else "calibration"
         if args.log_seconds is not None:
             stem += f"_log{args.log_seconds:g}s"
+        if args.no_errors:
+            stem += "_no_errors"
         args.out = _common.RESULTS / (stem + ".json")
     if args.quick:
         args.cases = args.cases or 2
@@ -325,23 +336,25 @@ def main(argv: list[str] | None = None) -> int:
     if args.log_seconds is not None:
         cases = with_long_logs(cases, args.log_seconds)
     rows, session_secs = [], []
+    injected = ("nothing injected" if args.no_errors
+                else f"errors injected with seed {args.seed}")
     if args.sessions:
         sessions = group_sessions(cases, say=say)
         cases = [c for g in sessions for c in g]
         say(f"calibration benchmark: {len(cases)} photo(s) in {len(sessions)} session(s), "
-            f"errors injected with seed {args.seed}")
+            f"{injected}")
         for k, group in enumerate(sessions):
             rng = np.random.default_rng([args.seed, 7, k])
             got = run_session(group, rng, say=say, method=args.method,
-                              n_patches=args.patches)
+                              n_patches=args.patches, no_errors=args.no_errors)
             rows += got
             session_secs.append(got[0]["seconds"])
     else:
-        say(f"calibration benchmark: {len(cases)} case(s), errors injected with seed {args.seed}")
+        say(f"calibration benchmark: {len(cases)} case(s), {injected}")
         for k, case in enumerate(cases):
             rng = np.random.default_rng([args.seed, 6, k])
             rows.append(run_case(case, rng, say=say, method=args.method,
-                                 n_patches=args.patches))
+                                 n_patches=args.patches, no_errors=args.no_errors))
     summary = summarise(rows)
     if args.sessions:
         summary["sessions"] = len(sessions)
@@ -357,7 +370,7 @@ def main(argv: list[str] | None = None) -> int:
         report(dict(s, cases=s["calibrated"]), say)
     result = {"benchmark": "calibration", "quick": args.quick, "seed": args.seed,
               "mode": "sessions" if args.sessions else "single photos",
-              "log_seconds": args.log_seconds,
+              "log_seconds": args.log_seconds, "no_errors": args.no_errors,
               "targets": TARGETS, "summary": summary, "cases": rows,
               "total_seconds": time.perf_counter() - t_start, "machine": _common.machine_info()}
     _common.write_json(args.out, result)

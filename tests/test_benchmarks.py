@@ -9,6 +9,7 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import SHARED_DATA
@@ -119,3 +120,21 @@ def test_calibration_sessions_quick(tmp_path):
         assert row["axes_correct"], row["estimates"]
         assert abs(row["offset_error_ms"]) < 3, row["estimates"]
         assert row["psnr_calibrated"] > row["psnr_corrupted"] + 5
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_calibration_of_true_captures_with_long_logs_quick(tmp_path):
+    """--no-errors calibrates the true captures; --log-seconds 10 gives them 10 s of the
+    source trace either side, which calibrate reads (the typical-rate note) and which
+    bears their bias out: the capture stays (nearly) where it was."""
+    _need_shared()
+    out = tmp_path / "cal.json"
+    assert _load("calibration").main(["--quick", "--no-errors", "--log-seconds", "10",
+                                      "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["no_errors"] and r["log_seconds"] == 10
+    for row in r["cases"]:
+        assert row["injected"]["offset_ms"] == 0 and row["injected"]["bias"] == [0, 0, 0]
+        assert any("typical rate over" in note for note in row["notes"]), row["notes"]
+        assert row["axes_correct"] and abs(row["offset_error_ms"]) < 1, row["estimates"]
+        assert np.max(np.abs(row["bias_error"])) < 0.01, row["bias_error"]

@@ -51,10 +51,15 @@ rate (:func:`gyrodeblur.gyrolog.median_rate`: the median of 1 s block means, whi
 seconds of deliberate motion barely move, with an error bar from their spread; to that, in
 quadrature, what the camera's own turning may leave: 0.05 rad over the log's length, at
 least :data:`_REST_FLOOR`) becomes a second Gaussian on the bias, combined with the given
-bias's (a bias given as ``"auto"`` came from the same log; the given one's +-0.05 rad/s
-then adds little). Each candidate mapping turns it into its own camera frame, the searches
-start from its centre, and the "given parameters" that are kept unless the photo prefers
-others carry it. A typical rate more than :data:`_REST_MAX_RATE` from the given bias on an
+bias's. Each candidate mapping turns it into its own camera frame, and the searches start
+from its centre; the "given parameters" that are kept unless the photo prefers others
+carry it. But a given bias is either right (a calibrated gyro, ``"auto"`` from the same
+log) or off, and moving a right one by the log's own error (the hand's mean rate) would
+only add that error: so the log's rate first decides, by its likelihood ratio, how likely
+the given bias is to be off (even odds before), and the prior is the mixture of "right"
+and "off" (:func:`_bias_from_log`). (On the benchmark's correct captures with 10 s of the
+shaken trace either side, centring on the log always cost 0.6-4 dB on five of the photos
+that calibration otherwise leaves alone.) A typical rate more than :data:`_REST_MAX_RATE` from the given bias on an
 axis is a pan, not a bias, and is not used (said in the notes); a slower steady pan is
 indistinguishable from a bias and is taken for one. On the calibration benchmark
 with 10 s of the (deliberately shaken) source trace on each side of each photo
@@ -110,7 +115,9 @@ Search
 5. When the best mapping is the given one, the given parameters are kept unless the best
    found lowers the tempered objective by :data:`_KEEP_MARGIN`: a correct capture on a
    photo that says little (small blur) is left alone rather than moved along directions
-   the photo cannot tell apart. A noisy gyro makes its PSFs' fine structure noisy, and a
+   the photo cannot tell apart. Another mapping must lower it by
+   :data:`_KEEP_MAPPING_NATS` (a right capture of a few pixels' blur was otherwise switched
+   to a mapping that scored the same). A noisy gyro makes its PSFs' fine structure noisy, and a
    fit then gains objective by following that noise (at 0.02 rad/s per sample, gains of
    3-17 with no better PSFs); so the margin grows with the log's white-noise level
    (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
@@ -874,9 +881,14 @@ _N_PATCHES = 9             # patches per photo, by default, ...
 _MAX_PATCHES = 18          # ... or this many shared out (rounded up to >= 3 per photo)
 #: With the given axis mapping, the given parameters are kept unless the best found lowers
 #: the (tempered) objective by at least this much: a correct capture on a photo with little
-#: blur is left alone rather than moved along directions the photo cannot tell apart. (A
-#: different mapping is taken whenever it is better at all.)
+#: blur is left alone rather than moved along directions the photo cannot tell apart.
 _KEEP_MARGIN = 10.0
+#: ... and a different mapping is taken only when it lowers it by at least this much (odds of
+#: about 7 to 1 for the mapping the user gave). Until session 8 any gain would do: a right
+#: capture of a 3 px blur was switched to a wrong mapping by 0.4 and lost 19 dB. The full
+#: margin of 10 was tried: two benchmark photos of 3-4 px blur then kept the wrong mapping
+#: they were given, which the right one beat by 4.2 and 6.7.
+_KEEP_MAPPING_NATS = 2.0
 #: rad/s per sample: gyro noise above this raises the keep margin (in proportion).
 _TYPICAL_GYRO_NOISE = 0.007
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
@@ -1154,20 +1166,19 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             else:
                 floor = max(_REST_FLOOR, _REST_TURN / secs_log)
                 rest = (m_log, np.hypot(se_log, floor))
+                off = _bias_from_log(c0.axes @ m_log - b_given, (c0.axes ** 2) @ rest[1] ** 2)[2]
                 notes.append(f"the gyro log's typical rate over {secs_log:.0f} s: "
                              f"{_vec(m_log)} +- {_vec(rest[1])} rad/s (log axes), a prior "
-                             f"on the bias")
+                             f"on the bias (the given bias is off with probability {off:.2f})")
             say_(notes[-1])
 
     def rest_bias(M):
         """Prior mean and sd of the bias correction (rad/s, camera frame) for mapping
-        ``M``: the given bias +- _PRIOR_BIAS, combined with the log's typical rate."""
+        ``M``: the given bias, either right or off by up to ~_PRIOR_BIAS (even odds),
+        weighed against the log's typical rate (:func:`_bias_from_log`)."""
         if rest is None:
             return np.zeros(3), np.full(3, _PRIOR_BIAS)
-        m_cam = M @ rest[0]
-        p_log = 1.0 / ((M ** 2) @ rest[1] ** 2)
-        p_given = 1.0 / _PRIOR_BIAS ** 2
-        return p_log * (m_cam - b_given) / (p_given + p_log), 1.0 / np.sqrt(p_given + p_log)
+        return _bias_from_log(M @ rest[0] - b_given, (M ** 2) @ rest[1] ** 2)[:2]
 
     # candidate mappings
     given_letters = axes_to_letters(c0.axes)
@@ -1378,13 +1389,16 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         f_given = _objective(stage, lambda v: search.theta_of(v, c0.axes, ubar), x0,
                              idx, prior_for(c0.axes), extra_for(c0.axes))
         noise = _gyro_noise(captures)
-        margin = _keep_margin(noise) if np.allclose(M, c0.axes) else 0.0
+        margin = _keep_margin(noise)
+        if not np.allclose(M, c0.axes):
+            margin *= _KEEP_MAPPING_NATS / _KEEP_MARGIN
         if np.isfinite(noise) and margin > _KEEP_MARGIN:
             notes.append(f"gyro noise {noise:.4f} rad/s per sample: the given parameters are "
                          f"kept unless the objective improves by {margin:.0f}")
             say_("  " + notes[-1])
         if f_given - fx < margin:
-            msg = (f"kept the given parameters{' (the bias from the log)' if rest else ''}: "
+            from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
+            msg = (f"kept the given parameters{from_log}: "
                    f"the best found ({axes_to_letters(M) or 'given'}) improves the objective "
                    f"by only {f_given - fx:.1f} (< {margin:g})")
             x, M, fx = x0, c0.axes, f_given
@@ -1529,6 +1543,27 @@ def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
         b = np.mean(np.asarray(given_biases, float).reshape(-1, 3), axis=0)
         xt[3:6] = _TWIN @ xt[3:6] + (_TWIN - np.eye(3)) @ b
     return xt
+
+
+def _bias_from_log(d: np.ndarray, var_log: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The prior on the bias correction from the log: mean, sd (rad/s, camera frame) and
+    the probability that the given bias is off.
+
+    ``d``: the log's typical rate minus the given bias, ``var_log`` its variance, per
+    axis. A given bias is taken to be either right or off by a Gaussian amount of sd
+    :data:`_PRIOR_BIAS`, at even odds; ``d`` decides between the two (its likelihood
+    ratio, all axes together), and the prior is the moment-matched mixture of "right" (no
+    correction) and "off" (the given bias's Gaussian combined with the log's). A log that
+    bears the given bias out leaves it where it is, with the log's precision: moving a
+    right bias by the log's own error (the hand's mean rate) would only add that error.
+    """
+    var_off = var_log + _PRIOR_BIAS ** 2
+    llr = 0.5 * float(np.sum(np.log(var_log / var_off) + d ** 2 / var_log - d ** 2 / var_off))
+    p_off = float(1.0 / (1.0 + np.exp(-np.clip(llr, -50.0, 50.0))))
+    p_log, p_given = 1.0 / var_log, 1.0 / _PRIOR_BIAS ** 2
+    mu_off = p_log * d / (p_given + p_log)
+    var = 1.0 / (p_given + p_log) + p_off * (1.0 - p_off) * mu_off ** 2
+    return p_off * mu_off, np.sqrt(var), p_off
 
 
 def _rest_rate(captures) -> tuple[np.ndarray, np.ndarray, float]:
