@@ -59,11 +59,12 @@ only add that error: so the log's rate first decides, by its likelihood ratio, h
 the given bias is to be off (even odds before), and the prior is the mixture of "right"
 and "off" (:func:`_bias_from_log`). (On the benchmark's correct captures with 10 s of the
 shaken trace either side, centring on the log always cost 0.6-4 dB on five of the photos
-that calibration otherwise leaves alone.) A typical rate more than :data:`_REST_MAX_RATE` from the given bias on an
-axis is a pan, not a bias, and is not used (said in the notes); a slower steady pan is
-indistinguishable from a bias and is taken for one. On the calibration benchmark
-with 10 s of the (deliberately shaken) source trace on each side of each photo
-(``--log-seconds 10``): see BENCHMARKS.md section 4.
+that calibration otherwise leaves alone.) A typical rate more than
+:data:`_REST_MAX_RATE` from the given bias on an axis is a pan, not a bias, and is not
+used (said in the notes); a slower steady pan is indistinguishable from a bias and is
+taken for one. Figures with 10 s of the (deliberately shaken) source trace on each side
+of each photo (``--log-seconds 10``, with and without ``--no-errors``): BENCHMARKS.md
+section 4.
 
 Search
 ------
@@ -116,9 +117,9 @@ Search
    found lowers the tempered objective by :data:`_KEEP_MARGIN`: a correct capture on a
    photo that says little (small blur) is left alone rather than moved along directions
    the photo cannot tell apart. Another mapping must lower it by
-   :data:`_KEEP_MAPPING_NATS` (a right capture of a few pixels' blur was otherwise switched
-   to a mapping that scored the same). A noisy gyro makes its PSFs' fine structure noisy, and a
-   fit then gains objective by following that noise (at 0.02 rad/s per sample, gains of
+   :data:`_KEEP_MAPPING_NATS` (a right capture of a few pixels' blur was otherwise
+   switched to a mapping that scored the same). A noisy gyro makes its PSFs' fine
+   structure noisy, and a fit then gains objective by following that noise (at 0.02 rad/s per sample, gains of
    3-17 with no better PSFs); so the margin grows with the log's white-noise level
    (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
    0.007 rad/s: ``margin = 10 max(1, noise / 0.007)`` (in proportion, not with the
@@ -1362,8 +1363,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         if fa < fx:
             x, fx, Fm, sc = xa, fa, Fa, sca
     # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from the
-    # given (prior) values of the other parameters: the coarse start's line fits can miss a nearby
-    # basin that the fine cost prefers; the best _SCAN_REFINED are refined as far.
+    # given (prior) values of the other parameters: the coarse start's line fits can miss a
+    # nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined as far.
     if "offset" not in fix:
         scan, tried = [], {round(float(x[0]), 6)}
         for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
