@@ -119,8 +119,8 @@ Search
    the photo cannot tell apart. Another mapping must lower it by
    :data:`_KEEP_MAPPING_NATS` (a right capture of a few pixels' blur was otherwise
    switched to a mapping that scored the same). A noisy gyro makes its PSFs' fine
-   structure noisy, and a fit then gains objective by following that noise (at 0.02 rad/s per sample, gains of
-   3-17 with no better PSFs); so the margin grows with the log's white-noise level
+   structure noisy, and a fit then gains objective by following that noise (at 0.02 rad/s
+   per sample, gains of 3-17 with no better PSFs); so the margin grows with the log's white-noise level
    (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
    0.007 rad/s: ``margin = 10 max(1, noise / 0.007)`` (in proportion, not with the
    variance: that kept real 5 ms offset errors under 0.02 rad/s noise).
