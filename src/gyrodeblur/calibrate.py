@@ -120,8 +120,8 @@ Search
    :data:`_KEEP_MAPPING_NATS` (a right capture of a few pixels' blur was otherwise
    switched to a mapping that scored the same). A noisy gyro makes its PSFs' fine
    structure noisy, and a fit then gains objective by following that noise (at 0.02 rad/s
-   per sample, gains of 3-17 with no better PSFs); so the margin grows with the log's white-noise level
-   (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
+   per sample, gains of 3-17 with no better PSFs); so the margin grows with the log's
+   white-noise level (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
    0.007 rad/s: ``margin = 10 max(1, noise / 0.007)`` (in proportion, not with the
    variance: that kept real 5 ms offset errors under 0.02 rad/s noise).
 
@@ -1281,10 +1281,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         mu[3:6], sig[3:6] = rest_bias(M)
         return mu, sig, _TEMPERATURE
 
-    def start_vec(tau0, kap, fo=1.0, M=None):
+    def start_vec(tau0, kap, M, fo=1.0):
         x = np.zeros(6)
-        if M is not None:
-            x[3:6] = rest_bias(M)[0]
+        x[3:6] = rest_bias(M)[0]
         x[1] = kap
         x[0] = 0.0 if "offset" in fix else tau0 + kap * (0.5 - ubar)
         x[2] = np.log(fo)
@@ -1300,7 +1299,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
             if tm.size == 0:
                 tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
-        stage.set_envelope(search.theta_of(start_vec(tau0, kap, M=M), M, ubar))
+        stage.set_envelope(search.theta_of(start_vec(tau0, kap, M), M, ubar))
         starts = []
         for fo in fgrid:
             C = stage.costs(theta0.copy(axes=M, focal=fo, bias=rest_bias(M)[0]), taus=tm,
@@ -1320,7 +1319,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                 chosen.append(r)
         fx, alts = np.inf, []
         for best in chosen:
-            x1 = start_vec(best[1], best[2], best[3], M)
+            x1 = start_vec(best[1], best[2], M, best[3])
             x1, f1, _, _ = _gn_refine(stage, lambda v: search.theta_of(v, M, ubar), x1, idx, lo,
                                       hi, hs, caps, prior_for(M), iters=4, extra=extra_for(M))
             alts.append(x1)
@@ -1601,7 +1600,7 @@ def _vec(v) -> str:
 
 def _gyro_noise(captures) -> float:
     """The largest white-noise level (rad/s per sample) of the captures' gyro logs."""
-    levels = [rate_noise(log) for log in {id(c.log): c.log for c in captures}.values()]
+    levels = [rate_noise(log) for log, _ in _by_log(captures)]
     levels = [v for v in levels if np.isfinite(v)]
     return max(levels) if levels else float("nan")
 
