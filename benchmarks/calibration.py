@@ -57,7 +57,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur.axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes  # noqa: E402
-from gyrodeblur.calibrate import calibrate, format_estimates  # noqa: E402
+from gyrodeblur.calibrate import calibrate  # noqa: E402
+from gyrodeblur.calibrate_cli import format_estimates  # noqa: E402
 from gyrodeblur.dataset import default_shared_data  # noqa: E402
 from gyrodeblur.deblur import deblur  # noqa: E402
 from gyrodeblur.errors import InputError  # noqa: E402

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from gyrodeblur.axes import axes_to_letters, parse_axes
-from gyrodeblur.calibrate import PARAMETERS, calibrate, format_estimates
+from gyrodeblur.calibrate import PARAMETERS, calibrate
+from gyrodeblur.calibrate_cli import format_estimates
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture, load_capture
 from gyrodeblur.cli import main
@@ -376,7 +377,9 @@ def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
     """Negating the camera's x and y rates reflects the PSFs only if the bias is negated with
     them: the twin's parameters give exactly the winner's camera rates, x and y negated; with
     photos of unequal given biases, as nearly as one shared correction can; a fixed bias stays."""
-    from gyrodeblur.calibrate import _TWIN, _Theta, _twin_parameters
+    from gyrodeblur.calibrate import _twin_parameters
+    from gyrodeblur.calibration_search import TWIN
+    from gyrodeblur.spectral_criterion import Corrections
 
     base = _true_capture(0.5)
     caps = [base.replace(bias=np.array([0.03, -0.01, 0.02])),
@@ -385,12 +388,12 @@ def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
     M = parse_axes("Xyz")
 
     def rates(v, axes, cap):
-        th = _Theta(axes=axes, offset=v[0], readout=v[1], focal=float(np.exp(v[2])),
+        th = Corrections(axes=axes, offset=v[0], readout=v[1], focal=float(np.exp(v[2])),
                     bias=np.asarray(v[3:6], float))
         return th.apply(cap).camera_rates()[1]
 
     def miss(v, cap):               # twin's rates against the winner's reflected
-        return rates(v, _TWIN @ M, cap) - rates(x, M, cap) @ _TWIN
+        return rates(v, TWIN @ M, cap) - rates(x, M, cap) @ TWIN
 
     xt = _twin_parameters(x, [caps[0].bias])
     np.testing.assert_allclose(xt[:3], x[:3])
@@ -526,15 +529,15 @@ def test_the_log_decides_how_likely_the_given_bias_is_off():
     no correction); one 0.04 rad/s away on an axis, 8 of its standard errors, moves it
     nearly all the way (the given bias's +-0.05 combined with the log's +-0.005); in
     between, the correction grows with the distance."""
-    from gyrodeblur.calibrate import _bias_from_log
+    from gyrodeblur.bias_prior import bias_from_log
 
     var = np.full(3, 0.005 ** 2)
-    mu, sd, p_off = _bias_from_log(np.zeros(3), var)
+    mu, sd, p_off = bias_from_log(np.zeros(3), var)
     assert p_off < 0.01 and np.all(mu == 0.0) and np.all(sd < 0.006)
-    mu, sd, p_off = _bias_from_log(np.array([0.04, 0.0, 0.0]), var)
+    mu, sd, p_off = bias_from_log(np.array([0.04, 0.0, 0.0]), var)
     assert p_off > 0.999
     assert mu[0] == pytest.approx(0.04 * 0.05 ** 2 / (0.05 ** 2 + 0.005 ** 2), rel=1e-3)
     assert mu[1] == mu[2] == 0.0
-    steps = [_bias_from_log(np.array([x, 0.0, 0.0]), var) for x in (0.005, 0.01, 0.015, 0.02)]
+    steps = [bias_from_log(np.array([x, 0.0, 0.0]), var) for x in (0.005, 0.01, 0.015, 0.02)]
     assert all(a[2] < b[2] and a[0][0] < b[0][0] for a, b in zip(steps, steps[1:]))
     assert np.all(steps[1][1] >= sd)          # the sd covers the doubt between the two

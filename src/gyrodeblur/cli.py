@@ -246,11 +246,12 @@ def cmd_deblur(args, say) -> None:
             raise InputError("--downscale", "applies with --refine only")
         fix = None
         if args.refine:
-            from .calibrate import fixed_parameters
+            from .calibrate_cli import fixed_parameters
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         if args.refine:
-            from .calibrate import calibrate, format_estimates
+            from .calibrate import calibrate
+            from .calibrate_cli import format_estimates
             res = calibrate([photo.pixels], cap, fix=fix, say=say, downscale=args.downscale)
             for line in format_estimates(res.estimates):
                 say(line)
@@ -277,7 +278,7 @@ def cmd_demo(args, say) -> None:
 
 
 def cmd_calibrate(args, say) -> None:
-    from .calibrate import calibrate_command
+    from .calibrate_cli import calibrate_command
     calibrate_command(args, say, _load_capture)
 
 

@@ -174,7 +174,7 @@ def median_rate(log: GyroLog, *, block: float = 1.0) -> tuple[np.ndarray, np.nda
     fraction of a second, so the samples themselves would understate the error. The
     median, not the mean: a few seconds of deliberate motion (raising the camera, a short
     pan) move it little. Over a long log of a hand-held camera the true rate averages out
-    and what is left is the gyro's bias (see :func:`gyrodeblur.calibrate.calibrate`).
+    and what is left is the gyro's bias (see :mod:`gyrodeblur.bias_prior`).
 
     Returns
     -------

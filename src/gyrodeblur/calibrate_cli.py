@@ -1,0 +1,121 @@
+"""Command-line glue of calibration: which parameters the options fix, the printed
+report, and ``gyrodeblur calibrate``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+import numpy as np
+
+from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix
+from .errors import InputError
+
+__all__ = ["format_estimates", "fixed_parameters", "calibrate_command"]
+
+
+def format_estimates(est: dict) -> list[str]:
+    """Human-readable lines: each parameter before -> after (+- uncertainty, or fixed)."""
+    lines = []
+    b, a, u = est["offset"]
+    lines.append(f"  time offset  {b * 1e3:+8.2f} ms -> {a * 1e3:+8.2f} ms  ({_pm(u, 1e3, 'ms')})")
+    b, a, u = est["readout"]
+    lines.append(f"  readout      {b * 1e3:8.2f} ms -> {a * 1e3:8.2f} ms  ({_pm(u, 1e3, 'ms')})")
+    b, a, u = est["focal"]
+    lines.append(f"  focal scale  {b:8.4f}    -> {a:8.4f}     ({_pm(u, 1, '')})")
+    b, a, u = est["bias"]
+    vec = lambda v: "[" + ", ".join(f"{x:+.4f}" for x in v) + "]"
+    unc = "fixed" if u is None else "+- [" + ", ".join(_fmt(v, 1) for v in u) + "]"
+    lines.append(f"  gyro bias    {vec(b)} -> {vec(a)} rad/s  ({unc})")
+    b, a, gap = est["axes"]
+    if gap is None:
+        conf = "fixed"
+    elif not np.isfinite(gap):
+        conf = "only candidate"
+    else:
+        conf = f"next best mapping: objective {gap:+.1f} higher"
+        if gap < AXES_CONFIDENT_NATS:
+            conf += ": uncertain"
+    lines.append(f"  axes         {b} -> {a}  ({conf})")
+    return lines
+
+
+def _pm(u, mult, unit) -> str:
+    if u is None:
+        return "fixed"
+    return f"+- {_fmt(u, mult)}{(' ' + unit) if unit else ''}"
+
+
+def _fmt(u, mult) -> str:
+    if u is None or not np.isfinite(u):
+        return "?"
+    return f"{u * mult:.2g}"
+
+
+#: Capture options whose value, given on the command line, fixes a parameter.
+_FIXING_OPTIONS = (("time_offset", "offset"), ("bias", "bias"), ("readout_time", "readout"),
+                   ("fx", "focal"), ("fy", "focal"), ("orientation", "axes"))
+
+
+def fixed_parameters(args) -> set[str]:
+    """Parameters the user fixes on the command line: those named by ``--fix``, and those
+    whose value is given explicitly (``--time-offset``, ``--bias``, ``--readout-time``,
+    ``--fx``/``--fy``, ``--orientation``): a value stated on the command line is taken as
+    known, not as a starting guess."""
+    fix = checked_fix(f.strip() for f in (getattr(args, "fix", None) or "").split(","))
+    for option, name in _FIXING_OPTIONS:
+        if getattr(args, option, None) is not None:
+            fix.add(name)
+    return fix
+
+
+def calibrate_command(args, say, load_capture) -> None:
+    """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json`.
+
+    Several photos of one session are calibrated together; each needs its own exposure
+    start, so ``--capture`` may list one description per photo (comma-separated, or the
+    option repeated). The
+    corrected description written is the first photo's (the corrections are shared)."""
+    from .imageio import check_destination, read_photo
+
+    fix = fixed_parameters(args)
+    photos = [read_photo(p) for p in args.photos]
+    check_destination(args.output, None, args.overwrite, image=False)
+    given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
+    paths = [c for entry in given for c in entry.split(",") if c] or given[:1]
+    if len(paths) not in (1, len(photos)):
+        raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
+                                      "photos: give one, or one per photo (comma-separated)")
+    if len(paths) == 1 and len(photos) > 1:
+        say(f"note: all {len(photos)} photos take their exposure start from {paths[0]}; give "
+            "one capture per photo (--capture a.json,b.json,... or --capture repeated) if "
+            "they were taken at different times")
+    caps = []
+    for k, ph in enumerate(photos):
+        a = argparse.Namespace(**vars(args))
+        a.capture = paths[k] if len(paths) > 1 else paths[0]
+        caps.append(load_capture(a, ph, say))
+    res = calibrate([p.pixels for p in photos], caps, fix=fix, say=say,
+                    downscale=args.downscale)
+    say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
+        f"one-sigma uncertainty):")
+    for line in format_estimates(res.estimates):
+        say(line)
+    src = caps[0].source
+    gyro_rel = caps[0].gyro_spec.get("path")
+    if gyro_rel is not None and os.path.isabs(gyro_rel):
+        pass                                     # an absolute path stays as it is
+    elif src and src != "capture" and gyro_rel is not None:
+        gyro_abs = os.path.join(os.path.dirname(os.path.abspath(src)), gyro_rel)
+        gyro_rel = os.path.relpath(gyro_abs, os.path.dirname(os.path.abspath(args.output)))
+    elif gyro_rel is not None and not os.path.isabs(gyro_rel):
+        gyro_rel = os.path.relpath(os.path.abspath(gyro_rel),
+                                   os.path.dirname(os.path.abspath(args.output)))
+    tmp = args.output + ".part"
+    try:
+        res.capture.save(tmp, gyro_path=gyro_rel)
+        os.replace(tmp, args.output)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    say(f"wrote {args.output}")

@@ -1,0 +1,117 @@
+"""The photos that calibration works on, and where their textured patches are.
+
+A photo is read through its transfer curve into linear light; patches are chosen where the
+texture is rich in every direction (the smaller eigenvalue of the structure tensor) and
+highlights are not clipped, spread over the frame so that the rolling shutter's rows and a
+roll's field of PSFs are all seen.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from .capture import Capture
+from .errors import InputError
+from .tonecurve import get_transfer_curve
+
+__all__ = ["CalibrationPhoto", "select_patch_centres"]
+
+
+class CalibrationPhoto:
+    """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
+
+    def __init__(self, image, capture: Capture, transfer: str, index: int):
+        img = np.asarray(image)
+        if img.ndim not in (2, 3):
+            raise InputError(None, f"photo {index + 1}: expected an (H, W) or (H, W, C) array")
+        if img.ndim == 3 and img.shape[2] == 4:
+            img = img[..., :3]
+        self.image = img
+        self.H, self.W = img.shape[:2]
+        self.cap = capture.scaled_to(self.W, self.H)
+        self.curve = get_transfer_curve(transfer)
+        self.index = index
+
+    def gray(self, y0, y1, x0, x1) -> np.ndarray:
+        """Linear-light luminance of a crop (float64)."""
+        c = np.asarray(self.image[y0:y1, x0:x1], np.float32)
+        lin = self.curve.decode(c)
+        return (lin.mean(axis=2) if lin.ndim == 3 else lin).astype(np.float64)
+
+    def thumbnail(self, max_side: int = 512):
+        """Block-averaged encoded luminance and saturated fraction, and the block size."""
+        k = max(1, int(np.ceil(max(self.H, self.W) / max_side)))
+        h, w = self.H // k, self.W // k
+        img = np.asarray(self.image[:h * k, :w * k], np.float32)
+        if img.ndim == 3:
+            sat = img.max(axis=2) > 0.98
+            img = img.mean(axis=2)
+        else:
+            sat = img > 0.98
+        th = img.reshape(h, k, w, k).mean(axis=(1, 3))
+        st = sat.reshape(h, k, w, k).mean(axis=(1, 3))
+        return th, st, k
+
+
+def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> list[tuple[float, float]]:
+    """Centres (full-res x, y) of up to ``n`` textured, unsaturated windows of side
+    ``footprint`` spread over a grid of cells (best isotropic texture per cell: the
+    smaller eigenvalue of the structure tensor), then the best remaining anywhere."""
+    th, sat, k = photo.thumbnail()
+    h, w = th.shape
+    win = max(3, int(round(footprint / k)))
+    win = min(win, h, w)
+    gy, gx = np.gradient(th.astype(np.float64))
+    jxx = ndimage.uniform_filter(gx * gx, win, mode="nearest")
+    jyy = ndimage.uniform_filter(gy * gy, win, mode="nearest")
+    jxy = ndimage.uniform_filter(gx * gy, win, mode="nearest")
+    lam_min = 0.5 * (jxx + jyy - np.sqrt((jxx - jyy) ** 2 + 4 * jxy ** 2))
+    satf = ndimage.uniform_filter(sat, win, mode="nearest")
+    # clipped highlights break the linear model: avoid them, but a page of text on white
+    # paper has little else, so they are penalised rather than excluded up to 30 %
+    score = np.where(satf > 0.3, -1.0, lam_min * (1 - 3 * satf))
+    if not (score > 0).any():                    # nothing else: take what there is
+        score = lam_min * (1 - 0.9 * satf)
+    half = win / 2
+    ylo, yhi = int(np.ceil(half)) - 1, int(np.floor(h - half))
+    xlo, xhi = int(np.ceil(half)) - 1, int(np.floor(w - half))
+    if yhi < ylo:
+        ylo = yhi = h // 2
+    if xhi < xlo:
+        xlo = xhi = w // 2
+    valid = np.full(score.shape, -np.inf)
+    valid[ylo:yhi + 1, xlo:xhi + 1] = score[ylo:yhi + 1, xlo:xhi + 1]
+    aspect = photo.W / photo.H
+    cols = max(1, int(round(np.sqrt(n * aspect))))
+    rows = max(1, int(np.ceil(n / cols)))
+    yb = np.linspace(ylo, yhi + 1, rows + 1).astype(int)
+    xb = np.linspace(xlo, xhi + 1, cols + 1).astype(int)
+    Y, X = np.mgrid[0:h, 0:w]
+    taken: list = []
+    radius = 0.7 * win
+    found = []
+
+    def pick(y0, y1, x0, x1) -> bool:
+        sub = valid[y0:y1, x0:x1].copy()
+        for (ty, tx) in taken:
+            sub[np.hypot(Y[y0:y1, x0:x1] - ty, X[y0:y1, x0:x1] - tx) < radius] = -np.inf
+        if not np.isfinite(sub).any():
+            return False
+        j = int(np.argmax(sub))
+        v = float(sub.flat[j])
+        if not v > 0:
+            return False
+        yy, xx = np.unravel_index(j, sub.shape)
+        taken.append((y0 + yy, x0 + xx))
+        found.append((v, (x0 + xx + 0.5) * k - 0.5, (y0 + yy + 0.5) * k - 0.5))
+        return True
+
+    for r in range(rows):                        # the best window of each cell ...
+        for c in range(cols):
+            if len(found) < n:
+                pick(yb[r], max(yb[r + 1], yb[r] + 1), xb[c], max(xb[c + 1], xb[c] + 1))
+    while len(found) < n and pick(0, h, 0, w):   # ... then the best anywhere else
+        pass
+    found.sort(key=lambda f: -f[0])
+    return [(x, y) for _, x, y in found[:n]]

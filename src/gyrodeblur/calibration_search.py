@@ -1,0 +1,208 @@
+"""The machinery of the calibration search: parameter vectors, bounds, line fits over
+time shifts, and Levenberg-Marquardt on the tempered criterion with Gaussian priors.
+
+The parameter vector ``x`` is ``(tmid, readout, log focal, bias x, y, z)``: the time
+shift at the pivot row ``ubar`` (s), the readout-time correction (s), the log of the focal
+scale, and the bias correction (rad/s, camera frame). See :mod:`gyrodeblur.calibrate`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .calibration_patches import CalibrationPhoto
+from .errors import InputError
+from .spectral_criterion import Corrections, PatchSpectra
+
+__all__ = ["SearchSpace", "psf_extent_and_path", "with_twin", "line_fit", "objective",
+           "lm_refine", "TWIN", "X_NAMES"]
+
+#: The mirror twin of a mapping ``M`` is ``TWIN @ M``: the camera's x and y rates negated
+#: (a proper rotation), which nearly reflects every PSF.
+TWIN = np.diag([-1.0, -1.0, 1.0])
+#: Names of the parameter vector's coordinates.
+X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
+
+
+class SearchSpace:
+    """Everything :func:`calibrate` needs between its stages."""
+
+    def __init__(self, photos: list[CalibrationPhoto], fix: set, offset_range: float, say):
+        self.photos = photos
+        self.fix = fix
+        self.say = say or (lambda msg: None)
+        self.offset_range = float(offset_range)
+        c0 = photos[0].cap
+        self.r0 = c0.readout_time
+        self.tau_lo, self.tau_hi = self._coverage()
+
+    # -- admissible time shifts -------------------------------------------------------
+    def _coverage(self) -> tuple[float, float]:
+        """Time shifts (added to every capture's offset) for which the log covers every
+        photo's exposure with a 30 % longer readout (a bit of slack for the search)."""
+        lo, hi = -np.inf, np.inf
+        for ph in self.photos:
+            c = ph.cap
+            span = c.readout_time * 1.6 + 0.005 + c.exposure_time
+            t0 = c.log.t[0] + c.time_offset
+            t1 = c.log.t[-1] + c.time_offset
+            hi = min(hi, c.exposure_start - t0)               # window start after log start
+            lo = max(lo, c.exposure_start + span - t1)        # window end before log end
+        lo = max(lo, -self.offset_range)
+        hi = min(hi, self.offset_range)
+        if "offset" in self.fix:
+            lo, hi = 0.0, 0.0
+        if lo > hi:
+            raise InputError(self.photos[0].cap.source,
+                             "the gyro log does not cover the exposure window at any time "
+                             "offset in the search range")
+        return lo, hi
+
+    # -- vector <-> theta -------------------------------------------------------------
+    def free(self) -> list[str]:
+        out = []
+        if "offset" not in self.fix:
+            out.append("tmid")
+        if "readout" not in self.fix:
+            out.append("readout")
+        if "focal" not in self.fix:
+            out.append("focal")
+        if "bias" not in self.fix:
+            out += ["bias0", "bias1", "bias2"]
+        return out
+
+    def theta_of(self, x: np.ndarray, axes: np.ndarray, ubar: float) -> Corrections:
+        return Corrections(axes=axes, offset=float(x[0] + ubar * x[1]), readout=float(x[1]),
+                      focal=float(np.exp(x[2])), bias=np.array(x[3:6], float))
+
+    def bounds(self, ubar: float):
+        r0 = self.r0
+        rlo, rhi = (-r0, 0.6 * r0 + 0.003) if r0 > 0 else (0.0, 0.05)
+        lo = np.array([self.tau_lo - 0.01, max(rlo, -0.6 * r0), np.log(0.7), -0.2, -0.2, -0.2])
+        hi = np.array([self.tau_hi + 0.01, rhi, np.log(1.4), 0.2, 0.2, 0.2])
+        return lo, hi
+
+
+def psf_extent_and_path(photos, theta: Corrections, taus) -> tuple[float, float]:
+    """Typical largest PSF extent and path length (full-res px) over a 3x3 grid of
+    points of each photo, the median over ``taus``."""
+    geo = PatchSpectra(photos, [], 1.0, 16, n_samples=96)
+    ext, path = [], []
+    for tau in taus:
+        items = [(i, fx * (ph.W - 1), fy * (ph.H - 1), fy * (ph.H - 1), tau)
+                 for i, ph in enumerate(photos) for fx in (0.1, 0.5, 0.9) for fy in (0.1, 0.5, 0.9)]
+        d = geo.displacements(theta, items)
+        ext.append(float(np.max(np.ptp(d, axis=1))))
+        path.append(float(np.max(np.sum(np.hypot(*np.diff(d, axis=1).transpose(2, 0, 1)), 1))))
+    return float(np.median(ext)), float(np.median(path))
+
+
+def with_twin(top: list, everything: list) -> list:
+    """``top`` (rows whose last item is a mapping) plus the best row holding the mirror
+    twin of its first mapping, when that is not already in."""
+    if not top:
+        return top
+    tw = TWIN @ top[0][-1]
+    if any(np.allclose(tw, r[-1]) for r in top):
+        return list(top)
+    return list(top) + [r for r in everything if np.allclose(r[-1], tw)][:1]
+
+
+def line_fit(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas) -> tuple[float, float, float]:
+    """Best ``sum_i C_i(tau0 - kappa u_i)`` over ``tau0`` in ``taus`` and ``kappa`` in
+    ``kappas`` (each patch's cost curve ``C[:, i]`` interpolated linearly, held constant
+    beyond the grid)."""
+    if len(taus) == 1:
+        return float(C.sum()), float(taus[0]), 0.0
+    best = (np.inf, float(taus[0]), 0.0)
+    for kap in kappas:
+        tot = np.zeros(len(taus))
+        for j in range(C.shape[1]):
+            tot += np.interp(taus - kap * u[j], taus, C[:, j])
+        i = int(np.argmin(tot))
+        if tot[i] < best[0]:
+            best = (float(tot[i]), float(taus[i]), float(kap))
+    return best
+
+
+def objective(stage: PatchSpectra, theta_of, x, idx, prior, extra=None) -> float:
+    """The objective of :func:`lm_refine` at ``x`` (envelopes fitted there)."""
+    mu, sig, T = prior
+    prec = np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
+    stage.set_envelope(theta_of(x))
+    f = stage.cost(theta_of(x)) / T + 0.5 * float(np.sum(prec[idx] * (x[idx] - mu[idx]) ** 2))
+    if extra is not None:
+        f += 0.5 * float(np.sum(extra(x) ** 2))
+    return f
+
+
+def lm_refine(stage: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *, iters: int = 8,
+               refit_every: int = 2, tol: float = 0.01, extra=None):
+    """Levenberg-Marquardt on ``cost / T + prior`` with the patch envelopes held (refitted
+    every ``refit_every`` iterations); steps capped per coordinate (``caps``).
+
+    ``prior = (mu, sigma, T)``: independent Gaussian priors on the coordinates (``sigma``
+    inf = flat) and the temperature ``T`` dividing the Whittle cost.
+
+    Returns ``x``, the objective, its Gauss-Newton Hessian and the per-patch scores (both
+    for the free coordinates ``idx``, tempered)."""
+    mu, sig, T = prior
+    idx = list(idx)
+    x = np.array(x, float)
+    prec = np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
+
+    def pen(v):
+        p = 0.5 * float(np.sum(prec[idx] * (v[idx] - mu[idx]) ** 2))
+        if extra is not None:
+            p += 0.5 * float(np.sum(extra(v) ** 2))
+        return p
+
+    def terms(v):
+        c, g, F, sc = stage.gauss_newton(theta_of, v, idx, hs)
+        g = g / T + prec[idx] * (v[idx] - mu[idx])
+        F = F / T + np.diag(prec[idx])
+        if extra is not None:
+            r0 = extra(v)
+            if r0.size:
+                J = np.empty((r0.size, len(idx)))
+                for k, j in enumerate(idx):
+                    y = v.copy()
+                    y[j] += hs[j]
+                    J[:, k] = (extra(y) - r0) / hs[j]
+                g = g + J.T @ r0
+                F = F + J.T @ J
+        return c / T + pen(v), g, F, sc / T
+
+    stage.set_envelope(theta_of(x))
+    lam = 1e-3
+    for it in range(iters):
+        if it and it % refit_every == 0:
+            stage.set_envelope(theta_of(x))
+        if not idx:
+            break
+        c, g, F, _ = terms(x)
+        moved = False
+        for _ in range(5):
+            A = F + lam * np.diag(np.diag(F)) + 1e-12 * np.eye(len(idx))
+            try:
+                d = -np.linalg.solve(A, g)
+            except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            shrink = min(1.0, float(np.min(caps[idx] / np.maximum(np.abs(d), 1e-300))))
+            y = x.copy()
+            y[idx] = np.clip(x[idx] + shrink * d, lo[idx], hi[idx])
+            fy = stage.cost(theta_of(y)) / T + pen(y)
+            if fy < c:
+                moved = True
+                break
+            lam *= 10
+        if not moved:
+            break
+        x = y
+        lam = max(lam / 10, 1e-6)
+        if c - fy < tol:
+            break
+    stage.set_envelope(theta_of(x))
+    c, g, F, sc = terms(x)
+    return x, c, F, sc

@@ -1,0 +1,113 @@
+"""Image motion between consecutive photos of a session, measured and predicted.
+
+Blur alone cannot tell a straight pan's direction (a PSF and its point reflection have the
+same spectrum) and barely tells the focal length from a bias. Two photos taken less than a
+second apart can: the image moved between them by an amount the gyro predicts for any
+parameter set. The motion is measured once (phase correlation of the whole frames) and
+compared with the prediction (mean displacement of the blurred image of a grid of scene
+points), pixel units of the full-resolution photos.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft as sfft
+
+from .calibration_patches import CalibrationPhoto
+from .orientation import Orientation, quat_multiply, quat_to_matrix
+from .spectral_criterion import CONJUGATE, Corrections
+
+__all__ = ["FrameRegistration", "phase_shift"]
+
+
+def phase_shift(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+    """Translation ``d`` (x, y) with ``b(x) ~ a(x - d)`` by phase correlation (whitened
+    cross-power, Gaussian low-pass at 0.1 cycles/px so that JPEG block edges, which do not
+    move, do not win), and the peak's prominence (peak over the 99.9th percentile)."""
+    h, w = a.shape
+    win = np.outer(np.hanning(h), np.hanning(w))
+    A = sfft.fft2((a - a.mean()) * win)
+    Bf = sfft.fft2((b - b.mean()) * win)
+    R = Bf * np.conj(A)
+    R /= np.maximum(np.abs(R), 1e-12)
+    fy = sfft.fftfreq(h)[:, None]
+    fx = sfft.fftfreq(w)[None, :]
+    R *= np.exp(-(fx ** 2 + fy ** 2) / (2 * 0.1 ** 2))    # JPEG blocks and noise: low-pass
+    r = np.real(sfft.ifft2(R))
+    iy, ix = np.unravel_index(int(np.argmax(r)), r.shape)
+    peak = r[iy, ix]
+
+    def sub(v0, v1, v2):
+        den = v0 - 2 * v1 + v2
+        return 0.0 if den >= 0 else 0.5 * (v0 - v2) / den
+
+    dy = iy + sub(r[(iy - 1) % h, ix], peak, r[(iy + 1) % h, ix])
+    dx = ix + sub(r[iy, (ix - 1) % w], peak, r[iy, (ix + 1) % w])
+    dy = dy - h if dy > h / 2 else dy
+    dx = dx - w if dx > w / 2 else dx
+    return np.array([dx, dy]), float(peak / max(np.percentile(r, 99.9), 1e-12))
+
+
+class FrameRegistration:
+    """Image motion between photos of one session: measured once (phase correlation of
+    the whole frames), predicted from the gyro for any parameter set (mean displacement
+    of the blurred image of a grid of scene points)."""
+
+    def __init__(self, photos: list[CalibrationPhoto], extent: float, max_dt: float = 1.0):
+        self.photos = photos
+        self.pairs = []
+        order = sorted(range(len(photos)), key=lambda i: photos[i].cap.exposure_start)
+        for a, b in zip(order[:-1], order[1:]):
+            pa, pb = photos[a], photos[b]
+            dt = pb.cap.exposure_start - pa.cap.exposure_start
+            if (pa.W, pa.H) != (pb.W, pb.H) or not 0 < dt <= max_dt:
+                continue
+            ta, _, k = pa.thumbnail()
+            tb, _, _ = pb.thumbnail()
+            d, q = phase_shift(ta.astype(np.float64), tb.astype(np.float64))
+            if q < 3.0:
+                continue
+            sigma = 2.0 + 0.03 * extent
+            self.pairs.append((a, b, d * k, sigma, q))
+
+    def predict(self, theta: Corrections, a: int, b: int) -> np.ndarray:
+        pa, pb = self.photos[a], self.photos[b]
+        ca, cb = pa.cap, pb.cap
+        n = 16
+        s = (np.arange(n) + 0.5) / n
+        t_a, t_b = ca.exposure_start, cb.exposure_start
+        lo = t_a - theta.offset - 0.01
+        hi = t_b + cb.readout_time * 1.7 + cb.exposure_time - theta.offset + 0.01
+        t = ca.log.t + ca.time_offset
+        i0 = max(int(np.searchsorted(t, lo)) - 2, 0)
+        i1 = min(int(np.searchsorted(t, hi)) + 2, t.size)
+        w = ca.log.omega[i0:i1] @ theta.axes.T - (ca.bias + theta.bias)
+        O = Orientation(t[i0:i1], w, t_a)
+        qref = O.quaternions(np.array([t_a - theta.offset]))[0] * CONJUGATE
+        cam = ca.camera
+        fx, fy = cam.fx * theta.focal, cam.fy * theta.focal
+        gx, gy = np.meshgrid([0.25, 0.5, 0.75], [0.25, 0.5, 0.75])
+        px = gx.ravel() * (pa.W - 1)
+        py = gy.ravel() * (pa.H - 1)
+        ray = np.stack([(px - cam.cx) / fx, (py - cam.cy) / fy, np.ones(px.size)], 1)
+
+        def centroid(times):                       # times (P, n), camera clock
+            q = quat_multiply(qref, O.quaternions(times - theta.offset))
+            R = quat_to_matrix(q)
+            d = np.einsum("pnji,pj->pni", R, ray)
+            return np.stack([(fx * d[..., 0] / d[..., 2] + cam.cx).mean(1),
+                             (fy * d[..., 1] / d[..., 2] + cam.cy).mean(1)], 1)
+
+        ro_a = max(0.0, ca.readout_time + theta.readout)
+        ro_b = max(0.0, cb.readout_time + theta.readout)
+        c_a = centroid(t_a + ro_a * py[:, None] / pa.H + ca.exposure_time * s[None, :])
+        row_b = centroid(np.full((px.size, 1), t_b))[:, 1]
+        c_b = centroid(t_b + ro_b * np.clip(row_b, 0, pb.H - 1)[:, None] / pb.H
+                       + cb.exposure_time * s[None, :])
+        return (c_b - c_a).mean(0)
+
+    def residuals(self, theta: Corrections) -> np.ndarray:
+        out = []
+        for a, b, d, sigma, _ in self.pairs:
+            out.append((d - self.predict(theta, a, b)) / sigma)
+        return np.concatenate(out) if out else np.zeros(0)

@@ -1,0 +1,474 @@
+"""The calibration criterion: how well the PSFs of a parameter set explain patch spectra.
+
+A patch (linear-light luminance, downscaled so that the largest PSF spans ~32 px) is
+modelled as ``g = h * u + n`` with a Gaussian image ``u`` and white noise ``n``. Its
+Hann-windowed periodogram ``P(w)`` is then exponentially distributed around
+
+    ``M(w) = a (E(w) |H(w)|^2 |A(w)|^2 / |D(w)|^2 + rho)``
+
+(``D`` the discrete gradient: a Gaussian gradient prior; ``A`` the resampling filter), and
+``-log p(g | h) = sum_w P/M + log M`` (Whittle): the chapter's marginal ``p(h | g)``
+(eq. 6.7) for a Gaussian prior, which penalises too little blur and too much alike. The
+scale ``a`` is profiled in closed form, the noise ratio ``rho`` by Newton steps.
+
+Real patches are not isotropic ``1/f^2`` textures: edges and oriented texture make the
+spectrum anisotropic, optics and resampling soften it, and a fixed prior then trades those
+differences against the blur. So ``E`` is a smooth per-patch envelope,
+``log E = c . phi(w)`` with ``phi`` = {1, log f, f^2, cos 2a, sin 2a, cos 4a, sin 4a,
+log f cos 2a, log f sin 2a}, fitted to ``P ~ E S + s`` on 4x4-binned spectra (weighted
+least squares, then damped Fisher scoring) at a given parameter set and then held while
+the parameters move (refitted every few steps). What is left to the PSF is mostly the fine
+structure of ``|H|^2``, its zeros and ripples. ``|H|`` comes from the exact trace of the
+patch centre, rendered as a sum of narrow Gaussians (0.75 px): the cost is a smooth
+function of the parameters (bilinear splatting makes it jagged, because its low-pass
+changes with the PSF's sub-pixel position). A patch spans rows exposed at different times
+(rolling shutter), so ``|H|^2`` is averaged over three of its rows.
+
+See :mod:`gyrodeblur.calibrate` for how the criterion is searched.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.fft as sfft
+
+from .calibration_patches import CalibrationPhoto
+from .capture import Capture
+from .orientation import Orientation, quat_multiply, quat_to_matrix
+
+__all__ = ["Corrections", "PatchSpectra", "whittle_profiled", "envelope_basis", "CONJUGATE"]
+
+_SPLAT_SIGMA = 0.75        # px: Gaussian splat of the PSF trace
+_FMAX = 0.42               # cycles/px: frequencies kept (splat aliasing beyond)
+_FMIN_BINS = 2.5           # frequencies below this many bins are dropped (window leakage)
+_ENVELOPE_ITERS = 3        # Fisher-scoring steps of an envelope fitted per evaluation ...
+_ENVELOPE_ITERS_HELD = 6   # ... and of one fitted to be held
+#: Multiplies a unit quaternion (w, x, y, z) into its conjugate (inverse).
+CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
+
+
+@dataclass
+class Corrections:
+    """Corrections shared by all photos: deltas to each capture's own values."""
+
+    axes: np.ndarray            # absolute mapping (3x3)
+    offset: float = 0.0         # s, added to each capture's time_offset
+    readout: float = 0.0        # s, added to each capture's readout_time
+    focal: float = 1.0          # scale of the focal length
+    bias: np.ndarray = field(default_factory=lambda: np.zeros(3))   # rad/s, added
+
+    def copy(self, **kw) -> "Corrections":
+        d = dict(axes=self.axes, offset=self.offset, readout=self.readout, focal=self.focal,
+                 bias=np.array(self.bias, float))
+        d.update(kw)
+        return Corrections(**d)
+
+    def apply(self, cap: Capture) -> Capture:
+        return cap.replace(time_offset=cap.time_offset + self.offset,
+                           readout_time=max(0.0, cap.readout_time + self.readout),
+                           camera=cap.camera.with_focal_scale(self.focal),
+                           bias=cap.bias + self.bias, axes=self.axes)
+
+
+class PatchSpectra:
+    """Patches of the photos at one working scale, and the cost of a parameter set."""
+
+    def __init__(self, photos: list[CalibrationPhoto], centres, scale: float, size: int, *,
+                 rows=(0.0,), n_samples: int = 128, envelope: bool = True):
+        self.photos = photos
+        P = self.size = int(size)
+        F = self.F = max(P, int(round(P / scale))) if scale < 1 else P
+        self.scale = P / F
+        self.rows = np.asarray(rows, float)
+        self.row_w = np.ones(len(rows)) / len(rows) if len(rows) != 3 else np.array([0.25, 0.5, 0.25])
+        self.n = int(n_samples)
+        # frequency bookkeeping on the rfft half-plane, extended by one column each side
+        fy = sfft.fftfreq(P)
+        fxe = np.arange(-1, P // 2 + 2) / P
+        self.fy = fy
+        FY, FX = np.meshgrid(fy, fxe, indexing="ij")
+        d2 = 4 * np.sin(np.pi * FY) ** 2 + 4 * np.sin(np.pi * FX) ** 2
+        sig_o = max(0.0, (1 / self.scale - 1) / 2) * self.scale   # anti-alias filter, out px
+        a2 = np.exp(-4 * np.pi ** 2 * sig_o ** 2 * (FX ** 2 + FY ** 2))
+        prior_ext = a2 / np.maximum(d2, 1e-12)
+        fyh, fxh = FY[:, 1:-1], FX[:, 1:-1]
+        rad = np.hypot(fyh, fxh)
+        mask = (rad >= _FMIN_BINS / P) & (rad <= _FMAX)
+        mask &= ~((fyh < 0) & ((fxh == 0) | np.isclose(fxh, 0.5)))   # redundant halves
+        self.mask = mask
+        self._build_smoother(prior_ext)
+        win1 = np.hanning(P + 2)[1:-1]
+        self.win = np.outer(win1, win1)
+        # envelope basis and 4x4 bins
+        r = rad[mask]
+        self._rad_masked = r
+        a = np.arctan2(fyh, fxh)[mask]
+        self.Phi = envelope_basis(r, a)
+        b = 4
+        lab = ((np.arange(P)[:, None] // b) * (P // b + 2) + np.arange(fxh.shape[1])[None, :] // b)
+        lab = np.broadcast_to(lab, mask.shape)[mask]
+        _, self.bin_of = np.unique(lab, return_inverse=True)
+        self.nbins = int(self.bin_of.max()) + 1
+        self.bin_cnt = np.bincount(self.bin_of, minlength=self.nbins).astype(float)
+        self.Phi_bin = np.stack([np.bincount(self.bin_of, self.Phi[:, j], self.nbins)
+                                 for j in range(self.Phi.shape[1])], 1) / self.bin_cnt[:, None]
+        # the patches
+        self.points, self.power, self.pbin, self.G = [], [], [], []
+        from skimage.transform import resize
+        wsum = (self.win ** 2).sum()
+        for (i, x, y) in centres:
+            ph = photos[i]
+            x0 = int(round(x - (F - 1) / 2))
+            y0 = int(round(y - (F - 1) / 2))
+            x0 = min(max(x0, 0), ph.W - F)
+            y0 = min(max(y0, 0), ph.H - F)
+            crop = ph.gray(y0, y0 + F, x0, x0 + F)
+            if F != P:
+                crop = resize(crop, (P, P), order=1, anti_aliasing=True, mode="reflect")
+            G = sfft.rfft2((crop - crop.mean()) * self.win)
+            pw = (np.abs(G) ** 2 / wsum)[mask]
+            self.points.append((i, x0 + (F - 1) / 2, y0 + (F - 1) / 2))
+            self.power.append(pw)
+            self.pbin.append(np.bincount(self.bin_of, pw, self.nbins) / self.bin_cnt)
+            self.G.append(G)
+        self.power = np.stack(self.power) if self.power else np.zeros((0, mask.sum()))
+        self.pbin = np.stack(self.pbin) if self.pbin else np.zeros((0, self.nbins))
+        self._prepare_fast_envelope()
+        self._orient_cache: dict = {}
+        self._rho_warm: dict = {}
+        self.E = None
+        self.envelope = envelope
+        self.evaluations = 0
+
+    # -- geometry ---------------------------------------------------------------------
+    def _orientation(self, i: int, theta: Corrections, lo: float, hi: float) -> Orientation:
+        cap = self.photos[i].cap
+        key = (i, theta.axes.tobytes(), tuple(np.round(theta.bias, 12)))
+        hit = self._orient_cache.get(key)
+        if hit is not None and hit[0] <= lo and hit[1] >= hi:
+            return hit[2]
+        t = cap.log.t + cap.time_offset
+        lo2, hi2 = lo - 0.05, hi + 0.05
+        i0 = max(int(np.searchsorted(t, lo2)) - 2, 0)
+        i1 = min(int(np.searchsorted(t, hi2)) + 2, t.size)
+        if i1 - i0 < 2:
+            i0, i1 = max(0, i1 - 2), max(i1, 2)
+        w = cap.log.omega[i0:i1] @ theta.axes.T - (cap.bias + theta.bias)
+        O = Orientation(t[i0:i1], w, cap.exposure_start)
+        if len(self._orient_cache) > 64:
+            self._orient_cache.clear()
+        self._orient_cache[key] = (lo2, hi2, O)
+        return O
+
+    def displacements(self, theta: Corrections, items) -> np.ndarray:
+        """``(B, n, 2)`` trace of each item ``(photo, x, y, row, tau)`` relative to
+        ``(x, y)``, in working-scale pixels (full-resolution coordinates in)."""
+        n = self.n
+        out = np.empty((len(items), n, 2))
+        s = (np.arange(n) + 0.5) / n
+        groups: dict = {}
+        for b, it in enumerate(items):
+            groups.setdefault(it[0], []).append(b)
+        for i, idx in groups.items():
+            cap = self.photos[i].cap
+            arr = np.array([items[b][1:] for b in idx], float)
+            taus = arr[:, 3] + theta.offset
+            tref = cap.exposure_start
+            readout = max(0.0, cap.readout_time + theta.readout)
+            T = tref + readout * arr[:, 2:3] / cap.camera.height + cap.exposure_time * s[None, :]
+            O = self._orientation(i, theta, min(T.min(), tref) - taus.max(),
+                                  max(T.max(), tref) - taus.min())
+            qref = O.quaternions(tref - taus) * CONJUGATE
+            q = O.quaternions(T - taus[:, None])
+            R = quat_to_matrix(quat_multiply(qref[:, None, :], q))       # (b, n, 3, 3)
+            c = cap.camera
+            fx, fy = c.fx * theta.focal, c.fy * theta.focal
+            ray = np.stack([(arr[:, 0] - c.cx) / fx, (arr[:, 1] - c.cy) / fy,
+                            np.ones(len(idx))], 1)
+            d = np.einsum("bnji,bj->bni", R, ray)
+            out[idx, :, 0] = (fx * d[..., 0] / d[..., 2] + c.cx - arr[:, 0:1]) * self.scale
+            out[idx, :, 1] = (fy * d[..., 1] / d[..., 2] + c.cy - arr[:, 1:2]) * self.scale
+        return out
+
+    def otf(self, disp: np.ndarray) -> np.ndarray:
+        """Complex OTF ``(B, P, P//2+1)`` of Gaussian-splatted traces (sum 1)."""
+        P = self.size
+        B, n, _ = disp.shape
+        R = 2
+        offs = np.arange(-R, R + 1)
+        cx = np.floor(disp[..., 0] + 0.5)
+        cy = np.floor(disp[..., 1] + 0.5)
+        k2 = -0.5 / _SPLAT_SIGMA ** 2
+        wx = np.exp(k2 * ((cx[..., None] + offs) - disp[..., 0, None]) ** 2)
+        wy = np.exp(k2 * ((cy[..., None] + offs) - disp[..., 1, None]) ** 2)
+        ix = (cx.astype(np.int64)[..., None] + offs) % P
+        iy = (cy.astype(np.int64)[..., None] + offs) % P
+        idx = (np.arange(B) * P * P)[:, None, None, None] + iy[..., :, None] * P + ix[..., None, :]
+        w = wy[..., :, None] * wx[..., None, :]
+        k = np.bincount(idx.ravel(), w.ravel(), minlength=B * P * P).reshape(B, P, P)
+        k /= np.maximum(k.sum(axis=(1, 2), keepdims=True), 1e-30)
+        return sfft.rfft2(k.astype(np.float32), axes=(1, 2), workers=2)
+
+    def model(self, h2: np.ndarray) -> np.ndarray:
+        """``|H|^2 |A|^2 / |D|^2`` smoothed by the Hann window's power kernel, masked:
+        ``(B, P, P//2+1)`` -> ``(B, N)`` (a precomputed sparse operator)."""
+        B = h2.shape[0]
+        flat = h2.reshape(B, -1).T                      # (P*(P/2+1), B)
+        return np.asarray(self._smooth_op @ flat, dtype=np.float64).T
+
+    def _build_smoother(self, prior_ext: np.ndarray) -> None:
+        from scipy import sparse
+        P = self.size
+        K = P // 2 + 1
+        ky, kx = np.nonzero(self.mask)
+        rows, cols, vals = [], [], []
+        w = {-1: 1 / 6, 0: 2 / 3, 1: 1 / 6}
+        out = np.arange(ky.size)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                sy = (ky + dy) % P
+                sx = kx + dx
+                pe = prior_ext[sy, sx + 1]              # extended grid has a column offset of 1
+                my = np.where((sx < 0) | (sx > P // 2), (-sy) % P, sy)
+                mx = np.where(sx < 0, 1, np.where(sx > P // 2, P // 2 - 1, sx))
+                rows.append(out)
+                cols.append(my * K + mx)
+                vals.append(w[dy] * w[dx] * pe)
+        self._smooth_op = sparse.csr_matrix(
+            (np.concatenate(vals).astype(np.float32), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(ky.size, P * K))
+
+    def spectra(self, theta: Corrections, taus=None, rows=None, keep_otf=False):
+        """Model spectra ``S`` ``(n_tau * n_patch, N)`` (and the centre-row OTFs)."""
+        rows = self.rows if rows is None else np.asarray(rows, float)
+        rw = self.row_w if rows is self.rows else np.ones(len(rows)) / len(rows)
+        tl = [0.0] if taus is None else list(taus)
+        items = [(i, x, y, y + r * self.F, tau)
+                 for tau in tl for (i, x, y) in self.points for r in rows]
+        H = self.otf(self.displacements(theta, items))
+        h2 = (H.real ** 2 + H.imag ** 2).reshape(len(tl) * len(self.points), len(rows), *H.shape[1:])
+        h2 = np.tensordot(rw.astype(np.float32), h2, axes=([0], [1]))
+        S = self.model(h2)
+        if keep_otf:
+            mid = len(rows) // 2
+            return S, H.reshape(len(tl) * len(self.points), len(rows), *H.shape[1:])[:, mid]
+        return S
+
+    # -- likelihood -------------------------------------------------------------------
+    def costs(self, theta: Corrections, taus=None, rows=None) -> np.ndarray:
+        """Per-patch costs, ``(n_patch,)`` or ``(n_tau, n_patch)`` when ``taus`` (extra
+        time shifts) is given: the Whittle cost of the patch periodograms under the model
+        spectra with their envelopes, profiled over the scale and the noise."""
+        S = self.spectra(theta, taus, rows=rows)
+        if self.E is not None:
+            S = S * np.tile(self.E, (S.shape[0] // len(self.points), 1))
+        elif self.envelope:
+            S = S * self.fast_envelope(S)
+        c = self._whittle(S)
+        self.evaluations += 1
+        c = c.reshape(-1, len(self.points))
+        return c if taus is not None else c[0]
+
+    def cost(self, theta: Corrections) -> float:
+        return float(self.costs(theta).sum())
+
+    def set_envelope(self, theta: Corrections | None) -> None:
+        """Fit the patch envelopes at ``theta`` and hold them (``None``: let every
+        evaluation fit its own)."""
+        if theta is None:
+            self.E = None
+            return
+        S = self.spectra(theta)
+        E = self.fast_envelope(S, iters=_ENVELOPE_ITERS_HELD)
+        self.E = E / E.mean(1, keepdims=True)
+
+    def _whittle(self, S: np.ndarray, params: bool = False):
+        reps = S.shape[0] // len(self.points)
+        Pw = np.tile(self.power, (reps, 1))
+        warm = self._rho_warm.get(S.shape[0])
+        if warm is None:
+            warm = np.tile(self._rho_init, reps)
+        c, a, rho, x = whittle_profiled(S, Pw, warm=warm, params=True)
+        self._rho_warm[S.shape[0]] = x
+        return (c, a, rho) if params else c
+
+    def _prepare_fast_envelope(self) -> None:
+        """Per patch, the fixed weighted least-squares map from ``log S`` (binned) to the
+        envelope coefficients: ``c = G (log(P - s) - log S)`` on bins where the signal
+        dominates the noise floor ``s`` (weights from the data alone, so ``c`` is a linear,
+        smooth function of ``log S``)."""
+        from scipy import sparse
+        N = int(self.mask.sum())
+        self._bin_op = sparse.csr_matrix(
+            (1.0 / self.bin_cnt[self.bin_of], (self.bin_of, np.arange(N))), shape=(self.nbins, N))
+        Phi = self.Phi_bin
+        k = Phi.shape[1]
+        rb = np.sqrt(np.bincount(self.bin_of, self.Phi[:, 0] * 0 + self._rad_masked ** 2,
+                                 self.nbins) / self.bin_cnt)
+        G, Y, R, NS = [], [], [], []
+        for pb in self.pbin:
+            outer = pb[rb > 0.3]
+            s = np.percentile(outer, 20) if outer.size else np.percentile(pb, 5)
+            w = np.clip((pb - 2 * s) / pb, 0, 1) ** 2 * self.bin_cnt
+            A = Phi.T @ (w[:, None] * Phi) + 1e-6 * np.eye(k)
+            G.append(np.linalg.solve(A, Phi.T * w[None, :]))
+            Y.append(np.log(np.maximum(pb - s, 0.1 * pb)))
+            R.append(np.log(max(s, 1e-30) / max(pb.mean(), 1e-30)))
+            NS.append(s)
+        self._env_G = np.stack(G) if G else np.zeros((0, k, self.nbins))
+        self._env_Y = np.stack(Y) if Y else np.zeros((0, self.nbins))
+        self._rho_init = np.array(R)
+        self._noise = np.array(NS)
+
+    def fast_envelope(self, S: np.ndarray, iters: int | None = None) -> np.ndarray:
+        """Envelopes ``(B, N)`` for model spectra ``S`` (B a multiple of the patches):
+        the weighted least-squares start, then a fixed number of damped Fisher-scoring
+        steps of the Whittle likelihood of ``P ~ E S + s`` on the binned spectra (fixed,
+        so that the envelope is a smooth function of ``S``)."""
+        iters = _ENVELOPE_ITERS if iters is None else iters
+        npt = len(self.points)
+        reps = S.shape[0] // npt
+        Sb = np.maximum(np.asarray(self._bin_op @ S.T).T, 1e-300)            # (B, nb)
+        y = (self._env_Y[None] - np.log(Sb).reshape(reps, npt, -1)).transpose(1, 2, 0)
+        c = np.matmul(self._env_G, y).transpose(2, 0, 1).reshape(S.shape[0], -1)
+        if iters:
+            Pb = np.tile(self.pbin, (reps, 1))
+            Phi = self.Phi_bin
+            k = Phi.shape[1]
+            cnt = self.bin_cnt[None, :]
+            ls = np.log(np.maximum(np.tile(self._noise, reps), 1e-30))
+            th = np.concatenate([c, ls[:, None]], 1)
+            eye = np.eye(k + 1)
+            for _ in range(iters):
+                m1 = np.exp(np.clip(th[:, :k] @ Phi.T, -60, 60)) * Sb
+                sn = np.exp(np.clip(th[:, -1], -80, 10))[:, None]
+                M = m1 + sn
+                Z = np.concatenate([(m1 / M)[:, :, None] * Phi[None], (sn / M)[:, :, None]], 2)
+                Zt = np.transpose(Z, (0, 2, 1))
+                g = np.matmul(Zt, (cnt * (1 - Pb / M))[:, :, None])[..., 0]
+                F = np.matmul(Zt * cnt[:, None, :], Z)
+                F = F + 0.1 * F * eye + 1e-6 * eye
+                th = th - np.linalg.solve(F, g[..., None])[..., 0]
+            c = th[:, :k]
+        return np.exp(np.clip(c @ self.Phi.T, -60, 60))
+
+    def gauss_newton(self, theta_of, x, idx, hs):
+        """Cost, gradient, Fisher matrix (scale and noise profiled out) and per-patch
+        scores at ``x`` for the coordinates ``idx`` (forward differences of the model
+        spectra, steps ``hs``)."""
+        def model(v):
+            S = self.spectra(theta_of(v))
+            if self.E is not None:
+                return S * self.E
+            return S * self.fast_envelope(S) if self.envelope else S
+
+        S0 = model(x)
+        c, a, rho = self._whittle(S0, params=True)
+        M0 = S0 + rho[:, None]
+        r = self.power / (a[:, None] * M0)
+        J = []
+        for j in idx:
+            y = x.copy()
+            y[j] += hs[j]
+            J.append((model(y) - S0) / hs[j] / M0)
+        if not J:
+            return float(c.sum()), np.zeros(0), np.zeros((0, 0)), np.zeros((len(self.points), 0))
+        J = np.stack(J)                                          # (K, B, N)
+        U = np.stack([np.ones_like(M0), 1.0 / M0], 0)            # nuisances: log a, rho
+        UU = np.einsum("pbn,qbn->bpq", U, U)
+        UJ = np.einsum("pbn,kbn->bpk", U, J)
+        coef = np.linalg.solve(UU + 1e-30 * np.eye(2), UJ)      # (B, 2, K)
+        Jt = J - np.einsum("pbn,bpk->kbn", U, coef)
+        scores = np.einsum("kbn,bn->bk", J, 1 - r)                # per patch gradient
+        F = np.einsum("kbn,lbn->kl", Jt, Jt)
+        self.evaluations += 1
+        return float(c.sum()), scores.sum(0), F, scores
+
+    # -- phase: sparsity of deconvolved patches ---------------------------------------
+    def sparsity(self, theta: Corrections) -> np.ndarray:
+        """Per patch, normalised gradient sparsity ``|grad u|_1 / |grad u|_2`` (x sqrt n)
+        of the Wiener-deconvolved patch (Gaussian-model optimal filter)."""
+        S, H = self.spectra(theta, keep_otf=True)
+        P = self.size
+        u = sfft.fftfreq(P)[:, None]
+        v = sfft.rfftfreq(P)[None, :]
+        d2 = 4 * np.sin(np.pi * u) ** 2 + 4 * np.sin(np.pi * v) ** 2
+        out = []
+        for j in range(len(self.points)):
+            Hj = H[j]
+            ps = np.abs(Hj) ** 2
+            nsr = self._nsr(j, ps, d2)
+            U = np.conj(Hj) * self.G[j] / (ps + nsr * d2 + 1e-12)
+            img = sfft.irfft2(U, s=(P, P))
+            m = P // 4
+            c = img[m:-m, m:-m]
+            gy, gx = np.gradient(c)
+            g = np.hypot(gx, gy)
+            out.append(g.sum() / np.sqrt((g ** 2).sum() * g.size + 1e-30))
+        return np.asarray(out)
+
+    def _nsr(self, j, ps, d2) -> float:
+        """Noise-to-signal ratio of patch ``j`` under the flat model (a rough Wiener NSR)."""
+        m = self.mask
+        S = (ps * np.where(d2 > 0, 1 / np.maximum(d2, 1e-12), 0))[m]
+        P = self.power[j]
+        best = (np.inf, 1e-3)
+        for r in np.geomspace(1e-6, 1.0, 13):
+            rho = r * S.mean()
+            Mm = S + rho
+            c = P.size * np.log(np.mean(P / Mm)) + np.log(Mm).sum()
+            if c < best[0]:
+                best = (c, rho)
+        return float(best[1])
+
+
+def envelope_basis(r: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Envelope basis at frequencies of radius ``r`` (cycles/px) and angle ``a``."""
+    lr = np.log(r / 0.1)
+    return np.stack([np.ones_like(r), lr, (r / 0.25) ** 2, np.cos(2 * a), np.sin(2 * a),
+                     np.cos(4 * a), np.sin(4 * a), lr * np.cos(2 * a), lr * np.sin(2 * a)], 1)
+
+
+def whittle_profiled(S: np.ndarray, Pw: np.ndarray, grid=np.geomspace(1e-7, 1.0, 8),
+                  params: bool = False, warm: np.ndarray | None = None):
+    """Whittle cost of ``P ~ a (S + rho)`` profiled over ``a`` (closed form) and ``rho``
+    (``log rho`` by Newton steps from a grid, or from ``warm``, the previous solution).
+    Returns the costs, and with ``params`` also ``a``, ``rho`` and ``log(rho / mean S)``."""
+    B, N = S.shape
+    scale = np.maximum(S.mean(1), 1e-300)
+    lg = np.log(grid)
+    if warm is None or warm.shape != (B,):
+        best = np.full(B, np.inf)
+        x = np.zeros(B)
+        for k, r in enumerate(grid):
+            M0 = S + (r * scale)[:, None]
+            c = N * np.log(np.mean(Pw / M0, 1)) + np.sum(np.log(M0), 1)
+            better = c < best
+            best[better] = c[better]
+            x[better] = lg[k]
+        iters = 3
+    else:
+        x = np.clip(warm, lg[0] - 2, lg[-1])
+        iters = 4
+    for _ in range(iters):
+        rho = np.exp(x) * scale
+        inv = 1.0 / (S + rho[:, None])
+        q1 = Pw * inv
+        a = q1.mean(1)
+        q2 = (q1 * inv).mean(1)
+        q3 = (q1 * inv * inv).mean(1)
+        c_r = -N * q2 / a + inv.sum(1)
+        c_rr = N * (2 * q3 / a - (q2 / a) ** 2) - (inv * inv).sum(1)
+        c_x = rho * c_r
+        c_xx = rho * c_r + rho ** 2 * c_rr
+        step = np.where(c_xx > 0, -c_x / np.where(c_xx > 0, c_xx, 1.0), -np.sign(c_x) * 0.5)
+        x = np.clip(x + np.clip(step, -1.0, 1.0), lg[0] - 2, lg[-1])
+    rho = np.exp(x) * scale
+    M0 = S + rho[:, None]
+    a = np.mean(Pw / M0, 1)
+    c = N * np.log(a) + np.sum(np.log(M0), 1) + N
+    if params:
+        return c, a, rho, x
+    return c, x
