@@ -522,22 +522,3 @@ def test_a_log_that_pans_throughout_is_not_read_as_a_bias(case):
     assert any("is motion, not a bias" in note for note in res.notes)
     assert not any("prior on the bias" in note for note in res.notes)
     assert np.all(np.abs(res.capture.bias) < 0.03)
-
-
-def test_the_log_decides_how_likely_the_given_bias_is_off():
-    """A log whose typical rate matches the given bias leaves it (probability off near 0,
-    no correction); one 0.04 rad/s away on an axis, 8 of its standard errors, moves it
-    nearly all the way (the given bias's +-0.05 combined with the log's +-0.005); in
-    between, the correction grows with the distance."""
-    from gyrodeblur.bias_prior import bias_from_log
-
-    var = np.full(3, 0.005 ** 2)
-    mu, sd, p_off = bias_from_log(np.zeros(3), var)
-    assert p_off < 0.01 and np.all(mu == 0.0) and np.all(sd < 0.006)
-    mu, sd, p_off = bias_from_log(np.array([0.04, 0.0, 0.0]), var)
-    assert p_off > 0.999
-    assert mu[0] == pytest.approx(0.04 * 0.05 ** 2 / (0.05 ** 2 + 0.005 ** 2), rel=1e-3)
-    assert mu[1] == mu[2] == 0.0
-    steps = [bias_from_log(np.array([x, 0.0, 0.0]), var) for x in (0.005, 0.01, 0.015, 0.02)]
-    assert all(a[2] < b[2] and a[0][0] < b[0][0] for a, b in zip(steps, steps[1:]))
-    assert np.all(steps[1][1] >= sd)          # the sd covers the doubt between the two

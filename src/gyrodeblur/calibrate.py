@@ -291,219 +291,40 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         images, work_caps = _shrunk_photos(images, captures, downscale)
     if n_patches is None:
         n_patches = min(_N_PATCHES * len(images), _MAX_PATCHES)
-    photos = [CalibrationPhoto(img, cap, transfer, i) for i, (img, cap) in enumerate(zip(images, work_caps))]
+    photos = [CalibrationPhoto(img, cap, transfer, i)
+              for i, (img, cap) in enumerate(zip(images, work_caps))]
     search = SearchSpace(photos, fix, offset_range, say_)
     c0 = photos[0].cap
-    theta0 = Corrections(axes=c0.axes)
     notes: list[str] = []
+
+    def note(msg: str, indent: str = "") -> None:
+        notes.append(msg)
+        say_(indent + msg)
 
     # the bias that the log's typical rate implies, when the log is long (hand motion
     # averages out over seconds; a gyro's bias does not)
     b_given = np.mean([np.asarray(cap.bias, float) for cap in captures], axis=0)
-    bias_prior, note = BiasPrior(b_given), None
+    bias_prior, msg = BiasPrior(b_given), None
     if "bias" not in fix:
-        bias_prior, note = BiasPrior.from_logs(captures, c0.axes, b_given)
-    if note:
-        notes.append(note)
-        say_(note)
-    rest_bias = bias_prior.for_mapping
+        bias_prior, msg = BiasPrior.from_logs(captures, c0.axes, b_given)
+    if msg:
+        note(msg)
 
-    # candidate mappings
     given_letters = axes_to_letters(c0.axes)
-    if "axes" in fix:
-        cand = [c0.axes]
-    else:
-        letters = list(mappings) if mappings else list(PROPER_AXIS_LETTERS)
-        cand = [parse_axes(s) for s in letters]
-        if given_letters is None:
-            cand.append(c0.axes)
-
-    # working scales and patches from the blur at the given parameters
-    probe = [search.tau_lo, 0.5 * search.tau_lo, 0.0, 0.5 * search.tau_hi, search.tau_hi]
-    extent, path = psf_extent_and_path(photos, theta0, sorted(set(probe)))
-    extent = max(extent, 2.0)
-    s_f = min(1.0, _TARGET_EXTENT / extent)
-    s_c = min(1.0, _COARSE_EXTENT / extent)
-    small = min(min(ph.H, ph.W) for ph in photos)
-    P_f = int(min(_PATCH, 16 * (small * s_f // 16)))
-    P_c = int(min(_COARSE_PATCH, 16 * (small * s_c // 16)))
-    if P_f < 48 or P_c < 32:
-        raise InputError(None, f"the photos are too small ({small} px) for the blur "
-                               f"(~{extent:.0f} px) to be calibrated")
-    per = max(3, int(np.ceil(n_patches / len(photos))))
-    centres = []
-    for i, ph in enumerate(photos):
-        centres += [(i, x, y) for x, y in select_patch_centres(ph, per, int(round(P_f / s_f)))]
-    if not centres:
-        raise InputError(None, "no textured, unsaturated patch found for calibration")
-    stage = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
-                   n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
-    coarse = PatchSpectra(photos, centres, s_c, P_c, rows=(0.0,), envelope=False,
-                    n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)))
-    u = np.array([y / photos[i].H for i, _, y in stage.points])
-    # pivot row of the (time shift, readout) parametrisation: the mean patch row, so the
-    # two are nearly uncorrelated; with the offset fixed the time shift stays 0
-    ubar = 0.0 if "offset" in fix else float(u.mean())
-    uc = u - 0.5
-    say_(f"calibrating on {len(centres)} patches of {P_f} px at scale {stage.scale:.2f} "
-         f"(coarse: {P_c} px at {coarse.scale:.2f}; blur ~{extent:.0f} px), {len(cand)} axis "
-         f"mapping(s)")
-    reg = FrameRegistration(photos, extent) if len(photos) > 1 else None
-    if reg is not None and reg.pairs:
-        for a_, b_, d, sig, q in reg.pairs:
-            say_(f"  photos {a_ + 1} -> {b_ + 1}: image motion ({d[0]:+.1f}, {d[1]:+.1f}) px "
-                 f"(phase correlation, prominence {q:.1f}), weight 1/{sig:.1f} px")
-
-    def extra_for(M):
-        if reg is None or not reg.pairs:
-            return None
-        return lambda v: reg.residuals(search.theta_of(v, M, ubar))
+    cand = _candidate_mappings(c0.axes, fix, mappings)
+    fit = _Fit(photos, search, fix, bias_prior, n_patches, len(cand), say_)
 
     # 1. coarse: every mapping x time shifts per patch, combined along a line (time offset +
-    #    readout error x row); then the best few again over a grid of focal scales.
-    if search.tau_hi > search.tau_lo:
-        taus = np.arange(search.tau_lo, search.tau_hi + 1e-9, _COARSE_STEP)
-    else:
-        taus = np.array([search.tau_lo])
-    if "readout" in fix or search.r0 == 0:
-        kappas = np.array([0.0])
-    else:
-        kappas = search.r0 * np.linspace(-0.35, 0.35, 8)
-    fgrid = [1.0] if "focal" in fix else [0.8, 0.87, 0.94, 1.0, 1.07, 1.15, 1.25]
-    rankings = []
-    for envelope in (False, True):
-        coarse.envelope = envelope
-        scored = []
-        for M in cand:
-            C = coarse.costs(theta0.copy(axes=M, bias=rest_bias(M)[0]), taus=taus)
-            tot, tau0, kap = line_fit(C, taus, uc, kappas)
-            scored.append((tot, tau0, kap, 1.0, M))
-        scored.sort(key=lambda r: r[0])
-        rankings.append(scored)
-        ranking = [(axes_to_letters(r[4]) or "given", float(r[0] - scored[0][0])) for r in scored]
-        say_(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
-             + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
-    # The two coarse criteria fail on different scenes (a flat 1/f^2 spectrum is misled by
-    # oriented texture, a fitted envelope soaks up part of a long blur): the shortlist
-    # takes the best of each in turn.
-    short = []
-    for pair in zip(*rankings):
-        for r in pair:
-            if not any(np.allclose(r[4], q[4]) for q in short):
-                short.append(r)
-    # 2. candidates at full working scale: Levenberg-Marquardt on every free parameter from
-    #    the coarse start; the best is refined further.
-    free = search.free()
-    idx = [X_NAMES.index(k) for k in free]
-    lo, hi = search.bounds(ubar)
-    hs = np.array([0.0005, 0.001, 0.01, 0.004, 0.004, 0.004])          # finite differences
-    caps = np.array([0.004, max(0.15 * search.r0, 0.004), 0.08, 0.03, 0.03, 0.03])
-    prior_sig = np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
-                          PRIOR_BIAS, PRIOR_BIAS, PRIOR_BIAS])
-
-    def prior_for(M):
-        """(mean, sd, temperature) of the priors for mapping ``M``: the bias's combines
-        the given bias with the log's typical rate, when the log is long enough."""
-        mu, sig = np.zeros(6), prior_sig.copy()
-        mu[3:6], sig[3:6] = rest_bias(M)
-        return mu, sig, _TEMPERATURE
-
-    def start_vec(tau0, kap, M, fo=1.0):
-        x = np.zeros(6)
-        x[3:6] = rest_bias(M)[0]
-        x[1] = kap
-        x[0] = 0.0 if "offset" in fix else tau0 + kap * (0.5 - ubar)
-        x[2] = np.log(fo)
-        return np.clip(x, lo, hi)
-
-    def candidate(tau0, kap, M):
-        # start: per-patch time shifts x focal grid with the envelopes held from the
-        # coarse start, combined along the readout line; then Levenberg-Marquardt
-        if "offset" in fix:
-            tm = np.array([0.0])
-        else:
-            tm = np.arange(tau0 - 0.016, tau0 + 0.0161, _COARSE_STEP)
-            tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
-            if tm.size == 0:
-                tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
-        stage.set_envelope(search.theta_of(start_vec(tau0, kap, M), M, ubar))
-        starts = []
-        for fo in fgrid:
-            C = stage.costs(theta0.copy(axes=M, focal=fo, bias=rest_bias(M)[0]), taus=tm,
-                            rows=(0.0,))
-            for kap in kappas:
-                tot, t0, kp = line_fit(C, tm, uc, [kap])
-                starts.append((tot, t0, kp, fo))
-        # the best few starts that differ in time shift (at the pivot row) or readout: the
-        # refinement from the best line fit alone can stop in the wrong basin
-        starts.sort(key=lambda r: r[0])
-        chosen = [starts[0]]
-        for r in starts[1:]:
-            if len(chosen) >= _CANDIDATE_STARTS:
-                break
-            if all(abs((r[1] - c[1]) + (r[2] - c[2]) * (0.5 - ubar)) > _DISTINCT_SHIFT
-                   or abs(r[2] - c[2]) > _DISTINCT_READOUT for c in chosen):
-                chosen.append(r)
-        fx, alts = np.inf, []
-        for best in chosen:
-            x1 = start_vec(best[1], best[2], M, best[3])
-            x1, f1, _, _ = lm_refine(stage, lambda v: search.theta_of(v, M, ubar), x1, idx, lo,
-                                      hi, hs, caps, prior_for(M), iters=4, extra=extra_for(M))
-            alts.append(x1)
-            if f1 < fx:
-                x, fx = x1, f1
-        say_(f"  candidate {axes_to_letters(M) or 'given'}: time shift {x[0] * 1e3:+.1f} ms, "
-             f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
-        return fx, x, M, [a for a in alts if a is not x]
-
+    #    readout error x row); the two rankings take turns in the shortlist
+    rankings = fit.coarse_rankings(cand)
+    ranking = [(axes_to_letters(r[4]) or "given", float(r[0] - rankings[-1][0][0]))
+               for r in rankings[-1]]
+    short = _shortlist(rankings)
+    # 2. candidates at full working scale, the best refined further
     top = with_twin(short[:_CANDIDATES], rankings[0])
-    results = [candidate(r[1], r[2], r[4]) for r in top]
-    results.sort(key=lambda r: r[0])
-    fx, x, M, alts = results[0]
-
-    def refine(x0, iters, which=idx):
-        """Levenberg-Marquardt for the winning mapping ``M``: (x, f, F, scores)."""
-        return lm_refine(stage, lambda v: search.theta_of(v, M, ubar), x0, which, lo, hi,
-                          hs, caps, prior_for(M), iters=iters, extra=extra_for(M))
-
-    x, fx, Fm, sc = refine(x, 10)
-    # The winner's other starts, refined as far: four iterations do not always tell which
-    # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
-    # Then (see below) two more kinds of start; the lowest objective is kept throughout.
-    for xa in alts:
-        xa, fa, Fa, sca = refine(xa, 10)
-        if fa < fx:
-            x, fx, Fm, sc = xa, fa, Fa, sca
-    # Focal length and a bias along the motion trade off (see Criterion), and the valley
-    # between them holds several local minima: the coarse start's focal guess can leave
-    # the refinement in one far from the given values. So the winner is refined once more
-    # from the given focal length and bias (the prior's: with a long log, the log's; first
-    # with the focal length held, so that the bias settles on its own), and the lower
-    # objective is kept.
-    b_prior = rest_bias(M)[0]
-    if any(j >= 2 for j in idx) and np.any(x[2:] != np.r_[0.0, b_prior]):
-        xs = x.copy()
-        xs[2:] = np.r_[0.0, b_prior]
-        xs = refine(np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
-        xa, fa, Fa, sca = refine(xs, 10)
-        if fa < fx:
-            x, fx, Fm, sc = xa, fa, Fa, sca
-    # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from the
-    # given (prior) values of the other parameters: the coarse start's line fits can miss a
-    # nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined as far.
-    if "offset" not in fix:
-        scan, tried = [], {round(float(x[0]), 6)}
-        for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
-            xs0 = np.clip(np.r_[x[0] + dt, 0.0, 0.0, b_prior], lo, hi)
-            if round(float(xs0[0]), 6) in tried:      # the winner's own, or clipped to a bound
-                continue
-            tried.add(round(float(xs0[0]), 6))
-            scan.append(refine(xs0, 4)[:2])
-        scan.sort(key=lambda r: r[1])
-        for xs0, _ in scan[:_SCAN_REFINED]:
-            xa, fa, Fa, sca = refine(xs0, 10)
-            if fa < fx:
-                x, fx, Fm, sc = xa, fa, Fa, sca
+    results = sorted((fit.candidate(r[1], r[2], r[4]) for r in top), key=lambda r: r[0])
+    _, x, M, alts = results[0]
+    x, fx, Fm, sc = fit.refine_winner(M, x, alts)
     gap = float(min(r[0] for r in results[1:]) - fx) if len(results) > 1 else np.nan
     if np.isfinite(gap) and gap < 0:        # a runner-up's refinement was cut short
         gap = 0.0
@@ -511,75 +332,46 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     # the given parameters (with a long log, its bias) stay unless the photo(s) clearly
     # prefer others
     kept = False
-    if idx or len(cand) > 1:
-        x0 = np.clip(np.r_[0.0, 0.0, 0.0, rest_bias(c0.axes)[0]], lo, hi)
-        f_given = objective(stage, lambda v: search.theta_of(v, c0.axes, ubar), x0,
-                             idx, prior_for(c0.axes), extra_for(c0.axes))
+    if fit.idx or len(cand) > 1:
+        f_given, x0 = fit.given_objective(c0.axes)
         noise = gyro_noise_level(captures)
         margin = _keep_margin(noise)
         if not np.allclose(M, c0.axes):
             margin *= _KEEP_MAPPING_NATS / _KEEP_MARGIN
         if np.isfinite(noise) and margin > _KEEP_MARGIN:
-            notes.append(f"gyro noise {noise:.4f} rad/s per sample: the given parameters are "
-                         f"kept unless the objective improves by {margin:.0f}")
-            say_("  " + notes[-1])
+            note(f"gyro noise {noise:.4f} rad/s per sample: the given parameters are "
+                 f"kept unless the objective improves by {margin:.0f}", "  ")
         if f_given - fx < margin:
             from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
             msg = (f"kept the given parameters{from_log}: "
                    f"the best found ({axes_to_letters(M) or 'given'}) improves the objective "
                    f"by only {f_given - fx:.1f} (< {margin:g})")
             x, M, fx = x0, c0.axes, f_given
-            _, _, Fm, sc = lm_refine(stage, lambda v: search.theta_of(v, M, ubar), x, idx,
-                                      lo, hi, hs, caps, prior_for(M), iters=0,
-                                      extra=extra_for(M))
+            _, _, Fm, sc = fit.refine(M, x, 0)
             kept = True
-            notes.append(msg)
-            say_("  " + msg)
+            note(msg, "  ")
             others = [r[0] for r in results if not np.allclose(r[2], M)]
             gap = float(min(others) - fx) if others else np.nan
 
     # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
     if "axes" not in fix and len(cand) > 1 and not kept:
-        Mt = TWIN @ M
-        xt = np.clip(_twin_parameters(x, [cap.bias for cap in captures], fix), lo, hi)
-        th_w = search.theta_of(x, M, ubar)
-        th_t = search.theta_of(xt, Mt, ubar)
-        per_patch = (stage.cost(th_t) - stage.cost(th_w)) / len(stage.points)
-        d = np.log(stage.sparsity(th_t) / stage.sparsity(th_w))
-        margin, sem = _mean_and_error(d)
-        msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
-               f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
-               f"{int((d > 0).sum())}/{d.size} patches prefer {axes_to_letters(M)})")
-        if reg is not None and reg.pairs:
-            r_w = float(np.sum(reg.residuals(th_w) ** 2))
-            r_t = float(np.sum(reg.residuals(th_t) ** 2))
-            msg += f", registration chi2 {r_w:.1f} vs {r_t:.1f}"
-            swap = r_t < r_w
-        else:
-            swap = _phase_prefers_twin(per_patch, d)
-        if swap:
-            x, fx, Fm, sc = lm_refine(stage, lambda v: search.theta_of(v, Mt, ubar),
-                                       xt, idx, lo, hi, hs, caps, prior_for(Mt),
-                                       iters=6, extra=extra_for(Mt))
-            msg += f": {axes_to_letters(Mt)} taken"
-            M = Mt
-        notes.append(msg)
-        say_("  " + msg)
+        M, twin = fit.mirror_twin(M, x, [cap.bias for cap in captures])
+        if twin is not None:
+            x, fx, Fm, sc = twin
+        note(fit.twin_message, "  ")
 
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         others = [r for r in results if not np.allclose(r[2], M)]
         runner = min(others, key=lambda r: r[0])[2] if others else None
-        msg = (f"warning: the axis mapping is uncertain: the next best"
-               f"{' (' + (axes_to_letters(runner) or 'given') + ')' if runner is not None else ''}"
-               f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g}); the blur says little"
-               f" about its direction. Give the mapping (--orientation) if it is known, or"
-               f" calibrate on several photos of the session")
-        notes.append(msg)
-        say_("  " + msg)
+        note(f"warning: the axis mapping is uncertain: the next best"
+             f"{' (' + (axes_to_letters(runner) or 'given') + ')' if runner is not None else ''}"
+             f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g}); the blur says little"
+             f" about its direction. Give the mapping (--orientation) if it is known, or"
+             f" calibrate on several photos of the session", "  ")
 
-    theta = search.theta_of(x, M, ubar)
-    unc = _uncertainties(x, idx, Fm, sc, ubar)
+    theta = search.theta_of(x, M, fit.ubar)
+    unc = _uncertainties(x, fit.idx, Fm, sc, fit.ubar)
     out_caps = []
     for cap in captures:
         try:
@@ -600,9 +392,282 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                  None if "axes" in fix else gap),
     }
     secs = time.perf_counter() - t_start
-    notes.append(f"{coarse.evaluations} coarse and {stage.evaluations} fine cost evaluations, "
-                 f"{secs:.1f} s")
-    return CalibrationResult(out_caps, est, ranking, stage.scale, fix, secs, notes)
+    notes.append(f"{fit.coarse.evaluations} coarse and {fit.stage.evaluations} fine cost "
+                 f"evaluations, {secs:.1f} s")
+    return CalibrationResult(out_caps, est, ranking, fit.stage.scale, fix, secs, notes)
+
+
+def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarray]:
+    """The axis mappings to consider: the given one alone when fixed; else ``mappings``
+    (letters; default all 24 proper signed permutations), plus the given matrix when it is
+    not one of them (a measured, not quite permutation, mapping)."""
+    if "axes" in fix:
+        return [given]
+    letters = list(mappings) if mappings else list(PROPER_AXIS_LETTERS)
+    cand = [parse_axes(s) for s in letters]
+    if axes_to_letters(given) is None:
+        cand.append(given)
+    return cand
+
+
+def _shortlist(rankings: list) -> list:
+    """The coarse rankings' rows merged, each ranking's best in turn, each mapping once.
+
+    The two coarse criteria fail on different scenes (a flat 1/f^2 spectrum is misled by
+    oriented texture, a fitted envelope soaks up part of a long blur)."""
+    short = []
+    for pair in zip(*rankings):
+        for r in pair:
+            if not any(np.allclose(r[4], q[4]) for q in short):
+                short.append(r)
+    return short
+
+
+class _Fit:
+    """The fitting context of one calibration: working scales, the patches at the fine and
+    coarse scales, the frame registration, the free coordinates with their bounds, steps
+    and priors; and each step of the search (see the module docstring, Search).
+
+    Parameter vectors ``x`` are those of :class:`gyrodeblur.calibration_search.SearchSpace`;
+    each step returns what :func:`gyrodeblur.calibration_search.lm_refine` does."""
+
+    def __init__(self, photos, search: SearchSpace, fix: set, bias_prior: BiasPrior,
+                 n_patches: int, n_mappings: int, say):
+        self.search, self.fix, self.bias_prior, self.say = search, fix, bias_prior, say
+        c0 = photos[0].cap
+        self.axes0 = c0.axes
+        self.theta0 = Corrections(axes=c0.axes)
+        # working scales and patches from the blur at the given parameters
+        probe = [search.tau_lo, 0.5 * search.tau_lo, 0.0, 0.5 * search.tau_hi, search.tau_hi]
+        extent, path = psf_extent_and_path(photos, self.theta0, sorted(set(probe)))
+        extent = max(extent, 2.0)
+        s_f = min(1.0, _TARGET_EXTENT / extent)
+        s_c = min(1.0, _COARSE_EXTENT / extent)
+        small = min(min(ph.H, ph.W) for ph in photos)
+        P_f = int(min(_PATCH, 16 * (small * s_f // 16)))
+        P_c = int(min(_COARSE_PATCH, 16 * (small * s_c // 16)))
+        if P_f < 48 or P_c < 32:
+            raise InputError(None, f"the photos are too small ({small} px) for the blur "
+                                   f"(~{extent:.0f} px) to be calibrated")
+        per = max(3, int(np.ceil(n_patches / len(photos))))
+        centres = []
+        for i, ph in enumerate(photos):
+            centres += [(i, x, y) for x, y in select_patch_centres(ph, per, int(round(P_f / s_f)))]
+        if not centres:
+            raise InputError(None, "no textured, unsaturated patch found for calibration")
+        self.stage = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
+                                  n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
+        self.coarse = PatchSpectra(photos, centres, s_c, P_c, rows=(0.0,), envelope=False,
+                                   n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)))
+        u = np.array([y / photos[i].H for i, _, y in self.stage.points])
+        # pivot row of the (time shift, readout) parametrisation: the mean patch row, so the
+        # two are nearly uncorrelated; with the offset fixed the time shift stays 0
+        self.ubar = 0.0 if "offset" in fix else float(u.mean())
+        self.uc = u - 0.5
+        say(f"calibrating on {len(centres)} patches of {P_f} px at scale {self.stage.scale:.2f} "
+            f"(coarse: {P_c} px at {self.coarse.scale:.2f}; blur ~{extent:.0f} px), "
+            f"{n_mappings} axis mapping(s)")
+        self.reg = FrameRegistration(photos, extent) if len(photos) > 1 else None
+        if self.reg is not None and self.reg.pairs:
+            for a_, b_, d, sig, q in self.reg.pairs:
+                say(f"  photos {a_ + 1} -> {b_ + 1}: image motion ({d[0]:+.1f}, {d[1]:+.1f}) px "
+                    f"(phase correlation, prominence {q:.1f}), weight 1/{sig:.1f} px")
+        # the search grids, the free coordinates, their bounds, steps and priors
+        if search.tau_hi > search.tau_lo:
+            self.taus = np.arange(search.tau_lo, search.tau_hi + 1e-9, _COARSE_STEP)
+        else:
+            self.taus = np.array([search.tau_lo])
+        if "readout" in fix or search.r0 == 0:
+            self.kappas = np.array([0.0])
+        else:
+            self.kappas = search.r0 * np.linspace(-0.35, 0.35, 8)
+        self.fgrid = [1.0] if "focal" in fix else [0.8, 0.87, 0.94, 1.0, 1.07, 1.15, 1.25]
+        self.idx = [X_NAMES.index(k) for k in search.free()]
+        self.lo, self.hi = search.bounds(self.ubar)
+        self.hs = np.array([0.0005, 0.001, 0.01, 0.004, 0.004, 0.004])    # finite differences
+        self.caps = np.array([0.004, max(0.15 * search.r0, 0.004), 0.08, 0.03, 0.03, 0.03])
+        self.prior_sig = np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
+                                   PRIOR_BIAS, PRIOR_BIAS, PRIOR_BIAS])
+        self.twin_message = ""
+
+    # -- pieces -------------------------------------------------------------------------
+    def theta_of(self, M):
+        return lambda v: self.search.theta_of(v, M, self.ubar)
+
+    def prior_for(self, M):
+        """(mean, sd, temperature) of the priors for mapping ``M``: the bias's combines
+        the given bias with the log's typical rate, when the log is long enough."""
+        mu, sig = np.zeros(6), self.prior_sig.copy()
+        mu[3:6], sig[3:6] = self.bias_prior.for_mapping(M)
+        return mu, sig, _TEMPERATURE
+
+    def extra_for(self, M):
+        """The frame registration's residuals for mapping ``M`` (``None`` without one)."""
+        reg = self.reg
+        if reg is None or not reg.pairs:
+            return None
+        return lambda v: reg.residuals(self.search.theta_of(v, M, self.ubar))
+
+    def start_vec(self, tau0, kap, M, fo=1.0):
+        """A start from a line fit (time shift ``tau0`` at the middle row, readout error
+        ``kap``), focal scale ``fo`` and the prior's bias."""
+        x = np.zeros(6)
+        x[3:6] = self.bias_prior.for_mapping(M)[0]
+        x[1] = kap
+        x[0] = 0.0 if "offset" in self.fix else tau0 + kap * (0.5 - self.ubar)
+        x[2] = np.log(fo)
+        return np.clip(x, self.lo, self.hi)
+
+    def refine(self, M, x0, iters, which=None):
+        """Levenberg-Marquardt under mapping ``M`` from ``x0``: (x, f, F, scores)."""
+        return lm_refine(self.stage, self.theta_of(M), x0, self.idx if which is None else which,
+                         self.lo, self.hi, self.hs, self.caps, self.prior_for(M), iters=iters,
+                         extra=self.extra_for(M))
+
+    def given_objective(self, M) -> tuple[float, np.ndarray]:
+        """The objective of the given parameters under mapping ``M`` (the bias the prior's),
+        and their vector."""
+        x0 = np.clip(np.r_[0.0, 0.0, 0.0, self.bias_prior.for_mapping(M)[0]], self.lo, self.hi)
+        return objective(self.stage, self.theta_of(M), x0, self.idx, self.prior_for(M),
+                         self.extra_for(M)), x0
+
+    # -- steps --------------------------------------------------------------------------
+    def coarse_rankings(self, cand) -> list[list]:
+        """Per coarse criterion (flat, then fitted envelope), the mappings' rows
+        ``(score, time shift, readout error, 1.0, M)``, best first."""
+        rankings = []
+        for envelope in (False, True):
+            self.coarse.envelope = envelope
+            scored = []
+            for M in cand:
+                C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.bias_prior.for_mapping(M)[0]),
+                                      taus=self.taus)
+                tot, tau0, kap = line_fit(C, self.taus, self.uc, self.kappas)
+                scored.append((tot, tau0, kap, 1.0, M))
+            scored.sort(key=lambda r: r[0])
+            rankings.append(scored)
+            ranking = [(axes_to_letters(r[4]) or "given", float(r[0] - scored[0][0])) for r in scored]
+            self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
+                     + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
+        return rankings
+
+    def candidate(self, tau0, kap, M):
+        """Mapping ``M`` at the working scale: per-patch time shifts x focal grid with the
+        envelopes held from the coarse start, combined along the readout line; from the
+        best few distinct starts, Levenberg-Marquardt. Returns (objective, x, M, the other
+        starts' results)."""
+        search = self.search
+        if "offset" in self.fix:
+            tm = np.array([0.0])
+        else:
+            tm = np.arange(tau0 - 0.016, tau0 + 0.0161, _COARSE_STEP)
+            tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
+            if tm.size == 0:
+                tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
+        self.stage.set_envelope(search.theta_of(self.start_vec(tau0, kap, M), M, self.ubar))
+        starts = []
+        for fo in self.fgrid:
+            C = self.stage.costs(self.theta0.copy(axes=M, focal=fo,
+                                                  bias=self.bias_prior.for_mapping(M)[0]),
+                                 taus=tm, rows=(0.0,))
+            for kap in self.kappas:
+                tot, t0, kp = line_fit(C, tm, self.uc, [kap])
+                starts.append((tot, t0, kp, fo))
+        # the best few starts that differ in time shift (at the pivot row) or readout: the
+        # refinement from the best line fit alone can stop in the wrong basin
+        starts.sort(key=lambda r: r[0])
+        chosen = [starts[0]]
+        for r in starts[1:]:
+            if len(chosen) >= _CANDIDATE_STARTS:
+                break
+            if all(abs((r[1] - c[1]) + (r[2] - c[2]) * (0.5 - self.ubar)) > _DISTINCT_SHIFT
+                   or abs(r[2] - c[2]) > _DISTINCT_READOUT for c in chosen):
+                chosen.append(r)
+        fx, alts = np.inf, []
+        for best in chosen:
+            x1, f1, _, _ = self.refine(M, self.start_vec(best[1], best[2], M, best[3]), 4)
+            alts.append(x1)
+            if f1 < fx:
+                x, fx = x1, f1
+        self.say(f"  candidate {axes_to_letters(M) or 'given'}: time shift {x[0] * 1e3:+.1f} ms, "
+                 f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
+        return fx, x, M, [a for a in alts if a is not x]
+
+    def refine_winner(self, M, x, alts):
+        """The winning mapping's refinement from its best start, its other starts, the
+        given focal length and bias, and time shifts around its own: the lowest objective
+        (x, f, F, scores)."""
+        x, fx, Fm, sc = self.refine(M, x, 10)
+        # The winner's other starts, refined as far: four iterations do not always tell which
+        # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
+        for xa in alts:
+            xa, fa, Fa, sca = self.refine(M, xa, 10)
+            if fa < fx:
+                x, fx, Fm, sc = xa, fa, Fa, sca
+        # Focal length and a bias along the motion trade off (see Criterion), and the valley
+        # between them holds several local minima: the coarse start's focal guess can leave
+        # the refinement in one far from the given values. So the winner is refined once more
+        # from the given focal length and bias (the prior's: with a long log, the log's; first
+        # with the focal length held, so that the bias settles on its own), and the lower
+        # objective is kept.
+        idx, lo, hi = self.idx, self.lo, self.hi
+        b_prior = self.bias_prior.for_mapping(M)[0]
+        if any(j >= 2 for j in idx) and np.any(x[2:] != np.r_[0.0, b_prior]):
+            xs = x.copy()
+            xs[2:] = np.r_[0.0, b_prior]
+            xs = self.refine(M, np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
+            xa, fa, Fa, sca = self.refine(M, xs, 10)
+            if fa < fx:
+                x, fx, Fm, sc = xa, fa, Fa, sca
+        # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from
+        # the given (prior) values of the other parameters: the coarse start's line fits can
+        # miss a nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined
+        # as far.
+        if "offset" not in self.fix:
+            scan, tried = [], {round(float(x[0]), 6)}
+            for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
+                xs0 = np.clip(np.r_[x[0] + dt, 0.0, 0.0, b_prior], lo, hi)
+                if round(float(xs0[0]), 6) in tried:   # the winner's own, or clipped to a bound
+                    continue
+                tried.add(round(float(xs0[0]), 6))
+                scan.append(self.refine(M, xs0, 4)[:2])
+            scan.sort(key=lambda r: r[1])
+            for xs0, _ in scan[:_SCAN_REFINED]:
+                xa, fa, Fa, sca = self.refine(M, xs0, 10)
+                if fa < fx:
+                    x, fx, Fm, sc = xa, fa, Fa, sca
+        return x, fx, Fm, sc
+
+    def mirror_twin(self, M, x, given_biases):
+        """Mapping ``M`` at ``x`` against its mirror twin at the same parameters (by the
+        frame registration when there is one, else by :func:`_phase_prefers_twin`).
+        Returns the mapping taken and, when it is the twin, its refinement (else
+        ``None``); :attr:`twin_message` says why."""
+        Mt = TWIN @ M
+        xt = np.clip(_twin_parameters(x, given_biases, self.fix), self.lo, self.hi)
+        th_w = self.search.theta_of(x, M, self.ubar)
+        th_t = self.search.theta_of(xt, Mt, self.ubar)
+        per_patch = (self.stage.cost(th_t) - self.stage.cost(th_w)) / len(self.stage.points)
+        d = np.log(self.stage.sparsity(th_t) / self.stage.sparsity(th_w))
+        margin, sem = _mean_and_error(d)
+        msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
+               f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
+               f"{int((d > 0).sum())}/{d.size} patches prefer {axes_to_letters(M)})")
+        reg = self.reg
+        if reg is not None and reg.pairs:
+            r_w = float(np.sum(reg.residuals(th_w) ** 2))
+            r_t = float(np.sum(reg.residuals(th_t) ** 2))
+            msg += f", registration chi2 {r_w:.1f} vs {r_t:.1f}"
+            swap = r_t < r_w
+        else:
+            swap = _phase_prefers_twin(per_patch, d)
+        twin = None
+        if swap:
+            twin = self.refine(Mt, xt, 6)
+            msg += f": {axes_to_letters(Mt)} taken"
+            M = Mt
+        self.twin_message = msg
+        return M, twin
 
 
 def _shrunk_photos(images, captures, factor: float):

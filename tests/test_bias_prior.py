@@ -1,0 +1,84 @@
+"""The prior on the gyro bias from a long gyro log (:mod:`gyrodeblur.bias_prior`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrodeblur.axes import parse_axes
+from gyrodeblur.bias_prior import PRIOR_BIAS, BiasPrior, bias_from_log, log_typical_rate
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture
+from gyrodeblur.gyrolog import GyroLog
+
+
+def _capture(seconds: float, bias, axes: str, pan=(0.0, 0.0, 0.0), start=None) -> Capture:
+    """A capture at the middle of a 200 Hz log (device axes ``axes``) of ``seconds``: a
+    hand shake in whole cycles per second, a steady ``pan`` and the gyro's ``bias``
+    (rad/s, camera frame)."""
+    t = np.arange(0.0, seconds, 1 / 200)
+    wc = np.stack([0.5 * np.sin(2 * np.pi * 3 * t + 0.4), 0.7 * np.cos(2 * np.pi * 2 * t + 1.0),
+                   0.2 * np.sin(2 * np.pi * 4 * t + 0.7)], 1)
+    wc = wc + np.asarray(pan, float) + np.asarray(bias, float)
+    log = GyroLog(t, wc @ parse_axes(axes))
+    start = seconds / 2 if start is None else start
+    return Capture(start, 0.03, 0.03, Camera.centred(640, 480, 600.0), log, axes=axes)
+
+
+def test_a_long_log_centres_the_prior_on_its_rate_in_each_mappings_frame():
+    """20 s of log whose shake averages out: with a zero bias given, the prior's mean is
+    the gyro's bias (camera frame) under the log's own mapping, and that rate turned by
+    another mapping under that one; its sd is the log's error, far below PRIOR_BIAS."""
+    b = np.array([0.03, -0.02, 0.01])
+    cap = _capture(20.0, b, "yZx")
+    M = parse_axes("yZx")
+    prior, note = BiasPrior.from_logs([cap], M, np.zeros(3))
+    assert "a prior on the bias" in note and "off with probability 1.00" in note
+    mu, sd = prior.for_mapping(M)
+    assert np.allclose(mu, b, atol=0.002) and np.all(sd < 0.01)
+    other = parse_axes("Xyz")
+    mu_other = prior.for_mapping(other)[0]
+    assert np.allclose(mu_other, other @ M.T @ b, atol=0.002)
+    assert not np.allclose(mu_other, mu, atol=0.01)
+
+
+def test_a_short_log_gives_no_prior():
+    cap = _capture(3.0, (0.03, 0.0, 0.0), "Xyz")
+    prior, note = BiasPrior.from_logs([cap], parse_axes("Xyz"), np.zeros(3))
+    assert note is None
+    mu, sd = prior.for_mapping(parse_axes("Xyz"))
+    assert np.all(mu == 0.0) and np.all(sd == PRIOR_BIAS)
+
+
+def test_a_log_that_pans_is_motion_not_a_bias():
+    cap = _capture(20.0, (0.0, 0.0, 0.0), "Xyz", pan=(0.0, 0.3, 0.0))
+    prior, note = BiasPrior.from_logs([cap], parse_axes("Xyz"), np.zeros(3))
+    assert "is motion, not a bias" in note
+    assert np.all(prior.for_mapping(parse_axes("Xyz"))[1] == PRIOR_BIAS)
+
+
+def test_photos_sharing_one_log_count_its_samples_once():
+    """Two photos 1 s apart on one 20 s log: the pooled span is the log's 20 s, not
+    twice that (which would halve the stated error)."""
+    cap = _capture(20.0, (0.02, 0.0, 0.0), "Xyz")
+    one = log_typical_rate([cap])
+    two = log_typical_rate([cap, cap.replace(exposure_start=cap.exposure_start + 1.0)])
+    assert one[2] == pytest.approx(two[2]) and one[2] == pytest.approx(20.0, abs=1.0)
+    assert np.allclose(one[0], two[0]) and np.allclose(one[1], two[1])
+
+
+def test_the_log_decides_how_likely_the_given_bias_is_off():
+    """A log whose typical rate matches the given bias leaves it (probability off near 0,
+    no correction); one 0.04 rad/s away on an axis, 8 of its standard errors, moves it
+    nearly all the way (the given bias's +-0.05 combined with the log's +-0.005); in
+    between, the correction grows with the distance."""
+    var = np.full(3, 0.005 ** 2)
+    mu, sd, p_off = bias_from_log(np.zeros(3), var)
+    assert p_off < 0.01 and np.all(mu == 0.0) and np.all(sd < 0.006)
+    mu, sd, p_off = bias_from_log(np.array([0.04, 0.0, 0.0]), var)
+    assert p_off > 0.999
+    assert mu[0] == pytest.approx(0.04 * 0.05 ** 2 / (0.05 ** 2 + 0.005 ** 2), rel=1e-3)
+    assert mu[1] == mu[2] == 0.0
+    steps = [bias_from_log(np.array([x, 0.0, 0.0]), var) for x in (0.005, 0.01, 0.015, 0.02)]
+    assert all(a[2] < b[2] and a[0][0] < b[0][0] for a, b in zip(steps, steps[1:]))
+    assert np.all(steps[1][1] >= sd)          # the sd covers the doubt between the two

@@ -1,0 +1,45 @@
+"""Where calibration looks (:mod:`gyrodeblur.calibration_patches`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from gyrodeblur.calibration_patches import CalibrationPhoto, select_patch_centres
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import GyroLog
+
+
+def _capture(w=600, h=400) -> Capture:
+    t = np.arange(0.0, 1.0, 0.005)
+    return Capture(0.5, 0.03, 0.03, Camera.centred(w, h, 500.0), GyroLog(t, np.zeros((t.size, 3))))
+
+
+def test_patches_are_textured_unclipped_and_apart():
+    """Texture on the left half only, with a clipped highlight in its middle. The frame is
+    covered by a grid of cells (3 x 2 for six patches), each giving its best window: the
+    four cells that hold texture give windows on it, and these come first (best
+    texture first); no window is mostly highlight (a page of text on white paper has
+    little else, so up to 30 % clipped is allowed); no two overlap much."""
+    rng = np.random.default_rng(0)
+    img = np.full((400, 600), 0.4, np.float32)
+    img[:, :300] += 0.15 * ndimage.gaussian_filter(rng.normal(size=(400, 300)), 1.5)
+    img[150:250, 100:200] = 1.0
+    photo = CalibrationPhoto(np.clip(img, 0, 1), _capture(), "srgb", 0)
+    centres = select_patch_centres(photo, 6, 64)
+    assert len(centres) == 6
+    for x, y in centres[:4]:
+        assert x < 300 - 16, centres
+    for x, y in centres:
+        win = img[int(y) - 32:int(y) + 32, int(x) - 32:int(x) + 32]
+        assert (win >= 1.0).mean() < 0.3, (x, y)
+    d = [np.hypot(a[0] - b[0], a[1] - b[1]) for i, a in enumerate(centres) for b in centres[i + 1:]]
+    assert min(d) > 0.5 * 64
+
+
+def test_a_photo_must_be_an_image():
+    with pytest.raises(InputError, match="photo 1"):
+        CalibrationPhoto(np.zeros(10), _capture(), "srgb", 0)
