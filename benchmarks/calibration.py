@@ -28,6 +28,10 @@ skews the output by the difference of the two captures' fields. ``aligned`` undo
 difference (the calibrated result resampled by the true field minus the estimated one)
 before comparing; it is a diagnostic that uses the truth, not something a user could do.
 
+``calibrate`` states a one-sigma uncertainty for each parameter; the summary's
+``uncertainty_coverage`` counts how often the errors lie within one and two of them (a
+Gaussian would have 68 and 95 %).
+
 Usage::
 
     python benchmarks/calibration.py --timing        # all cases, + a 12 MP timing run
@@ -160,6 +164,7 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         "registered_psnr_true": r_true, "registered_psnr_calibrated": r_cal,
         "registered_gap_db": r_cal - r_true,
         "aligned_psnr_calibrated": a_cal, "aligned_gap_db": a_cal - p_true,
+        "stated_sd": stated_sd(res.estimates),
         "seconds": secs,
         "estimates": format_estimates(res.estimates),
         "notes": res.notes,
@@ -170,6 +175,37 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         f"PSNR {p_cal:5.2f} vs {p_true:5.2f} ({p_cal - p_true:+.2f} dB; registered "
         f"{r_cal - r_true:+.2f}; aligned {a_cal - p_true:+.2f}; corrupted {p_bad:5.2f})  {secs:5.1f} s")
     return row
+
+
+def stated_sd(est: dict) -> dict:
+    """The one-sigma uncertainties ``calibrate`` states (``None``: fixed or unknown), in
+    the units of the row's errors: offset and readout in ms, focal in %, bias in rad/s."""
+    def val(u, mult):
+        return None if u is None or not np.all(np.isfinite(u)) else np.asarray(u, float) * mult
+
+    out = {"offset_ms": val(est["offset"][2], 1e3), "readout_ms": val(est["readout"][2], 1e3),
+           "focal_pct": val(est["focal"][2], 100.0), "bias": val(est["bias"][2], 1.0)}
+    return {k: (None if v is None else v.tolist()) for k, v in out.items()}
+
+
+def coverage(rows: list[dict]) -> dict:
+    """How often the errors lie within one and two stated sigmas (a Gaussian: 68 and
+    95 %), per parameter (bias: per axis); rows without a stated figure are skipped."""
+    pairs = {"offset_ms": "offset_error_ms", "readout_ms": "readout_error_ms",
+             "focal_pct": "focal_error_pct", "bias": "bias_error"}
+    out = {}
+    for sd_key, err_key in pairs.items():
+        z = []
+        for r in rows:
+            sd = r.get("stated_sd", {}).get(sd_key)
+            if sd is None:
+                continue
+            z.extend(np.abs(np.ravel(r[err_key])) / np.maximum(np.ravel(sd), 1e-12))
+        z = np.asarray(z)
+        out[sd_key] = ({"n": int(z.size), "within_1sd": int((z <= 1).sum()),
+                        "within_2sd": int((z <= 2).sum()), "median_z": float(np.median(z))}
+                       if z.size else {"n": 0})
+    return out
 
 
 def with_long_logs(cases, seconds: float, gyro=None) -> list:
@@ -281,6 +317,7 @@ def summarise(all_rows: list[dict]) -> dict:
         "readout_abs_error_ms_median": float(np.median(np.abs([r["readout_error_ms"] for r in rows]))),
         "focal_abs_error_pct_median": float(np.median(np.abs([r["focal_error_pct"] for r in rows]))),
         "bias_abs_error_median": float(np.median(np.abs([r["bias_error"] for r in rows]))),
+        "uncertainty_coverage": coverage(rows),
     }
 
 
@@ -391,6 +428,11 @@ def report(s: dict, say) -> None:
         f"{s['aligned_gap_db']['min']:+.2f}, {s['aligned_gap_db']['within_0.5dB']} within 0.5 dB); "
         f"time mean {s['seconds']['mean']:.1f} s, max {s['seconds']['max']:.1f} s per "
         f"{s['seconds'].get('per', 'photo')}")
+    cov = s.get("uncertainty_coverage", {})
+    parts = [f"{k} {c['within_1sd']}/{c['n']} and {c['within_2sd']}/{c['n']}"
+             for k, c in cov.items() if c.get("n")]
+    if parts:
+        say("errors within 1 and 2 stated sigmas (a Gaussian: 68 and 95 %): " + "; ".join(parts))
     if "timing_12mp" in s:
         t = s["timing_12mp"]
         say(f"12 MP: {t['seconds']:.1f} s for {t['width']}x{t['height']}")

@@ -105,6 +105,26 @@ def test_speed_quick(tmp_path):
     assert "| 1 | 1152x864 |" in out.with_suffix(".md").read_text()
 
 
+def test_calibration_coverage_counts_errors_within_the_stated_sigmas():
+    """Errors of 0.5, 1.5 and 3 sigmas: one within 1 sd, two within 2; a fixed parameter
+    (no stated figure) is skipped, and the bias counts per axis."""
+    cal = _load("calibration")
+    rows = [{"offset_error_ms": e, "readout_error_ms": 0.0, "focal_error_pct": 0.0,
+             "bias_error": [e * 0.01, 0.0, -0.03],
+             "stated_sd": {"offset_ms": 1.0, "readout_ms": None, "focal_pct": 2.0,
+                           "bias": [0.01, 0.01, 0.01]}} for e in (0.5, -1.5, 3.0)]
+    cov = cal.coverage(rows)
+    assert cov["offset_ms"] == {"n": 3, "within_1sd": 1, "within_2sd": 2, "median_z": 1.5}
+    assert cov["readout_ms"] == {"n": 0}
+    assert cov["focal_pct"]["within_1sd"] == 3
+    assert cov["bias"]["n"] == 9 and cov["bias"]["within_1sd"] == 4 and cov["bias"]["within_2sd"] == 5
+    est = {"offset": (0.0, 0.001, 0.0005), "readout": (0.03, 0.03, None),
+           "focal": (1.0, 1.02, 0.01), "bias": (np.zeros(3), np.zeros(3), np.array([0.01, np.nan, 0.01]))}
+    sd = cal.stated_sd(est)
+    assert sd["offset_ms"] == pytest.approx(0.5) and sd["readout_ms"] is None
+    assert sd["focal_pct"] == pytest.approx(1.0) and sd["bias"] is None
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_calibration_sessions_quick(tmp_path):
     """Two photos of one session share the injected errors and are calibrated together."""

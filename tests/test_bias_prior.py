@@ -57,14 +57,42 @@ def test_a_log_that_pans_is_motion_not_a_bias():
     assert np.all(prior.for_mapping(parse_axes("Xyz"))[1] == PRIOR_BIAS)
 
 
-def test_photos_sharing_one_log_count_its_samples_once():
-    """Two photos 1 s apart on one 20 s log: the pooled span is the log's 20 s, not
-    twice that (which would halve the stated error)."""
+def test_a_given_bias_the_log_bears_out_stays():
+    """The right bias given (large, and in a mapping that is not its own transpose): the
+    log's rate, turned into the camera frame the right way, agrees with it, so it is
+    neither a pan nor off (probability 0.00), and the prior asks for no correction."""
+    b = np.array([0.12, -0.09, 0.0])
+    cap = _capture(20.0, b, "yZx")
+    M = parse_axes("yZx")
+    prior, note = BiasPrior.from_logs([cap], M, b)
+    assert "off with probability 0.00" in note, note
+    mu, sd = prior.for_mapping(M)
+    assert np.all(np.abs(mu) < 1e-3) and np.all(sd < 0.01)
+
+
+def test_the_log_error_has_a_floor():
+    """A log with no hand motion at all has a tiny statistical error; what a hand-held
+    camera's own turning may leave (at least 0.005 rad/s) is still added."""
+    t = np.arange(0.0, 20.0, 1 / 200)
+    log = GyroLog(t, np.tile([0.01, 0.0, -0.01], (t.size, 1)))
+    cap = Capture(10.0, 0.03, 0.03, Camera.centred(640, 480, 600.0), log)
+    assert np.all(log_typical_rate([cap])[1] < 1e-6)
+    prior, _ = BiasPrior.from_logs([cap], np.eye(3), np.zeros(3))
+    assert np.all(prior.log_rate[1] >= 0.005)
+
+
+def test_a_log_given_twice_is_pooled_once():
+    """Two photos on one log, or on two equal copies of it: the samples are pooled once,
+    so the rate, its error and its span are one photo's (not a doubled span, which would
+    shrink the stated error)."""
     cap = _capture(20.0, (0.02, 0.0, 0.0), "Xyz")
+    copy = GyroLog(cap.log.t.copy(), cap.log.omega.copy())
     one = log_typical_rate([cap])
-    two = log_typical_rate([cap, cap.replace(exposure_start=cap.exposure_start + 1.0)])
-    assert one[2] == pytest.approx(two[2]) and one[2] == pytest.approx(20.0, abs=1.0)
-    assert np.allclose(one[0], two[0]) and np.allclose(one[1], two[1])
+    for other in (cap.replace(exposure_start=cap.exposure_start + 1.0),
+                  cap.replace(log=copy, exposure_start=cap.exposure_start + 1.0)):
+        two = log_typical_rate([cap, other])
+        assert two[2] == pytest.approx(one[2]) and one[2] == pytest.approx(20.0, abs=1.0)
+        assert np.allclose(one[0], two[0]) and np.allclose(one[1], two[1])
 
 
 def test_the_log_decides_how_likely_the_given_bias_is_off():

@@ -377,8 +377,7 @@ def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
     """Negating the camera's x and y rates reflects the PSFs only if the bias is negated with
     them: the twin's parameters give exactly the winner's camera rates, x and y negated; with
     photos of unequal given biases, as nearly as one shared correction can; a fixed bias stays."""
-    from gyrodeblur.calibrate import _twin_parameters
-    from gyrodeblur.calibration_search import TWIN
+    from gyrodeblur.calibrate import TWIN, _twin_parameters
     from gyrodeblur.spectral_criterion import Corrections
 
     base = _true_capture(0.5)

@@ -40,6 +40,23 @@ def test_patches_are_textured_unclipped_and_apart():
     assert min(d) > 0.5 * 64
 
 
+def test_texture_in_every_direction_beats_stripes():
+    """Stripes say nothing about blur along them: with a square of texture on the left and
+    stronger full-height stripes on the right, all nine windows lie on the texture, kept
+    apart by 0.7 of their side (packed as close as that allows)."""
+    rng = np.random.default_rng(0)
+    img = np.full((400, 600), 0.4, np.float32)
+    img[100:300, 50:250] += 0.15 * ndimage.gaussian_filter(rng.normal(size=(200, 200)), 1.5)
+    img[:, 350:550] += 0.3 * np.sin(2 * np.pi * np.arange(200) / 6)[None, :]
+    photo = CalibrationPhoto(np.clip(img, 0, 1), _capture(), "srgb", 0)
+    centres = select_patch_centres(photo, 9, 64)
+    assert len(centres) == 9
+    for x, y in centres:
+        assert 50 <= x <= 250 and 100 <= y <= 300, centres
+    d = [np.hypot(a[0] - b[0], a[1] - b[1]) for i, a in enumerate(centres) for b in centres[i + 1:]]
+    assert 0.7 * 64 - 3 < min(d) < 0.7 * 64 + 8, min(d)
+
+
 def test_a_photo_must_be_an_image():
     with pytest.raises(InputError, match="photo 1"):
         CalibrationPhoto(np.zeros(10), _capture(), "srgb", 0)

@@ -26,3 +26,54 @@ def test_phase_shift_of_unrelated_images_has_no_clear_peak():
     a = ndimage.gaussian_filter(rng.normal(size=(200, 260)), 2.0)
     b = ndimage.gaussian_filter(rng.normal(size=(200, 260)), 2.0)
     assert phase_shift(a, b)[1] < 3.0
+
+
+def _pair(d=(0.0, 0.0), w=(0.0, 0.2, 0.0), size=(700, 1000), f=500.0):
+    """Two photos 0.2 s apart on a log of steady rate ``w`` (rad/s, camera frame), the
+    second the first shifted by ``d`` (x, y) px."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+
+    rng = np.random.default_rng(4)
+    a = 0.5 + 0.1 * ndimage.gaussian_filter(rng.normal(size=size), 3.0)
+    b = ndimage.shift(a, (d[1], d[0]), order=3, mode="reflect")
+    t = np.arange(0.0, 2.0, 0.005)
+    log = GyroLog(t, np.tile(w, (t.size, 1)))
+    cam = Camera.centred(size[1], size[0], f)
+    caps = [Capture(s, 0.01, 0.0, cam, log) for s in (0.8, 1.0)]
+    return [CalibrationPhoto(np.clip(img, 0, 1), c, "linear", i)
+            for i, (img, c) in enumerate(zip((a, b), caps))]
+
+
+def test_the_measured_motion_is_in_full_resolution_pixels():
+    """Measured on thumbnails (here halved), reported in the photos' pixels."""
+    from gyrodeblur.frame_registration import FrameRegistration
+
+    reg = FrameRegistration(_pair(d=(-14.0, 6.0)), extent=10.0)
+    assert len(reg.pairs) == 1
+    a, b, d, sigma, q = reg.pairs[0]
+    assert (a, b) == (0, 1) and np.allclose(d, (-14.0, 6.0), atol=1.0), d
+
+
+def test_the_predicted_motion_follows_the_gyro():
+    """A steady yaw to the right (w_y > 0) moves content towards -x. The prediction is the
+    mean over a 3 x 3 grid of points (a quarter of the frame in from each side) of where
+    the turn by 0.2 rad/s x 0.2 s takes each one, worked out here with a rotation matrix
+    (a point's new camera coordinates are R^T times its old ones); the residual of that
+    motion, measured, is ~0."""
+    from gyrodeblur.frame_registration import FrameRegistration
+    from gyrodeblur.spectral_criterion import Corrections
+
+    f, th = 500.0, 0.04
+    x = (np.array([0.25, 0.5, 0.75]) * 999 - 499.5) / f
+    R = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
+    p = R.T @ np.stack([x, np.zeros(3), np.ones(3)])
+    expected = float(np.mean(f * (p[0] / p[2] - x)))           # about -23 px
+    photos = _pair(d=(expected, 0.0))
+    reg = FrameRegistration(photos, extent=10.0)
+    theta = Corrections(axes=np.eye(3))
+    pred = reg.predict(theta, 0, 1)
+    assert pred[0] == pytest.approx(expected, abs=0.2) and abs(pred[1]) < 0.2, (pred, expected)
+    assert np.all(np.abs(reg.residuals(theta)) < 0.5)

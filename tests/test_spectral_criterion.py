@@ -35,3 +35,50 @@ def test_the_true_spectrum_costs_least():
     costs = {L: whittle_profiled(S[None], P[None])[0][0] for L, S in models.items()}
     assert min(costs, key=costs.get) == 9, costs
     assert costs[6] - costs[9] > 10 and costs[12] - costs[9] > 10, costs
+
+
+def _patches(envelope=True):
+    from scipy import ndimage
+
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import PatchSpectra
+
+    rng = np.random.default_rng(3)
+    img = 0.5 + 0.1 * ndimage.gaussian_filter(rng.normal(size=(300, 400)), 1.0)
+    t = np.arange(0.0, 1.0, 0.005)
+    w = np.stack([0.3 * np.sin(6 * t), 0.5 * np.cos(4 * t), 0.05 * t], 1)
+    cap = Capture(0.5, 0.03, 0.02, Camera.centred(400, 300, 400.0), GyroLog(t, w))
+    photo = CalibrationPhoto(np.clip(img, 0, 1), cap, "linear", 0)
+    return PatchSpectra([photo], [(0, 120.0, 150.0), (0, 280.0, 150.0)], 1.0, 64,
+                        rows=(-0.15, 0.0, 0.15), envelope=envelope)
+
+
+def test_a_warm_started_cost_equals_a_cold_one():
+    """The noise level is solved from the previous evaluation's (a cache per shape):
+    the costs must not depend on what was evaluated before."""
+    from gyrodeblur.spectral_criterion import Corrections
+
+    a, b = _patches(), _patches()
+    th = Corrections(axes=np.eye(3))
+    other = th.copy(offset=0.006, focal=1.1)
+    a.costs(other)                                  # a now starts warm from ``other``
+    assert np.allclose(a.costs(th), b.costs(th), rtol=1e-7, atol=1e-6)
+    taus = np.array([-0.004, 0.0, 0.004])
+    a.costs(other, taus=taus)
+    assert np.allclose(a.costs(th, taus=taus), b.costs(th, taus=taus), rtol=1e-7, atol=1e-6)
+
+
+def test_the_cost_ignores_the_scale_of_a_held_envelope():
+    """The image's scale is profiled out: a held envelope times a constant costs the
+    same."""
+    from gyrodeblur.spectral_criterion import Corrections
+
+    p = _patches()
+    th = Corrections(axes=np.eye(3))
+    p.set_envelope(th)
+    c1 = p.costs(th)
+    p.E = 7.0 * p.E
+    assert np.allclose(p.costs(th), c1, rtol=1e-7, atol=1e-6)

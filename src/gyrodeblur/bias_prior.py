@@ -4,21 +4,21 @@ A bias barely shows in one exposure (0.03 rad/s over 20 ms lengthens a PSF by ha
 pixel at f = 1000 px), yet it moves the deblurred image, which is referenced to the first
 row's start: by f b t at a row exposed t later. A long log says more: over seconds, the
 rate of a hand-held camera averages out, and a gyro's bias does not. So when the logs hold
-:data:`_REST_MIN_SECONDS` s or more within :data:`_REST_SPAN` s of the photos, their typical
+:data:`_LOG_MIN_SECONDS` s or more within :data:`_LOG_SPAN` s of the photos, their typical
 rate (:func:`gyrodeblur.gyrolog.median_rate`: the median of 1 s block means, which a few
 seconds of deliberate motion barely move, with an error bar from their spread; to that, in
 quadrature, what the camera's own turning may leave: 0.05 rad over the log's length, at
-least :data:`_REST_FLOOR`) becomes a second Gaussian on the bias, combined with the given
-bias's. Each candidate mapping turns it into its own camera frame, and the searches start
-from its centre; the "given parameters" that are kept unless the photo prefers others
-carry it. But a given bias is either right (a calibrated gyro, ``"auto"`` from the same
+least :data:`_LOG_FLOOR`) becomes a second Gaussian on the bias, combined with the given
+bias's. Each candidate mapping turns it into its own camera frame
+(:meth:`BiasPrior.for_mapping`); :mod:`gyrodeblur.calibrate` starts its searches from the
+prior's centre, and its "given parameters" carry it. But a given bias is either right (a calibrated gyro, ``"auto"`` from the same
 log) or off, and moving a right one by the log's own error (the hand's mean rate) would
 only add that error: so the log's rate first decides, by its likelihood ratio, how likely
 the given bias is to be off (even odds before), and the prior is the mixture of "right"
 and "off" (:func:`bias_from_log`). (On the benchmark's correct captures with 10 s of the
 shaken trace either side, centring on the log always cost 0.6-4 dB on five of the photos
 that calibration otherwise leaves alone.) A typical rate more than
-:data:`_REST_MAX_RATE` from the given bias on an axis is a pan, not a bias, and is not
+:data:`_LOG_MAX_RATE` from the given bias on an axis is a pan, not a bias, and is not
 used (said in the notes); a slower steady pan is indistinguishable from a bias and is
 taken for one. Figures with 10 s of the (deliberately shaken) source trace on each side
 of each photo (``--log-seconds 10``, with and without ``--no-errors``): BENCHMARKS.md
@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gyrolog import GyroLog, median_rate, rate_noise
+from .gyrolog import GyroLog, median_rate
 
 __all__ = ["BiasPrior", "bias_from_log", "log_typical_rate", "logs_with_captures",
-           "gyro_noise_level", "PRIOR_BIAS"]
+           "PRIOR_BIAS"]
 
 #: sd (rad/s per axis) of the prior on the bias correction when nothing else is known, and
 #: of how far a given bias that is off may be off.
@@ -40,14 +40,14 @@ PRIOR_BIAS = 0.05
 #: The bias from the log's typical rate (see :func:`log_typical_rate`): seconds of log used
 #: on each side of the photos' exposures; the shortest log that counts (s); what a
 #: hand-held camera's own rate may leave in it, added to the statistical error in
-#: quadrature: a net turn of _REST_TURN rad over the log's seconds, at least _REST_FLOOR
+#: quadrature: a net turn of _LOG_TURN rad over the log's seconds, at least _LOG_FLOOR
 #: rad/s; and the largest difference from the given bias taken for a bias (rad/s; more is
 #: motion).
-_REST_SPAN = 30.0
-_REST_MIN_SECONDS = 8.0
-_REST_TURN = 0.05
-_REST_FLOOR = 0.005
-_REST_MAX_RATE = 0.1
+_LOG_SPAN = 30.0
+_LOG_MIN_SECONDS = 8.0
+_LOG_TURN = 0.05
+_LOG_FLOOR = 0.005
+_LOG_MAX_RATE = 0.1
 
 
 class BiasPrior:
@@ -59,13 +59,13 @@ class BiasPrior:
     ----------
     given_bias : array_like, shape (3,)
         The given bias (rad/s, camera frame; the mean over the photos).
-    rest : tuple of ndarray, optional
+    log_rate : tuple of ndarray, optional
         The log's typical rate and its sd (rad/s, log axes); ``None``: no log prior.
     """
 
-    def __init__(self, given_bias, rest=None):
+    def __init__(self, given_bias, log_rate=None):
         self.given = np.asarray(given_bias, float)
-        self.rest = rest
+        self.log_rate = log_rate
 
     @classmethod
     def from_logs(cls, captures, axes: np.ndarray, given_bias) -> tuple["BiasPrior", str | None]:
@@ -73,25 +73,26 @@ class BiasPrior:
         (``None`` when the logs are too short to say anything)."""
         given_bias = np.asarray(given_bias, float)
         m_log, se_log, secs_log = log_typical_rate(captures)
-        if not secs_log >= _REST_MIN_SECONDS:
+        if not secs_log >= _LOG_MIN_SECONDS:
             return cls(given_bias), None
-        if np.max(np.abs(m_log - axes.T @ given_bias)) > _REST_MAX_RATE:
+        if np.max(np.abs(m_log - axes.T @ given_bias)) > _LOG_MAX_RATE:
             return cls(given_bias), (
                 f"the gyro log's typical rate over {secs_log:.0f} s, {_vec(m_log)} rad/s (log "
                 f"axes), is motion, not a bias: the bias is not taken from it")
-        floor = max(_REST_FLOOR, _REST_TURN / secs_log)
-        rest = (m_log, np.hypot(se_log, floor))
-        off = bias_from_log(axes @ m_log - given_bias, (axes ** 2) @ rest[1] ** 2)[2]
-        return cls(given_bias, rest), (
+        floor = max(_LOG_FLOOR, _LOG_TURN / secs_log)
+        log_rate = (m_log, np.hypot(se_log, floor))
+        off = bias_from_log(axes @ m_log - given_bias, (axes ** 2) @ log_rate[1] ** 2)[2]
+        return cls(given_bias, log_rate), (
             f"the gyro log's typical rate over {secs_log:.0f} s: {_vec(m_log)} +- "
-            f"{_vec(rest[1])} rad/s (log axes), a prior on the bias (the given bias is off "
+            f"{_vec(log_rate[1])} rad/s (log axes), a prior on the bias (the given bias is off "
             f"with probability {off:.2f})")
 
     def for_mapping(self, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and sd (rad/s, camera frame) of the bias correction under mapping ``M``."""
-        if self.rest is None:
+        if self.log_rate is None:
             return np.zeros(3), np.full(3, PRIOR_BIAS)
-        return bias_from_log(M @ self.rest[0] - self.given, (M ** 2) @ self.rest[1] ** 2)[:2]
+        return bias_from_log(M @ self.log_rate[0] - self.given,
+                             (M ** 2) @ self.log_rate[1] ** 2)[:2]
 
 
 def bias_from_log(d: np.ndarray, var_log: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -118,14 +119,14 @@ def bias_from_log(d: np.ndarray, var_log: np.ndarray) -> tuple[np.ndarray, np.nd
 def log_typical_rate(captures) -> tuple[np.ndarray, np.ndarray, float]:
     """Typical rate of the captures' gyro logs (rad/s, log axes), its standard error and
     the seconds it spans (:func:`gyrodeblur.gyrolog.median_rate`): the samples within
-    :data:`_REST_SPAN` s of any photo's exposure, pooled over the photos (one session
+    :data:`_LOG_SPAN` s of any photo's exposure, pooled over the photos (one session
     shares one gyro clock; a sample logged twice counts once)."""
     ts, ws = [], []
     for log, caps in logs_with_captures(captures):
         near = np.zeros(len(log.t), bool)
         for c in caps:
             t0, t1 = (v - c.time_offset for v in c.window)
-            near |= (log.t >= t0 - _REST_SPAN) & (log.t <= t1 + _REST_SPAN)
+            near |= (log.t >= t0 - _LOG_SPAN) & (log.t <= t1 + _LOG_SPAN)
         ts.append(log.t[near])
         ws.append(log.omega[near])
     t, first = np.unique(np.concatenate(ts), return_index=True)
@@ -141,13 +142,6 @@ def logs_with_captures(captures):
     for c in captures:
         groups.setdefault(id(c.log), (c.log, []))[1].append(c)
     return list(groups.values())
-
-
-def gyro_noise_level(captures) -> float:
-    """The largest white-noise level (rad/s per sample) of the captures' gyro logs."""
-    levels = [rate_noise(log) for log, _ in logs_with_captures(captures)]
-    levels = [v for v in levels if np.isfinite(v)]
-    return max(levels) if levels else float("nan")
 
 
 def _vec(v) -> str:

@@ -110,19 +110,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
-from .bias_prior import PRIOR_BIAS, BiasPrior, gyro_noise_level
+from .bias_prior import PRIOR_BIAS, BiasPrior, logs_with_captures
 from .calibration_patches import CalibrationPhoto, select_patch_centres
-from .calibration_search import (TWIN, X_NAMES, SearchSpace, line_fit, lm_refine, objective,
-                                 psf_extent_and_path, with_twin)
+from .calibration_search import (X_NAMES, SearchSpace, line_fit, lm_refine, objective,
+                                 psf_extent_and_path)
 from .capture import Capture
 from .errors import InputError
 from .frame_registration import FrameRegistration
+from .gyrolog import rate_noise
 from .spectral_criterion import Corrections, PatchSpectra
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
+#: The mirror twin of a mapping ``M`` is ``TWIN @ M``: the camera's x and y rates negated
+#: (a proper rotation), which nearly reflects every PSF (see Search, 3).
+TWIN = np.diag([-1.0, -1.0, 1.0])
 
 
 @dataclass
@@ -222,18 +226,6 @@ _TYPICAL_GYRO_NOISE = 0.007
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
 
 
-
-
-
-
-
-
-
-
-
-
-
-
 def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
               transfer: str = "srgb", n_patches: int | None = None, say=None,
               mappings=None, downscale: float = 1.0) -> CalibrationResult:
@@ -293,7 +285,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         n_patches = min(_N_PATCHES * len(images), _MAX_PATCHES)
     photos = [CalibrationPhoto(img, cap, transfer, i)
               for i, (img, cap) in enumerate(zip(images, work_caps))]
-    search = SearchSpace(photos, fix, offset_range, say_)
+    search = SearchSpace(photos, fix, offset_range)
     c0 = photos[0].cap
     notes: list[str] = []
 
@@ -321,7 +313,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                for r in rankings[-1]]
     short = _shortlist(rankings)
     # 2. candidates at full working scale, the best refined further
-    top = with_twin(short[:_CANDIDATES], rankings[0])
+    top = _with_twin(short[:_CANDIDATES], rankings[0])
     results = sorted((fit.candidate(r[1], r[2], r[4]) for r in top), key=lambda r: r[0])
     _, x, M, alts = results[0]
     x, fx, Fm, sc = fit.refine_winner(M, x, alts)
@@ -334,7 +326,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     kept = False
     if fit.idx or len(cand) > 1:
         f_given, x0 = fit.given_objective(c0.axes)
-        noise = gyro_noise_level(captures)
+        noise = _gyro_noise_level(captures)
         margin = _keep_margin(noise)
         if not np.allclose(M, c0.axes):
             margin *= _KEEP_MAPPING_NATS / _KEEP_MARGIN
@@ -356,10 +348,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
     if "axes" not in fix and len(cand) > 1 and not kept:
-        M, twin = fit.mirror_twin(M, x, [cap.bias for cap in captures])
+        M, twin, msg = fit.mirror_twin(M, x, [cap.bias for cap in captures])
         if twin is not None:
             x, fx, Fm, sc = twin
-        note(fit.twin_message, "  ")
+        note(msg, "  ")
 
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         others = [r for r in results if not np.allclose(r[2], M)]
@@ -392,9 +384,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                  None if "axes" in fix else gap),
     }
     secs = time.perf_counter() - t_start
-    notes.append(f"{fit.coarse.evaluations} coarse and {fit.stage.evaluations} fine cost "
+    notes.append(f"{fit.coarse.evaluations} coarse and {fit.fine.evaluations} fine cost "
                  f"evaluations, {secs:.1f} s")
-    return CalibrationResult(out_caps, est, ranking, fit.stage.scale, fix, secs, notes)
+    return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes)
 
 
 def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarray]:
@@ -408,6 +400,17 @@ def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarra
     if axes_to_letters(given) is None:
         cand.append(given)
     return cand
+
+
+def _with_twin(top: list, everything: list) -> list:
+    """``top`` (rows whose last item is a mapping) plus the best row holding the mirror
+    twin of its first mapping, when that is not already in."""
+    if not top:
+        return top
+    tw = TWIN @ top[0][-1]
+    if any(np.allclose(tw, r[-1]) for r in top):
+        return list(top)
+    return list(top) + [r for r in everything if np.allclose(r[-1], tw)][:1]
 
 
 def _shortlist(rankings: list) -> list:
@@ -425,18 +428,18 @@ def _shortlist(rankings: list) -> list:
 
 class _Fit:
     """The fitting context of one calibration: working scales, the patches at the fine and
-    coarse scales, the frame registration, the free coordinates with their bounds, steps
+    coarse scales (:attr:`fine`, :attr:`coarse`), the frame registration, the free coordinates with their bounds, steps
     and priors; and each step of the search (see the module docstring, Search).
 
     Parameter vectors ``x`` are those of :class:`gyrodeblur.calibration_search.SearchSpace`;
-    each step returns what :func:`gyrodeblur.calibration_search.lm_refine` does."""
+    :meth:`refine` and :meth:`refine_winner` return what
+    :func:`gyrodeblur.calibration_search.lm_refine` does: ``(x, objective, Gauss-Newton
+    Hessian, per-patch scores)``."""
 
     def __init__(self, photos, search: SearchSpace, fix: set, bias_prior: BiasPrior,
                  n_patches: int, n_mappings: int, say):
         self.search, self.fix, self.bias_prior, self.say = search, fix, bias_prior, say
-        c0 = photos[0].cap
-        self.axes0 = c0.axes
-        self.theta0 = Corrections(axes=c0.axes)
+        self.theta0 = Corrections(axes=photos[0].cap.axes)
         # working scales and patches from the blur at the given parameters
         probe = [search.tau_lo, 0.5 * search.tau_lo, 0.0, 0.5 * search.tau_hi, search.tau_hi]
         extent, path = psf_extent_and_path(photos, self.theta0, sorted(set(probe)))
@@ -455,16 +458,16 @@ class _Fit:
             centres += [(i, x, y) for x, y in select_patch_centres(ph, per, int(round(P_f / s_f)))]
         if not centres:
             raise InputError(None, "no textured, unsaturated patch found for calibration")
-        self.stage = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
+        self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
                                   n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
         self.coarse = PatchSpectra(photos, centres, s_c, P_c, rows=(0.0,), envelope=False,
                                    n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)))
-        u = np.array([y / photos[i].H for i, _, y in self.stage.points])
+        u = np.array([y / photos[i].H for i, _, y in self.fine.points])
         # pivot row of the (time shift, readout) parametrisation: the mean patch row, so the
         # two are nearly uncorrelated; with the offset fixed the time shift stays 0
         self.ubar = 0.0 if "offset" in fix else float(u.mean())
         self.uc = u - 0.5
-        say(f"calibrating on {len(centres)} patches of {P_f} px at scale {self.stage.scale:.2f} "
+        say(f"calibrating on {len(centres)} patches of {P_f} px at scale {self.fine.scale:.2f} "
             f"(coarse: {P_c} px at {self.coarse.scale:.2f}; blur ~{extent:.0f} px), "
             f"{n_mappings} axis mapping(s)")
         self.reg = FrameRegistration(photos, extent) if len(photos) > 1 else None
@@ -488,7 +491,6 @@ class _Fit:
         self.caps = np.array([0.004, max(0.15 * search.r0, 0.004), 0.08, 0.03, 0.03, 0.03])
         self.prior_sig = np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
                                    PRIOR_BIAS, PRIOR_BIAS, PRIOR_BIAS])
-        self.twin_message = ""
 
     # -- pieces -------------------------------------------------------------------------
     def theta_of(self, M):
@@ -520,7 +522,7 @@ class _Fit:
 
     def refine(self, M, x0, iters, which=None):
         """Levenberg-Marquardt under mapping ``M`` from ``x0``: (x, f, F, scores)."""
-        return lm_refine(self.stage, self.theta_of(M), x0, self.idx if which is None else which,
+        return lm_refine(self.fine, self.theta_of(M), x0, self.idx if which is None else which,
                          self.lo, self.hi, self.hs, self.caps, self.prior_for(M), iters=iters,
                          extra=self.extra_for(M))
 
@@ -528,7 +530,7 @@ class _Fit:
         """The objective of the given parameters under mapping ``M`` (the bias the prior's),
         and their vector."""
         x0 = np.clip(np.r_[0.0, 0.0, 0.0, self.bias_prior.for_mapping(M)[0]], self.lo, self.hi)
-        return objective(self.stage, self.theta_of(M), x0, self.idx, self.prior_for(M),
+        return objective(self.fine, self.theta_of(M), x0, self.idx, self.prior_for(M),
                          self.extra_for(M)), x0
 
     # -- steps --------------------------------------------------------------------------
@@ -564,10 +566,10 @@ class _Fit:
             tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
             if tm.size == 0:
                 tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
-        self.stage.set_envelope(search.theta_of(self.start_vec(tau0, kap, M), M, self.ubar))
+        self.fine.set_envelope(search.theta_of(self.start_vec(tau0, kap, M), M, self.ubar))
         starts = []
         for fo in self.fgrid:
-            C = self.stage.costs(self.theta0.copy(axes=M, focal=fo,
+            C = self.fine.costs(self.theta0.copy(axes=M, focal=fo,
                                                   bias=self.bias_prior.for_mapping(M)[0]),
                                  taus=tm, rows=(0.0,))
             for kap in self.kappas:
@@ -641,14 +643,14 @@ class _Fit:
     def mirror_twin(self, M, x, given_biases):
         """Mapping ``M`` at ``x`` against its mirror twin at the same parameters (by the
         frame registration when there is one, else by :func:`_phase_prefers_twin`).
-        Returns the mapping taken and, when it is the twin, its refinement (else
-        ``None``); :attr:`twin_message` says why."""
+        Returns the mapping taken, its refinement when it is the twin (else ``None``), and
+        a note that says why."""
         Mt = TWIN @ M
         xt = np.clip(_twin_parameters(x, given_biases, self.fix), self.lo, self.hi)
         th_w = self.search.theta_of(x, M, self.ubar)
         th_t = self.search.theta_of(xt, Mt, self.ubar)
-        per_patch = (self.stage.cost(th_t) - self.stage.cost(th_w)) / len(self.stage.points)
-        d = np.log(self.stage.sparsity(th_t) / self.stage.sparsity(th_w))
+        per_patch = (self.fine.cost(th_t) - self.fine.cost(th_w)) / len(self.fine.points)
+        d = np.log(self.fine.sparsity(th_t) / self.fine.sparsity(th_w))
         margin, sem = _mean_and_error(d)
         msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
                f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
@@ -666,8 +668,7 @@ class _Fit:
             twin = self.refine(Mt, xt, 6)
             msg += f": {axes_to_letters(Mt)} taken"
             M = Mt
-        self.twin_message = msg
-        return M, twin
+        return M, twin, msg
 
 
 def _shrunk_photos(images, captures, factor: float):
@@ -737,14 +738,11 @@ def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
     return xt
 
 
-
-
-
-
-
-
-
-
+def _gyro_noise_level(captures) -> float:
+    """The largest white-noise level (rad/s per sample) of the captures' gyro logs."""
+    levels = [rate_noise(log) for log, _ in logs_with_captures(captures)]
+    levels = [v for v in levels if np.isfinite(v)]
+    return max(levels) if levels else float("nan")
 
 
 def _keep_margin(noise: float) -> float:

@@ -14,23 +14,30 @@ from .calibration_patches import CalibrationPhoto
 from .errors import InputError
 from .spectral_criterion import Corrections, PatchSpectra
 
-__all__ = ["SearchSpace", "psf_extent_and_path", "with_twin", "line_fit", "objective",
-           "lm_refine", "TWIN", "X_NAMES"]
+__all__ = ["SearchSpace", "psf_extent_and_path", "line_fit", "objective",
+           "lm_refine", "X_NAMES"]
 
-#: The mirror twin of a mapping ``M`` is ``TWIN @ M``: the camera's x and y rates negated
-#: (a proper rotation), which nearly reflects every PSF.
-TWIN = np.diag([-1.0, -1.0, 1.0])
 #: Names of the parameter vector's coordinates.
 X_NAMES = ("tmid", "readout", "focal", "bias0", "bias1", "bias2")
 
 
 class SearchSpace:
-    """Everything :func:`calibrate` needs between its stages."""
+    """The parameter space of a calibration: the time shifts the log allows, the free
+    coordinates (those not in ``fix``), their bounds, and vector -> :class:`Corrections`.
 
-    def __init__(self, photos: list[CalibrationPhoto], fix: set, offset_range: float, say):
+    Parameters
+    ----------
+    photos : list of CalibrationPhoto
+        The photos (their captures set the log's coverage and the given readout time).
+    fix : set of str
+        Parameters not estimated (see :data:`gyrodeblur.calibrate.PARAMETERS`).
+    offset_range : float
+        Seconds searched on each side of the given time offset.
+    """
+
+    def __init__(self, photos: list[CalibrationPhoto], fix: set, offset_range: float):
         self.photos = photos
         self.fix = fix
-        self.say = say or (lambda msg: None)
         self.offset_range = float(offset_range)
         c0 = photos[0].cap
         self.r0 = c0.readout_time
@@ -97,17 +104,6 @@ def psf_extent_and_path(photos, theta: Corrections, taus) -> tuple[float, float]
     return float(np.median(ext)), float(np.median(path))
 
 
-def with_twin(top: list, everything: list) -> list:
-    """``top`` (rows whose last item is a mapping) plus the best row holding the mirror
-    twin of its first mapping, when that is not already in."""
-    if not top:
-        return top
-    tw = TWIN @ top[0][-1]
-    if any(np.allclose(tw, r[-1]) for r in top):
-        return list(top)
-    return list(top) + [r for r in everything if np.allclose(r[-1], tw)][:1]
-
-
 def line_fit(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas) -> tuple[float, float, float]:
     """Best ``sum_i C_i(tau0 - kappa u_i)`` over ``tau0`` in ``taus`` and ``kappa`` in
     ``kappas`` (each patch's cost curve ``C[:, i]`` interpolated linearly, held constant
@@ -125,18 +121,18 @@ def line_fit(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas) -> tuple[fl
     return best
 
 
-def objective(stage: PatchSpectra, theta_of, x, idx, prior, extra=None) -> float:
+def objective(spectra: PatchSpectra, theta_of, x, idx, prior, extra=None) -> float:
     """The objective of :func:`lm_refine` at ``x`` (envelopes fitted there)."""
     mu, sig, T = prior
     prec = np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
-    stage.set_envelope(theta_of(x))
-    f = stage.cost(theta_of(x)) / T + 0.5 * float(np.sum(prec[idx] * (x[idx] - mu[idx]) ** 2))
+    spectra.set_envelope(theta_of(x))
+    f = spectra.cost(theta_of(x)) / T + 0.5 * float(np.sum(prec[idx] * (x[idx] - mu[idx]) ** 2))
     if extra is not None:
         f += 0.5 * float(np.sum(extra(x) ** 2))
     return f
 
 
-def lm_refine(stage: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *, iters: int = 8,
+def lm_refine(spectra: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *, iters: int = 8,
                refit_every: int = 2, tol: float = 0.01, extra=None):
     """Levenberg-Marquardt on ``cost / T + prior`` with the patch envelopes held (refitted
     every ``refit_every`` iterations); steps capped per coordinate (``caps``).
@@ -158,7 +154,7 @@ def lm_refine(stage: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *,
         return p
 
     def terms(v):
-        c, g, F, sc = stage.gauss_newton(theta_of, v, idx, hs)
+        c, g, F, sc = spectra.gauss_newton(theta_of, v, idx, hs)
         g = g / T + prec[idx] * (v[idx] - mu[idx])
         F = F / T + np.diag(prec[idx])
         if extra is not None:
@@ -173,11 +169,11 @@ def lm_refine(stage: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *,
                 F = F + J.T @ J
         return c / T + pen(v), g, F, sc / T
 
-    stage.set_envelope(theta_of(x))
+    spectra.set_envelope(theta_of(x))
     lam = 1e-3
     for it in range(iters):
         if it and it % refit_every == 0:
-            stage.set_envelope(theta_of(x))
+            spectra.set_envelope(theta_of(x))
         if not idx:
             break
         c, g, F, _ = terms(x)
@@ -192,7 +188,7 @@ def lm_refine(stage: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *,
             shrink = min(1.0, float(np.min(caps[idx] / np.maximum(np.abs(d), 1e-300))))
             y = x.copy()
             y[idx] = np.clip(x[idx] + shrink * d, lo[idx], hi[idx])
-            fy = stage.cost(theta_of(y)) / T + pen(y)
+            fy = spectra.cost(theta_of(y)) / T + pen(y)
             if fy < c:
                 moved = True
                 break
@@ -203,6 +199,6 @@ def lm_refine(stage: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *,
         lam = max(lam / 10, 1e-6)
         if c - fy < tol:
             break
-    stage.set_envelope(theta_of(x))
+    spectra.set_envelope(theta_of(x))
     c, g, F, sc = terms(x)
     return x, c, F, sc

@@ -14,8 +14,8 @@ import numpy as np
 import scipy.fft as sfft
 
 from .calibration_patches import CalibrationPhoto
-from .orientation import Orientation, quat_multiply, quat_to_matrix
-from .spectral_criterion import CONJUGATE, Corrections
+from .orientation import Orientation, quat_conjugate, quat_multiply, quat_to_matrix
+from .spectral_criterion import Corrections
 
 __all__ = ["FrameRegistration", "phase_shift"]
 
@@ -83,7 +83,7 @@ class FrameRegistration:
         i1 = min(int(np.searchsorted(t, hi)) + 2, t.size)
         w = ca.log.omega[i0:i1] @ theta.axes.T - (ca.bias + theta.bias)
         O = Orientation(t[i0:i1], w, t_a)
-        qref = O.quaternions(np.array([t_a - theta.offset]))[0] * CONJUGATE
+        qref = quat_conjugate(O.quaternions(np.array([t_a - theta.offset]))[0])
         cam = ca.camera
         fx, fy = cam.fx * theta.focal, cam.fy * theta.focal
         gx, gy = np.meshgrid([0.25, 0.5, 0.75], [0.25, 0.5, 0.75])

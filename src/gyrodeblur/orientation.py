@@ -17,6 +17,7 @@ import numpy as np
 __all__ = [
     "Orientation",
     "quat_multiply",
+    "quat_conjugate",
     "quat_from_rotvec",
     "quat_to_matrix",
     "rotvec_to_matrix",
@@ -33,6 +34,12 @@ def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         aw * by - ax * bz + ay * bw + az * bx,
         aw * bz + ax * by - ay * bx + az * bw,
     ], axis=-1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    """Conjugate of quaternions ``(..., 4)`` stored as ``(w, x, y, z)``: the inverse
+    rotation, for unit quaternions."""
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def quat_from_rotvec(v: np.ndarray) -> np.ndarray:
@@ -99,7 +106,7 @@ class Orientation:
             q[k + 1] /= np.linalg.norm(q[k + 1])
         self._q = q
         q_ref = self._interp(np.array([self.t_ref]))[0]
-        self._q_ref_inv = q_ref * np.array([1.0, -1.0, -1.0, -1.0])
+        self._q_ref_inv = quat_conjugate(q_ref)
 
     def _interp(self, times: np.ndarray) -> np.ndarray:
         k = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, self.t.size - 2)

@@ -36,17 +36,15 @@ import scipy.fft as sfft
 
 from .calibration_patches import CalibrationPhoto
 from .capture import Capture
-from .orientation import Orientation, quat_multiply, quat_to_matrix
+from .orientation import Orientation, quat_conjugate, quat_multiply, quat_to_matrix
 
-__all__ = ["Corrections", "PatchSpectra", "whittle_profiled", "envelope_basis", "CONJUGATE"]
+__all__ = ["Corrections", "PatchSpectra", "whittle_profiled", "envelope_basis"]
 
 _SPLAT_SIGMA = 0.75        # px: Gaussian splat of the PSF trace
 _FMAX = 0.42               # cycles/px: frequencies kept (splat aliasing beyond)
 _FMIN_BINS = 2.5           # frequencies below this many bins are dropped (window leakage)
 _ENVELOPE_ITERS = 3        # Fisher-scoring steps of an envelope fitted per evaluation ...
 _ENVELOPE_ITERS_HELD = 6   # ... and of one fitted to be held
-#: Multiplies a unit quaternion (w, x, y, z) into its conjugate (inverse).
-CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
 
 
 @dataclass
@@ -180,7 +178,7 @@ class PatchSpectra:
             T = tref + readout * arr[:, 2:3] / cap.camera.height + cap.exposure_time * s[None, :]
             O = self._orientation(i, theta, min(T.min(), tref) - taus.max(),
                                   max(T.max(), tref) - taus.min())
-            qref = O.quaternions(tref - taus) * CONJUGATE
+            qref = quat_conjugate(O.quaternions(tref - taus))
             q = O.quaternions(T - taus[:, None])
             R = quat_to_matrix(quat_multiply(qref[:, None, :], q))       # (b, n, 3, 3)
             c = cap.camera
