@@ -193,6 +193,9 @@ _DISTINCT_READOUT = 0.006
 _SCAN_STEP = 0.002
 _SCAN_REACH = 0.006
 _SCAN_REFINED = 2
+#: Readout corrections (fractions of the given readout time) scanned at the winner's
+#: mid-row time.
+_READOUT_SCAN = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 #: Objective gap (tempered nats) to the next best mapping under which the chosen axis
 #: mapping is reported as uncertain. On the 24-case calibration benchmark (session 4) the
 #: three wrong mappings had gaps of 3.6-4.9, every gap of 8.9 or more was right, and five
@@ -633,6 +636,22 @@ class _Fit:
                     continue
                 tried.add(round(float(xs0[0]), 6))
                 scan.append(self.refine(M, xs0, 4)[:2])
+            scan.sort(key=lambda r: r[1])
+            for xs0, _ in scan[:_SCAN_REFINED]:
+                xa, fa, Fa, sca = self.refine(M, xs0, 10)
+                if fa < fx:
+                    x, fx, Fm, sc = xa, fa, Fa, sca
+        # And readout times across the prior's range at the winner's mid-row time: with the
+        # rows between well timed, a readout 30-40 % off can sit in a basin of its own
+        # (the top and bottom patches then fit other parts of the trace).
+        if "readout" not in self.fix and self.search.r0 > 0:
+            r0, scan = self.search.r0, []
+            for fr in _READOUT_SCAN:
+                if abs(fr * r0 - x[1]) < 0.05 * r0:
+                    continue
+                xs0 = x.copy()
+                xs0[1] = fr * r0
+                scan.append(self.refine(M, np.clip(xs0, lo, hi), 4)[:2])
             scan.sort(key=lambda r: r[1])
             for xs0, _ in scan[:_SCAN_REFINED]:
                 xa, fa, Fa, sca = self.refine(M, xs0, 10)
