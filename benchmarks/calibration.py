@@ -63,7 +63,7 @@ import _common  # noqa: E402
 from gyrodeblur.axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes  # noqa: E402
 from gyrodeblur.calibrate import calibrate  # noqa: E402
 from gyrodeblur.calibrate_cli import format_estimates  # noqa: E402
-from gyrodeblur.dataset import default_shared_data  # noqa: E402
+from gyrodeblur.dataset import default_gyro  # noqa: E402
 from gyrodeblur.deblur import deblur  # noqa: E402
 from gyrodeblur.errors import InputError  # noqa: E402
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log  # noqa: E402
@@ -214,7 +214,7 @@ def with_long_logs(cases, seconds: float, gyro=None) -> list:
     around the excerpt, which stays as it is (the blur was made from it)."""
     from dataclasses import replace
 
-    trace = read_gyro_log(gyro or default_shared_data() / "gyro" / "handheld_phone_210hz.csv")
+    trace = read_gyro_log(gyro or default_gyro())
     out = []
     for case in cases:
         cap, ex = case.capture, case.capture.log

@@ -11,9 +11,9 @@ quadrature, what the camera's own turning may leave: 0.05 rad over the log's len
 least :data:`_LOG_FLOOR`) becomes a second Gaussian on the bias, combined with the given
 bias's. Each candidate mapping turns it into its own camera frame
 (:meth:`BiasPrior.for_mapping`); :mod:`gyrodeblur.calibrate` starts its searches from the
-prior's centre, and its "given parameters" carry it. But a given bias is either right (a calibrated gyro, ``"auto"`` from the same
-log) or off, and moving a right one by the log's own error (the hand's mean rate) would
-only add that error: so the log's rate first decides, by its likelihood ratio, how likely
+prior's centre, and its "given parameters" carry it. But a given bias is either right (a
+calibrated gyro, ``"auto"`` from the same log) or off, and moving a right one by the log's
+own error (the hand's mean rate) would only add that error: so the log's rate first decides, by its likelihood ratio, how likely
 the given bias is to be off (even odds before), and the prior is the mixture of "right"
 and "off" (:func:`bias_from_log`). (On the benchmark's correct captures with 10 s of the
 shaken trace either side, centring on the log always cost 0.6-4 dB on five of the photos

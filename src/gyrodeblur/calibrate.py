@@ -315,8 +315,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     # 1. coarse: every mapping x time shifts per patch, combined along a line (time offset +
     #    readout error x row); the two rankings take turns in the shortlist
     rankings = fit.coarse_rankings(cand)
-    ranking = [(axes_to_letters(r[4]) or "given", float(r[0] - rankings[-1][0][0]))
-               for r in rankings[-1]]
+    ranking = _relative(rankings[-1])
     short = _shortlist(rankings)
     # 2. candidates at full working scale, the best refined further
     top = _with_twin(short[:_CANDIDATES], rankings[0])
@@ -417,6 +416,11 @@ def _with_twin(top: list, everything: list) -> list:
     if any(np.allclose(tw, r[-1]) for r in top):
         return list(top)
     return list(top) + [r for r in everything if np.allclose(r[-1], tw)][:1]
+
+
+def _relative(scored: list) -> list[tuple[str, float]]:
+    """``(letters, score relative to the best)`` of a coarse ranking's rows (best first)."""
+    return [(axes_to_letters(r[4]) or "given", float(r[0] - scored[0][0])) for r in scored]
 
 
 def _shortlist(rankings: list) -> list:
@@ -554,7 +558,7 @@ class _Fit:
                 scored.append((tot, tau0, kap, 1.0, M))
             scored.sort(key=lambda r: r[0])
             rankings.append(scored)
-            ranking = [(axes_to_letters(r[4]) or "given", float(r[0] - scored[0][0])) for r in scored]
+            ranking = _relative(scored)
             self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
                      + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
         return rankings
@@ -605,13 +609,11 @@ class _Fit:
         """The winning mapping's refinement from its best start, its other starts, the
         given focal length and bias, and time shifts around its own: the lowest objective
         (x, f, F, scores)."""
-        x, fx, Fm, sc = self.refine(M, x, 10)
+        best = self.refine(M, x, 10)
         # The winner's other starts, refined as far: four iterations do not always tell which
         # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
         for xa in alts:
-            xa, fa, Fa, sca = self.refine(M, xa, 10)
-            if fa < fx:
-                x, fx, Fm, sc = xa, fa, Fa, sca
+            best = _lowest(best, self.refine(M, xa, 10))
         # Focal length and a bias along the motion trade off (see Criterion), and the valley
         # between them holds several local minima: the coarse start's focal guess can leave
         # the refinement in one far from the given values. So the winner is refined once more
@@ -620,47 +622,47 @@ class _Fit:
         # objective is kept.
         idx, lo, hi = self.idx, self.lo, self.hi
         b_prior = self.bias_prior.for_mapping(M)[0]
+        x = best[0]
         if any(j >= 2 for j in idx) and np.any(x[2:] != np.r_[0.0, b_prior]):
             xs = x.copy()
             xs[2:] = np.r_[0.0, b_prior]
             xs = self.refine(M, np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
-            xa, fa, Fa, sca = self.refine(M, xs, 10)
-            if fa < fx:
-                x, fx, Fm, sc = xa, fa, Fa, sca
+            best = _lowest(best, self.refine(M, xs, 10))
         # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from
         # the given (prior) values of the other parameters: the coarse start's line fits can
         # miss a nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined
         # as far.
         if "offset" not in self.fix:
-            scan, tried = [], {round(float(x[0]), 6)}
+            x = best[0]
+            starts, tried = [], {round(float(x[0]), 6)}
             for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
                 xs0 = np.clip(np.r_[x[0] + dt, 0.0, 0.0, b_prior], lo, hi)
                 if round(float(xs0[0]), 6) in tried:   # the winner's own, or clipped to a bound
                     continue
                 tried.add(round(float(xs0[0]), 6))
-                scan.append(self.refine(M, xs0, 4)[:2])
-            scan.sort(key=lambda r: r[1])
-            for xs0, _ in scan[:_SCAN_REFINED]:
-                xa, fa, Fa, sca = self.refine(M, xs0, 10)
-                if fa < fx:
-                    x, fx, Fm, sc = xa, fa, Fa, sca
+                starts.append(xs0)
+            best = self._scan(M, starts, best)
         # And readout times across the prior's range at the winner's mid-row time: with the
         # rows between well timed, a readout 30-40 % off can sit in a basin of its own
         # (the top and bottom patches then fit other parts of the trace).
         if "readout" not in self.fix and self.search.r0 > 0:
-            r0, scan = self.search.r0, []
+            x, r0, starts = best[0], self.search.r0, []
             for fr in _READOUT_SCAN:
                 if abs(fr * r0 - x[1]) < 0.05 * r0:
                     continue
                 xs0 = x.copy()
                 xs0[1] = fr * r0
-                scan.append(self.refine(M, np.clip(xs0, lo, hi), 4)[:2])
-            scan.sort(key=lambda r: r[1])
-            for xs0, _ in scan[:_SCAN_REFINED]:
-                xa, fa, Fa, sca = self.refine(M, xs0, 10)
-                if fa < fx:
-                    x, fx, Fm, sc = xa, fa, Fa, sca
-        return x, fx, Fm, sc
+                starts.append(np.clip(xs0, lo, hi))
+            best = self._scan(M, starts, best)
+        return best
+
+    def _scan(self, M, starts, best):
+        """``starts`` refined four iterations each, the best :data:`_SCAN_REFINED` of them
+        refined as far as the winner: the lowest objective of those and ``best``."""
+        scan = sorted((self.refine(M, xs0, 4)[:2] for xs0 in starts), key=lambda r: r[1])
+        for xs0, _ in scan[:_SCAN_REFINED]:
+            best = _lowest(best, self.refine(M, xs0, 10))
+        return best
 
     def mirror_twin(self, M, x, given_biases):
         """Mapping ``M`` at ``x`` against its mirror twin at the same parameters (by the
@@ -724,6 +726,12 @@ def _shrunk(image: np.ndarray, factor: float) -> np.ndarray:
         return np.stack([cv2.resize(img[..., c], size, interpolation=cv2.INTER_AREA)
                          for c in range(img.shape[2])], axis=2)
     return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+
+
+def _lowest(a: tuple, b: tuple) -> tuple:
+    """Of two refinements ``(x, objective, ...)``, the one with the lower objective (``a``
+    on a tie)."""
+    return b if b[1] < a[1] else a
 
 
 def _mean_and_error(d: np.ndarray) -> tuple[float, float]:

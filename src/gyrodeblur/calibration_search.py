@@ -80,7 +80,7 @@ class SearchSpace:
 
     def theta_of(self, x: np.ndarray, axes: np.ndarray, ubar: float) -> Corrections:
         return Corrections(axes=axes, offset=float(x[0] + ubar * x[1]), readout=float(x[1]),
-                      focal=float(np.exp(x[2])), bias=np.array(x[3:6], float))
+                           focal=float(np.exp(x[2])), bias=np.array(x[3:6], float))
 
     def bounds(self, ubar: float):
         r0 = self.r0
@@ -121,15 +121,27 @@ def line_fit(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas) -> tuple[fl
     return best
 
 
+def _penalty(prior, idx, extra):
+    """The objective's part beside the tempered cost, as a function of ``x``: the Gaussian
+    priors on the coordinates ``idx`` and the ``extra`` residuals; and the priors'
+    precisions (0 where flat)."""
+    mu, sig, _ = prior
+    prec = np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
+
+    def pen(v):
+        p = 0.5 * float(np.sum(prec[idx] * (v[idx] - mu[idx]) ** 2))
+        if extra is not None:
+            p += 0.5 * float(np.sum(extra(v) ** 2))
+        return p
+
+    return pen, prec
+
+
 def objective(spectra: PatchSpectra, theta_of, x, idx, prior, extra=None) -> float:
     """The objective of :func:`lm_refine` at ``x`` (envelopes fitted there)."""
-    mu, sig, T = prior
-    prec = np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
+    pen, _ = _penalty(prior, list(idx), extra)
     spectra.set_envelope(theta_of(x))
-    f = spectra.cost(theta_of(x)) / T + 0.5 * float(np.sum(prec[idx] * (x[idx] - mu[idx]) ** 2))
-    if extra is not None:
-        f += 0.5 * float(np.sum(extra(x) ** 2))
-    return f
+    return spectra.cost(theta_of(x)) / prior[2] + pen(x)
 
 
 def lm_refine(spectra: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *, iters: int = 8,
@@ -142,16 +154,10 @@ def lm_refine(spectra: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, 
 
     Returns ``x``, the objective, its Gauss-Newton Hessian and the per-patch scores (both
     for the free coordinates ``idx``, tempered)."""
-    mu, sig, T = prior
+    mu, _, T = prior
     idx = list(idx)
     x = np.array(x, float)
-    prec = np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
-
-    def pen(v):
-        p = 0.5 * float(np.sum(prec[idx] * (v[idx] - mu[idx]) ** 2))
-        if extra is not None:
-            p += 0.5 * float(np.sum(extra(v) ** 2))
-        return p
+    pen, prec = _penalty(prior, idx, extra)
 
     def terms(v):
         c, g, F, sc = spectra.gauss_newton(theta_of, v, idx, hs)

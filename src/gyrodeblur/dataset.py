@@ -56,6 +56,7 @@ __all__ = [
     "write_case",
     "load_case",
     "load_dataset",
+    "default_gyro",
     "list_photos",
     "find_gaps",
     "draw_window",
@@ -99,7 +100,8 @@ def _default_photos() -> Path:
     return default_shared_data() / "photos"
 
 
-def _default_gyro() -> Path:
+def default_gyro() -> Path:
+    """The hand-held gyro trace the benchmark cases are blurred with (shared data)."""
     return default_shared_data() / "gyro" / "handheld_phone_210hz.csv"
 
 
@@ -349,7 +351,7 @@ def build_cases(photos=None, gyro=None, *, exposure=DEFAULTS["exposure"],
     if isinstance(gyro, GyroLog):
         log = gyro
     else:
-        log = read_gyro_log(gyro or _default_gyro(), gyro_format)
+        log = read_gyro_log(gyro or default_gyro(), gyro_format)
     gaps = find_gaps(log)
     e_lo, e_hi = _exposure_range(exposure)
     if readout < 0:
