@@ -44,8 +44,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur import deblur as deblur_mod  # noqa: E402
-from gyrodeblur.dataset import (default_shared_data, find_gaps, plan_window,  # noqa: E402
-                                read_sharp, render_case)
+from gyrodeblur.dataset import (default_gyro, default_shared_data, find_gaps,  # noqa: E402
+                                plan_window, read_sharp, render_case)
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log  # noqa: E402
 from gyrodeblur.metrics import default_border, psnr, ssim  # noqa: E402
 
@@ -72,7 +72,7 @@ def pick_case(args):
     data = default_shared_data()
     photos = Path(args.photos) if args.photos else data / "photos"
     path = Path(args.photo) if Path(args.photo).is_file() else photos / args.photo
-    log = read_gyro_log(args.gyro or data / "gyro" / "handheld_phone_210hz.csv")
+    log = read_gyro_log(args.gyro or default_gyro())
     sharp = read_sharp(path, args.max_size)
     h, w = sharp.shape[:2]
     gaps = find_gaps(log)

@@ -35,8 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur.calibrate import calibrate  # noqa: E402
-from gyrodeblur.dataset import (default_shared_data, find_gaps, plan_window,  # noqa: E402
-                                read_sharp, render_case)
+from gyrodeblur.dataset import (default_gyro, default_shared_data, find_gaps,  # noqa: E402
+                                plan_window, read_sharp, render_case)
 from gyrodeblur.deblur import deblur  # noqa: E402
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log  # noqa: E402
 from gyrodeblur.metrics import default_border, psnr  # noqa: E402
@@ -49,7 +49,7 @@ TARGET_DB = 1.0
 def pick_case(photo: str, max_size: int, windows: int, seed: int):
     data = default_shared_data()
     path = Path(photo) if Path(photo).is_file() else data / "photos" / photo
-    log = read_gyro_log(data / "gyro" / "handheld_phone_210hz.csv")
+    log = read_gyro_log(default_gyro())
     sharp = read_sharp(path, max_size)
     h, w = sharp.shape[:2]
     gaps = find_gaps(log)

@@ -71,10 +71,10 @@ def _maxrss_mib() -> float:
 def _capture(height: int, width: int):
     """A capture with real shake: of the first 7 windows of the log (seed 0), the one
     whose centre blur is the median."""
-    from gyrodeblur.dataset import default_shared_data, find_gaps, plan_window
+    from gyrodeblur.dataset import default_gyro, find_gaps, plan_window
     from gyrodeblur.gyrolog import read_gyro_log
 
-    path = default_shared_data() / "gyro" / "handheld_phone_210hz.csv"
+    path = default_gyro()
     if path.exists():
         log, source, axes = read_gyro_log(path), "shared handheld_phone_210hz.csv", "Xyz"
     else:
