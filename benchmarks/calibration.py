@@ -39,11 +39,16 @@ Usage::
     python benchmarks/calibration.py --dataset DIR   # a dataset folder (built if absent)
     python benchmarks/calibration.py --cases 6 --max-size 768
     python benchmarks/calibration.py --sessions      # each photo's windows as one session
+    python benchmarks/calibration.py --burst         # each case and the next frame of a burst
 
 With ``--sessions`` the windows of each source photo are one session's photos: one set of
 errors is injected into all their captures (a session's seeds differ from the single-photo
 run's), ``calibrate`` sees them together, and ``seconds`` is the session's time. Windows
-under 2 s apart are left out of a session (:func:`group_sessions`).
+under 2 s apart are left out of a session (:func:`group_sessions`). With ``--burst`` each
+case is one session with the frame a camera would take next (:func:`burst_partner`: the same
+scene 1/30 s later, from the same log), so ``calibrate`` also registers the two frames to
+each other, as it does a real burst's; the errors injected are the single-photo run's for
+that case.
 
 Writes ``benchmarks/results/calibration.json`` (``--out``).
 """
@@ -250,6 +255,42 @@ def group_sessions(cases, *, say=None, min_apart: float = 2.0) -> list[list]:
     return list(groups.values())
 
 
+def burst_partner(case, interval: float | None = None):
+    """The frame after ``case``'s in a burst: the same scene, exposed ``interval`` seconds
+    later (default: 1/30 s, or the exposure time plus 1 ms when that is longer), at the
+    camera's orientation then.
+
+    Its sharp image is the case's warped to the orientation at the new frame's first row
+    (a scene point at ``x0`` in the case's reference is at ``K R^T K^-1 x0``; sampled
+    bicubically in linear light, mirrored outside the frame), then blurred from its own
+    capture like every case (:func:`gyrodeblur.dataset.render_case`; the noise seed is the
+    case's plus one). The two frames share the log, so ``calibrate`` registers them."""
+    from scipy import ndimage
+
+    from gyrodeblur.dataset import render_case
+    from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
+    from gyrodeblur.simulate import quantize_8bit
+
+    cap = case.capture
+    dt = interval if interval is not None else max(1 / 30, cap.exposure_time + 0.001)
+    nxt = cap.replace(exposure_start=cap.exposure_start + dt)
+    cam = cap.camera
+    Hm = cam.K @ cap.orientation.matrices(np.array([nxt.exposure_start]))[0] @ cam.K_inv
+    h, w = case.sharp.shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    den = Hm[2, 0] * xs + Hm[2, 1] * ys + Hm[2, 2]
+    coords = np.stack([(Hm[1, 0] * xs + Hm[1, 1] * ys + Hm[1, 2]) / den,
+                       (Hm[0, 0] * xs + Hm[0, 1] * ys + Hm[0, 2]) / den])
+    lin = srgb_to_linear(case.sharp).reshape(h, w, -1)
+    warped = np.stack([ndimage.map_coordinates(lin[..., c], coords, order=3, mode="mirror")
+                       for c in range(lin.shape[2])], axis=2).reshape(case.sharp.shape)
+    sharp = quantize_8bit(np.clip(linear_to_srgb(np.clip(warped, 0, 1)), 0, 1))
+    meta = {**case.meta, "burst_of": case.name, "burst_interval": dt,
+            "noise_seed": int(case.meta.get("noise_seed", 0)) + 1}
+    return render_case(case.name + "_next", sharp, nxt, meta,
+                       snr_db=case.meta.get("snr_db", 40.0))
+
+
 def field_aligned(restored: np.ndarray, estimated, true) -> np.ndarray:
     """``restored`` (deblurred with the ``estimated`` capture) moved to where the ``true``
     capture puts its result: resampled at ``x - (d_est(x) - d_true(x))``, with ``d`` the
@@ -338,6 +379,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sessions", action="store_true",
                     help="calibrate the windows of each photo together, as one session's "
                          "photos sharing one set of injected errors")
+    ap.add_argument("--burst", action="store_true",
+                    help="calibrate each case with the next frame of a burst (the same scene "
+                         "1/30 s later, see burst_partner) as one session: the two frames are "
+                         "registered to each other")
     ap.add_argument("--log-seconds", type=float, default=None,
                     help="give each capture this many seconds of the source gyro trace on "
                          "each side of its exposure (default: the dataset's 0.3 s); with 8 s "
@@ -350,8 +395,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="JSON report (default: results/calibration.json, or "
                          "results/calibration_sessions.json with --sessions)")
     args = ap.parse_args(argv)
+    if args.burst and args.sessions:
+        ap.error("--burst and --sessions are different sessions: give one")
     if args.out is None:
-        stem = "calibration_sessions" if args.sessions else "calibration"
+        stem = ("calibration_sessions" if args.sessions
+                else "calibration_burst" if args.burst else "calibration")
         if args.log_seconds is not None:
             stem += f"_log{args.log_seconds:g}s"
         if args.no_errors:
@@ -376,13 +424,17 @@ def main(argv: list[str] | None = None) -> int:
     rows, session_secs = [], []
     injected = ("nothing injected" if args.no_errors
                 else f"errors injected with seed {args.seed}")
-    if args.sessions:
-        sessions = group_sessions(cases, say=say)
+    if args.sessions or args.burst:
+        if args.burst:
+            sessions = [[case, burst_partner(case)] for case in cases]
+        else:
+            sessions = group_sessions(cases, say=say)
         cases = [c for g in sessions for c in g]
         say(f"calibration benchmark: {len(cases)} photo(s) in {len(sessions)} session(s), "
             f"{injected}")
         for k, group in enumerate(sessions):
-            rng = np.random.default_rng([args.seed, 7, k])
+            # a burst gets its case's single-photo errors (a paired comparison)
+            rng = np.random.default_rng([args.seed, 6 if args.burst else 7, k])
             got = run_session(group, rng, say=say, method=args.method,
                               n_patches=args.patches, no_errors=args.no_errors)
             rows += got
@@ -394,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(run_case(case, rng, say=say, method=args.method,
                                  n_patches=args.patches, no_errors=args.no_errors))
     summary = summarise(rows)
-    if args.sessions:
+    if args.sessions or args.burst:
         summary["sessions"] = len(sessions)
         summary["seconds"] = {"mean": float(np.mean(session_secs)),
                               "max": float(np.max(session_secs)), "per": "session"}
@@ -407,7 +459,8 @@ def main(argv: list[str] | None = None) -> int:
     if "offset_abs_error_ms" in s:
         report(dict(s, cases=s["calibrated"]), say)
     result = {"benchmark": "calibration", "quick": args.quick, "seed": args.seed,
-              "mode": "sessions" if args.sessions else "single photos",
+              "mode": ("sessions" if args.sessions else "bursts" if args.burst
+                       else "single photos"),
               "log_seconds": args.log_seconds, "no_errors": args.no_errors,
               "targets": TARGETS, "summary": summary, "cases": rows,
               "total_seconds": time.perf_counter() - t_start, "machine": _common.machine_info()}

@@ -158,3 +158,49 @@ def test_calibration_of_true_captures_with_long_logs_quick(tmp_path):
         assert any("typical rate over" in note for note in row["notes"]), row["notes"]
         assert row["axes_correct"] and abs(row["offset_error_ms"]) < 1, row["estimates"]
         assert np.max(np.abs(row["bias_error"])) < 0.01, row["bias_error"]
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_calibration_burst_quick(tmp_path):
+    """--burst calibrates a photo with its next frame: one session, the photo's own
+    injected errors for both, and the two frames registered to each other."""
+    _need_shared()
+    out = tmp_path / "cal.json"
+    assert _load("calibration").main(["--quick", "--burst", "--cases", "1",
+                                      "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    first, nxt = r["cases"]
+    assert r["mode"] == "bursts" and r["summary"]["sessions"] == 1
+    assert nxt["case"] == first["case"] + "_next"
+    assert first["injected"] == nxt["injected"] and first["seconds"] == nxt["seconds"]
+    assert any("registration chi2" in note for note in first["notes"]), first["notes"]
+    for row in (first, nxt):
+        assert row["axes_correct"] and abs(row["offset_error_ms"]) < 3, row["estimates"]
+
+
+def test_burst_partner_is_the_scene_seen_one_frame_later():
+    """A camera yawing right at 0.6 rad/s turns 0.02 rad in 1/30 s: the next frame's sharp
+    image is the scene moved by -f tan(0.02) = -6.0 px in x (f = 300 px), and it is blurred
+    from a capture that starts 1/30 s later."""
+    from scipy import ndimage
+
+    from conftest import constant_rate_capture
+    from gyrodeblur.dataset import render_case
+    from gyrodeblur.frame_registration import phase_shift
+
+    cal = _load("calibration")
+    rng = np.random.default_rng(3)
+    sharp = ndimage.gaussian_filter(rng.random((120, 160)), 2.0)
+    sharp = np.round(255 * (0.1 + 0.8 * (sharp - sharp.min()) / np.ptp(sharp))) / 255
+    cap = constant_rate_capture((0.0, 0.6, 0.0), width=160, height=120, f=300.0,
+                                exposure=0.01)
+    case = render_case("toy_w0", sharp.astype(np.float32), cap, {"noise_seed": 1},
+                       snr_db=None)
+    nxt = cal.burst_partner(case)
+    assert nxt.name == "toy_w0_next" and nxt.meta["burst_of"] == "toy_w0"
+    assert nxt.capture.exposure_start == pytest.approx(cap.exposure_start + 1 / 30)
+    d, _ = phase_shift(case.sharp, nxt.sharp)
+    assert d == pytest.approx([-300 * np.tan(0.02), 0.0], abs=0.15)
+    # the next frame's blur is its own capture's: a 0.006 rad streak, 1.8 px, along x
+    d_blur, _ = phase_shift(nxt.sharp, nxt.blurred)
+    assert d_blur[0] == pytest.approx(-0.9, abs=0.3) and abs(d_blur[1]) < 0.2
