@@ -267,7 +267,7 @@ def burst_partner(case, interval: float | None = None):
     case's plus one). The two frames share the log, so ``calibrate`` registers them."""
     from scipy import ndimage
 
-    from gyrodeblur.dataset import render_case
+    from gyrodeblur.dataset import render_case, shake_stats
     from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
     from gyrodeblur.simulate import quantize_8bit
 
@@ -285,8 +285,10 @@ def burst_partner(case, interval: float | None = None):
     warped = np.stack([ndimage.map_coordinates(lin[..., c], coords, order=3, mode="mirror")
                        for c in range(lin.shape[2])], axis=2).reshape(case.sharp.shape)
     sharp = quantize_8bit(np.clip(linear_to_srgb(np.clip(warped, 0, 1)), 0, 1))
-    meta = {**case.meta, "burst_of": case.name, "burst_interval": dt,
+    meta = {**case.meta, **shake_stats(nxt), "burst_of": case.name, "burst_interval": dt,
             "noise_seed": int(case.meta.get("noise_seed", 0)) + 1}
+    if "window_start" in meta:
+        meta["window_start"] += dt
     return render_case(case.name + "_next", sharp, nxt, meta,
                        snr_db=case.meta.get("snr_db", 40.0))
 
