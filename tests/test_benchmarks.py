@@ -214,3 +214,32 @@ def test_burst_partner_is_the_scene_seen_one_frame_later():
     # the next frame's blur is its own capture's: a 0.006 rad streak, 1.8 px, along x
     d_blur, _ = phase_shift(nxt.sharp, nxt.blurred)
     assert d_blur[0] == pytest.approx(-0.9, abs=0.3) and abs(d_blur[1]) < 0.2
+
+
+def test_burst_partner_is_referenced_to_the_next_frames_first_row():
+    """With a rolling shutter and a yaw rate ramping up (0.3 rad/s + 30 rad/s^2 t), the
+    next frame's reference is its first row's start, 1/30 s after this frame's: the camera
+    turned 0.3/30 + 30/(2 * 30^2) = 0.0267 rad in between (a reference at the middle row,
+    10 ms of readout later, would add 0.01 rad: 3 px more)."""
+    from scipy import ndimage
+
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.dataset import render_case
+    from gyrodeblur.frame_registration import phase_shift
+    from gyrodeblur.gyrolog import GyroLog
+
+    cal = _load("calibration")
+    rng = np.random.default_rng(5)
+    sharp = ndimage.gaussian_filter(rng.random((120, 160)), 2.0)
+    sharp = np.round(255 * (0.1 + 0.8 * (sharp - sharp.min()) / np.ptp(sharp))) / 255
+    t = np.arange(0.0, 0.2, 1 / 400)
+    start = 0.05
+    w = np.zeros((t.size, 3))
+    w[:, 1] = 0.3 + 30.0 * (t - start)
+    cap = Capture(start, 0.01, 0.02, Camera.centred(160, 120, 300.0), GyroLog(t, w))
+    case = render_case("ramp_w0", sharp.astype(np.float32), cap, {"noise_seed": 1},
+                       snr_db=None)
+    d, _ = phase_shift(case.sharp, cal.burst_partner(case).sharp)
+    turn = 0.3 / 30 + 30.0 / (2 * 30 ** 2)
+    assert d == pytest.approx([-300 * np.tan(turn), 0.0], abs=0.3)
