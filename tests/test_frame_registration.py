@@ -21,6 +21,26 @@ def test_phase_shift_finds_a_known_translation(d):
     assert prominence > 3.0
 
 
+def test_phase_shift_of_differently_blurred_photos_reads_the_centroid_difference():
+    """Photo a blurred by a 21 px streak to the right (centroid +10 px), photo b by a 31 px
+    streak to the left (centroid -15 px) and moved by (7, -3): low-passed inside the
+    streaks' main spectral lobe, the shift is the content's plus the centroids'
+    difference, (7 - 15 - 10, -3)."""
+    rng = np.random.default_rng(4)
+    u = ndimage.gaussian_filter(rng.normal(size=(256, 320)), 1.0)
+
+    def streak(img, start, stop):
+        k = np.zeros(img.shape)
+        k[0, np.arange(start, stop + 1) % img.shape[1]] = 1.0
+        return np.real(np.fft.ifft2(np.fft.fft2(img) * np.fft.fft2(k / k.sum())))
+
+    a = streak(u, 0, 20)
+    b = np.roll(streak(u, -30, 0), (-3, 7), axis=(0, 1))
+    found, prominence = phase_shift(a, b, lowpass=0.25 / 31)
+    assert np.allclose(found, (-18.0, -3.0), atol=0.6), found    # at 0.1: -13.0
+    assert prominence > 3.0
+
+
 def test_phase_shift_of_unrelated_images_has_no_clear_peak():
     rng = np.random.default_rng(2)
     a = ndimage.gaussian_filter(rng.normal(size=(200, 260)), 2.0)

@@ -19,21 +19,33 @@ from .spectral_criterion import Corrections
 
 __all__ = ["FrameRegistration", "phase_shift"]
 
+#: Low-pass of the phase correlation between photos (cycles per thumbnail pixel) times
+#: the blur extent (thumbnail pixels): well inside the PSFs' main spectral lobe.
+_LOWPASS_BLUR = 0.25
 
-def phase_shift(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
-    """Translation ``d`` (x, y) with ``b(x) ~ a(x - d)`` by phase correlation (whitened
-    cross-power, Gaussian low-pass at 0.1 cycles/px so that JPEG block edges, which do not
-    move, do not win), and the peak's prominence (peak over the 99.9th percentile)."""
+
+def phase_shift(a: np.ndarray, b: np.ndarray, lowpass: float = 0.1) -> tuple[np.ndarray, float]:
+    """Translation ``d`` (x, y) with ``b(x) ~ a(x - d)`` by phase correlation, and the
+    peak's prominence (peak over the 99.9th percentile).
+
+    The whitened cross-power is low-passed (Gaussian) at 0.1 cycles/px, so that JPEG block
+    edges, which do not move, do not win, and the prominence is measured there. The shift
+    is read off the peak low-passed at ``lowpass`` (cycles/px; at most 0.1): two photos
+    blurred differently differ in phase by the difference of their PSFs, which is the
+    difference of their centroids only well inside the PSFs' main spectral lobe (beyond it
+    the phase jumps by pi where the OTF changes sign: on the calibration benchmark's bursts
+    the 0.1-peak was up to 15 px away from it)."""
     h, w = a.shape
     win = np.outer(np.hanning(h), np.hanning(w))
     A = sfft.fft2((a - a.mean()) * win)
     Bf = sfft.fft2((b - b.mean()) * win)
     R = Bf * np.conj(A)
     R /= np.maximum(np.abs(R), 1e-12)
-    fy = sfft.fftfreq(h)[:, None]
-    fx = sfft.fftfreq(w)[None, :]
-    R *= np.exp(-(fx ** 2 + fy ** 2) / (2 * 0.1 ** 2))    # JPEG blocks and noise: low-pass
-    r = np.real(sfft.ifft2(R))
+    f2 = sfft.fftfreq(h)[:, None] ** 2 + sfft.fftfreq(w)[None, :] ** 2
+    r = np.real(sfft.ifft2(R * np.exp(-f2 / (2 * 0.1 ** 2))))
+    prominence = float(r.max() / max(np.percentile(r, 99.9), 1e-12))
+    if lowpass < 0.1:
+        r = np.real(sfft.ifft2(R * np.exp(-f2 / (2 * lowpass ** 2))))
     iy, ix = np.unravel_index(int(np.argmax(r)), r.shape)
     peak = r[iy, ix]
 
@@ -45,7 +57,7 @@ def phase_shift(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
     dx = ix + sub(r[iy, (ix - 1) % w], peak, r[iy, (ix + 1) % w])
     dy = dy - h if dy > h / 2 else dy
     dx = dx - w if dx > w / 2 else dx
-    return np.array([dx, dy]), float(peak / max(np.percentile(r, 99.9), 1e-12))
+    return np.array([dx, dy]), prominence
 
 
 class FrameRegistration:
@@ -64,15 +76,16 @@ class FrameRegistration:
                 continue
             ta, _, k = pa.thumbnail()
             tb, _, _ = pb.thumbnail()
-            d, q = phase_shift(ta.astype(np.float64), tb.astype(np.float64))
+            d, q = phase_shift(ta.astype(np.float64), tb.astype(np.float64),
+                               min(0.1, _LOWPASS_BLUR * k / max(extent, 1.0)))
             if q < 3.0:
                 continue
-            # The measured shift's error: two differently blurred photos differ in phase
-            # beyond their PSFs' main lobes too, which moves the peak away from the
-            # difference of their centroids that predict() gives. On 24 synthetic bursts
-            # (benchmarks/calibration.py --burst) the residuals at the true parameters were
-            # 0.6 px rms per axis for blurs under 12 px, 3.9 for 12-24 px, 6.6 for 24-60 px.
-            sigma = max(2.0, 0.25 * extent)
+            # The measured shift's error, read off the blur-adapted low-pass: on 24
+            # synthetic bursts (benchmarks/calibration.py --burst) the residuals at the
+            # true parameters were 0.4 px rms per axis for blurs under 12 px, 0.9 px for
+            # 12-24 px and 1.9 px for 24-60 px (at the former fixed 0.1 low-pass: 0.6, 3.9
+            # and 6.6 px).
+            sigma = max(2.0, 0.1 * extent)
             self.pairs.append((a, b, d * k, sigma, q))
 
     def predict(self, theta: Corrections, a: int, b: int) -> np.ndarray:
