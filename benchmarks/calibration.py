@@ -268,8 +268,8 @@ def burst_partner(case, interval: float | None = None):
     from scipy import ndimage
 
     from gyrodeblur.dataset import render_case, shake_stats
-    from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
     from gyrodeblur.simulate import quantize_8bit
+    from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
     cap = case.capture
     dt = interval if interval is not None else max(1 / 30, cap.exposure_time + 0.001)

@@ -188,23 +188,27 @@ def test_calibration_burst_quick(tmp_path):
                                                           + 0.001)))["blur_px"]
 
 
+def _texture_8bit(seed: int, shape=(120, 160)) -> np.ndarray:
+    """A smooth random texture in [0.1, 0.9] on 8-bit levels (float32): a sharp photo."""
+    from scipy import ndimage
+
+    t = ndimage.gaussian_filter(np.random.default_rng(seed).random(shape), 2.0)
+    return (np.round(255 * (0.1 + 0.8 * (t - t.min()) / np.ptp(t))) / 255).astype(np.float32)
+
+
 def test_burst_partner_is_the_scene_seen_one_frame_later():
     """A camera yawing right at 0.6 rad/s turns 0.02 rad in 1/30 s: the next frame's sharp
     image is the scene moved by -f tan(0.02) = -6.0 px in x (f = 300 px), and it is blurred
     from a capture that starts 1/30 s later."""
-    from scipy import ndimage
-
     from conftest import constant_rate_capture
     from gyrodeblur.dataset import render_case
     from gyrodeblur.frame_registration import phase_shift
 
     cal = _load("calibration")
-    rng = np.random.default_rng(3)
-    sharp = ndimage.gaussian_filter(rng.random((120, 160)), 2.0)
-    sharp = np.round(255 * (0.1 + 0.8 * (sharp - sharp.min()) / np.ptp(sharp))) / 255
+    sharp = _texture_8bit(seed=3)
     cap = constant_rate_capture((0.0, 0.6, 0.0), width=160, height=120, f=300.0,
                                 exposure=0.01)
-    case = render_case("toy_w0", sharp.astype(np.float32), cap, {"noise_seed": 1},
+    case = render_case("toy_w0", sharp, cap, {"noise_seed": 1},
                        snr_db=None)
     nxt = cal.burst_partner(case)
     assert nxt.name == "toy_w0_next" and nxt.meta["burst_of"] == "toy_w0"
@@ -221,8 +225,6 @@ def test_burst_partner_is_referenced_to_the_next_frames_first_row():
     next frame's reference is its first row's start, 1/30 s after this frame's: the camera
     turned 0.3/30 + 30/(2 * 30^2) = 0.0267 rad in between (a reference at the middle row,
     10 ms of readout later, would add 0.01 rad: 3 px more)."""
-    from scipy import ndimage
-
     from gyrodeblur.camera import Camera
     from gyrodeblur.capture import Capture
     from gyrodeblur.dataset import render_case
@@ -230,15 +232,13 @@ def test_burst_partner_is_referenced_to_the_next_frames_first_row():
     from gyrodeblur.gyrolog import GyroLog
 
     cal = _load("calibration")
-    rng = np.random.default_rng(5)
-    sharp = ndimage.gaussian_filter(rng.random((120, 160)), 2.0)
-    sharp = np.round(255 * (0.1 + 0.8 * (sharp - sharp.min()) / np.ptp(sharp))) / 255
+    sharp = _texture_8bit(seed=5)
     t = np.arange(0.0, 0.2, 1 / 400)
     start = 0.05
     w = np.zeros((t.size, 3))
     w[:, 1] = 0.3 + 30.0 * (t - start)
     cap = Capture(start, 0.01, 0.02, Camera.centred(160, 120, 300.0), GyroLog(t, w))
-    case = render_case("ramp_w0", sharp.astype(np.float32), cap, {"noise_seed": 1},
+    case = render_case("ramp_w0", sharp, cap, {"noise_seed": 1},
                        snr_db=None)
     d, _ = phase_shift(case.sharp, cal.burst_partner(case).sharp)
     turn = 0.3 / 30 + 30.0 / (2 * 30 ** 2)

@@ -438,8 +438,9 @@ def _shortlist(rankings: list) -> list:
 
 class _Fit:
     """The fitting context of one calibration: working scales, the patches at the fine and
-    coarse scales (:attr:`fine`, :attr:`coarse`), the frame registration, the free coordinates with their bounds, steps
-    and priors; and each step of the search (see the module docstring, Search).
+    coarse scales (:attr:`fine`, :attr:`coarse`), the frame registration, the free
+    coordinates with their bounds, steps and priors; and each step of the search (see the
+    module docstring, Search).
 
     Parameter vectors ``x`` are those of :class:`gyrodeblur.calibration_search.SearchSpace`;
     :meth:`refine` and :meth:`refine_winner` return what
@@ -469,7 +470,7 @@ class _Fit:
         if not centres:
             raise InputError(None, "no textured, unsaturated patch found for calibration")
         self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
-                                  n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
+                                 n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
         self.coarse = PatchSpectra(photos, centres, s_c, P_c, rows=(0.0,), envelope=False,
                                    n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)))
         u = np.array([y / photos[i].H for i, _, y in self.fine.points])
@@ -580,8 +581,8 @@ class _Fit:
         starts = []
         for fo in self.fgrid:
             C = self.fine.costs(self.theta0.copy(axes=M, focal=fo,
-                                                  bias=self.bias_prior.for_mapping(M)[0]),
-                                 taus=tm, rows=(0.0,))
+                                                 bias=self.bias_prior.for_mapping(M)[0]),
+                                taus=tm, rows=(0.0,))
             for kap in self.kappas:
                 tot, t0, kp = line_fit(C, tm, self.uc, [kap])
                 starts.append((tot, t0, kp, fo))

@@ -144,8 +144,8 @@ def objective(spectra: PatchSpectra, theta_of, x, idx, prior, extra=None) -> flo
     return spectra.cost(theta_of(x)) / prior[2] + pen(x)
 
 
-def lm_refine(spectra: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *, iters: int = 8,
-               refit_every: int = 2, tol: float = 0.01, extra=None):
+def lm_refine(spectra: PatchSpectra, theta_of, x, idx, lo, hi, hs, caps, prior, *,
+              iters: int = 8, refit_every: int = 2, tol: float = 0.01, extra=None):
     """Levenberg-Marquardt on ``cost / T + prior`` with the patch envelopes held (refitted
     every ``refit_every`` iterations); steps capped per coordinate (``caps``).
 
