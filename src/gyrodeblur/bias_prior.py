@@ -20,9 +20,9 @@ the benchmark's correct captures with 10 s of the shaken trace either side, cent
 the log always cost 0.6-4 dB on five of the photos that calibration otherwise leaves
 alone.) A typical rate more than :data:`_LOG_MAX_RATE` from the given bias on an axis is
 a pan, not a bias, and is not used (said in the notes); a slower steady pan is
-indistinguishable from a bias and is taken for one. Figures with 10 s of the (deliberately shaken) source trace on each side
-of each photo (``--log-seconds 10``, with and without ``--no-errors``): BENCHMARKS.md
-section 4.
+indistinguishable from a bias and is taken for one. Figures with 10 s of the
+(deliberately shaken) source trace on each side of each photo (``--log-seconds 10``, with
+and without ``--no-errors``): BENCHMARKS.md section 4.
 """
 
 from __future__ import annotations
