@@ -40,6 +40,18 @@ def test_patches_are_textured_unclipped_and_apart():
     assert min(d) > 0.5 * 64
 
 
+def test_a_nearly_flat_cell_gives_its_place_to_texture_elsewhere():
+    """The right half is sky: flat but for faint sensor noise. Its grid cells' best windows
+    would show noise, not blur, so all six windows lie on the textured left half."""
+    rng = np.random.default_rng(1)
+    img = np.full((400, 600), 0.4, np.float32) + 0.002 * rng.normal(size=(400, 600))
+    img[:, :300] += 0.15 * ndimage.gaussian_filter(rng.normal(size=(400, 300)), 1.5)
+    photo = CalibrationPhoto(np.clip(img, 0, 1).astype(np.float32), _capture(), "srgb", 0)
+    centres = select_patch_centres(photo, 6, 64)
+    assert len(centres) == 6
+    assert all(x < 300 for x, _ in centres), centres
+
+
 def test_texture_in_every_direction_beats_stripes():
     """Stripes say nothing about blur along them: with a square of texture on the left and
     stronger full-height stripes on the right, all nine windows lie on the texture, kept

@@ -17,6 +17,10 @@ from .tonecurve import get_transfer_curve
 
 __all__ = ["CalibrationPhoto", "select_patch_centres"]
 
+#: a grid cell whose best window has less texture than this fraction of the photo's best
+#: (smaller structure-tensor eigenvalue) leaves its place to the best window elsewhere
+_FLAT_FRACTION = 0.05
+
 
 class CalibrationPhoto:
     """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
@@ -57,7 +61,9 @@ class CalibrationPhoto:
 def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> list[tuple[float, float]]:
     """Centres (full-res x, y) of up to ``n`` textured, unsaturated windows of side
     ``footprint`` spread over a grid of cells (best isotropic texture per cell: the
-    smaller eigenvalue of the structure tensor), then the best remaining anywhere."""
+    smaller eigenvalue of the structure tensor; none from a cell whose best is nearly
+    flat, under ``_FLAT_FRACTION`` of the photo's best), then the best remaining
+    anywhere."""
     th, sat, k = photo.thumbnail()
     h, w = th.shape
     win = max(3, int(round(footprint / k)))
@@ -92,7 +98,11 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     radius = 0.7 * win
     found = []
 
-    def pick(y0, y1, x0, x1) -> bool:
+    # a cell with nothing but a nearly flat window (sky, a wall) gives its place to the best
+    # window elsewhere: its spectrum would show noise, not blur
+    floor = _FLAT_FRACTION * float(valid.max()) if np.isfinite(valid).any() else 0.0
+
+    def pick(y0, y1, x0, x1, least=0.0) -> bool:
         sub = valid[y0:y1, x0:x1].copy()
         for (ty, tx) in taken:
             sub[np.hypot(Y[y0:y1, x0:x1] - ty, X[y0:y1, x0:x1] - tx) < radius] = -np.inf
@@ -100,7 +110,7 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
             return False
         j = int(np.argmax(sub))
         v = float(sub.flat[j])
-        if not v > 0:
+        if not (v > 0 and v >= least):
             return False
         yy, xx = np.unravel_index(j, sub.shape)
         taken.append((y0 + yy, x0 + xx))
@@ -110,7 +120,7 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     for r in range(rows):                        # the best window of each cell ...
         for c in range(cols):
             if len(found) < n:
-                pick(yb[r], max(yb[r + 1], yb[r] + 1), xb[c], max(xb[c + 1], xb[c] + 1))
+                pick(yb[r], max(yb[r + 1], yb[r] + 1), xb[c], max(xb[c + 1], xb[c] + 1), floor)
     while len(found) < n and pick(0, h, 0, w):   # ... then the best anywhere else
         pass
     found.sort(key=lambda f: -f[0])
