@@ -89,3 +89,16 @@ class Camera:
     def with_focal_scale(self, scale: float) -> "Camera":
         """Focal lengths multiplied by ``scale`` (principal point unchanged)."""
         return replace(self, fx=self.fx * scale, fy=self.fy * scale)
+
+    def rays(self, x, y) -> np.ndarray:
+        """Viewing rays ``(..., 3)`` (camera frame, z = 1) of the pixels at ``x``, ``y``
+        (pixels; arrays of one shape, or scalars): ``K^-1 (x, y, 1)``."""
+        x, y = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64))
+        return np.stack([(x - self.cx) / self.fx, (y - self.cy) / self.fy, np.ones_like(x)], -1)
+
+    def project(self, rays: np.ndarray) -> np.ndarray:
+        """Pixel positions ``(..., 2)`` (x, y) of camera-frame directions ``rays``
+        ``(..., 3)`` in front of the camera (z > 0): ``K d``, divided by its z."""
+        d = np.asarray(rays, np.float64)
+        return np.stack([self.fx * d[..., 0] / d[..., 2] + self.cx,
+                         self.fy * d[..., 1] / d[..., 2] + self.cy], -1)

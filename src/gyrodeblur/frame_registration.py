@@ -102,19 +102,17 @@ class FrameRegistration:
         w = ca.log.omega[i0:i1] @ theta.axes.T - (ca.bias + theta.bias)
         O = Orientation(t[i0:i1], w, t_a)
         qref = quat_conjugate(O.quaternions(np.array([t_a - theta.offset]))[0])
-        cam = ca.camera
-        fx, fy = cam.fx * theta.focal, cam.fy * theta.focal
+        cam = ca.camera.with_focal_scale(theta.focal)
         gx, gy = np.meshgrid([0.25, 0.5, 0.75], [0.25, 0.5, 0.75])
         px = gx.ravel() * (pa.W - 1)
         py = gy.ravel() * (pa.H - 1)
-        ray = np.stack([(px - cam.cx) / fx, (py - cam.cy) / fy, np.ones(px.size)], 1)
+        ray = cam.rays(px, py)
 
         def centroid(times):                       # times (P, n), camera clock
             q = quat_multiply(qref, O.quaternions(times - theta.offset))
             R = quat_to_matrix(q)
-            d = np.einsum("pnji,pj->pni", R, ray)
-            return np.stack([(fx * d[..., 0] / d[..., 2] + cam.cx).mean(1),
-                             (fy * d[..., 1] / d[..., 2] + cam.cy).mean(1)], 1)
+            d = np.einsum("pnji,pj->pni", R, ray)  # R^T ray
+            return cam.project(d).mean(1)
 
         ro_a = max(0.0, ca.readout_time + theta.readout)
         ro_b = max(0.0, cb.readout_time + theta.readout)

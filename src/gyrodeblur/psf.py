@@ -44,10 +44,8 @@ def trace(capture: Capture, x0: float, y0: float, n: int, row: float | None = No
 def _project(capture: Capture, xy: np.ndarray, times: np.ndarray) -> np.ndarray:
     cam = capture.camera
     R = capture.orientation.matrices(times)                     # (n, 3, 3)
-    ray = cam.K_inv @ np.array([xy[0], xy[1], 1.0])
-    d = np.einsum("nji,j->ni", R, ray)                           # R^T ray
-    p = d @ cam.K.T
-    return p[:, :2] / p[:, 2:3]
+    d = np.einsum("nji,j->ni", R, cam.rays(xy[0], xy[1]))        # R^T ray
+    return cam.project(d)
 
 
 def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float,
@@ -217,9 +215,7 @@ def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
              + capture.exposure_time * (np.arange(n) + 0.5)[None, :] / n)      # (ny, n)
     R = capture.orientation.matrices(times)                                   # (ny, n, 3, 3)
     X, Y = np.meshgrid(xs, ys)                                                # (ny, nx)
-    rays = np.stack([X, Y, np.ones_like(X)], axis=-1) @ cam.K_inv.T          # (ny, nx, 3)
-    d = np.einsum("ykji,yxj->ykxi", R, rays)                                   # R^T ray
-    p = d @ cam.K.T
-    xy = p[..., :2] / p[..., 2:3]                                            # (ny, n, nx, 2)
+    d = np.einsum("ykji,yxj->ykxi", R, cam.rays(X, Y))                         # R^T ray
+    xy = cam.project(d)                                                       # (ny, n, nx, 2)
     mean = xy.mean(axis=1)                                                    # (ny, nx, 2)
     return ys, xs, mean - np.stack([X, Y], axis=-1)

@@ -181,13 +181,9 @@ class PatchSpectra:
             qref = quat_conjugate(O.quaternions(tref - taus))
             q = O.quaternions(T - taus[:, None])
             R = quat_to_matrix(quat_multiply(qref[:, None, :], q))       # (b, n, 3, 3)
-            c = cap.camera
-            fx, fy = c.fx * theta.focal, c.fy * theta.focal
-            ray = np.stack([(arr[:, 0] - c.cx) / fx, (arr[:, 1] - c.cy) / fy,
-                            np.ones(len(idx))], 1)
-            d = np.einsum("bnji,bj->bni", R, ray)
-            out[idx, :, 0] = (fx * d[..., 0] / d[..., 2] + c.cx - arr[:, 0:1]) * self.scale
-            out[idx, :, 1] = (fy * d[..., 1] / d[..., 2] + c.cy - arr[:, 1:2]) * self.scale
+            cam = cap.camera.with_focal_scale(theta.focal)
+            d = np.einsum("bnji,bj->bni", R, cam.rays(arr[:, 0], arr[:, 1]))   # R^T ray
+            out[idx] = (cam.project(d) - arr[:, None, 0:2]) * self.scale
         return out
 
     def otf(self, disp: np.ndarray) -> np.ndarray:
