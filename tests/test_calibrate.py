@@ -116,6 +116,7 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
     assert any("coarse ranking" in line for line in lines)
     assert res.ranking and res.ranking[0][1] == 0.0
     assert not any("uncertain" in note for note in res.notes)
+    assert res.offset_rivals == [] and not any("ambiguous" in note for note in res.notes)
 
 
 def test_an_uncertain_axis_mapping_is_reported(case):
@@ -137,7 +138,30 @@ def test_a_right_mapping_is_not_given_up_for_a_coin_toss(case):
     true = Capture(0.5, 0.006, 0.03, Camera.centred(W, H, 1.3 * W), _log(), axes=TRUE_AXES)
     res = calibrate([_blur(sharp, true)], true)
     assert axes_to_letters(res.capture.axes) == TRUE_AXES
-    assert any("kept the given parameters" in note for note in res.notes)
+    assert any("kept the given parameters" in note and "time offset" in note
+               for note in res.notes)
+
+
+def test_a_shake_that_repeats_within_the_exposure_makes_the_offset_ambiguous(case):
+    """A yaw oscillating at 100 Hz, four whole periods per row's 40 ms exposure: every row's
+    PSF is the same segment whatever the time offset, so the photo cannot tell offsets
+    apart (it does tell the focal length, by the segment's length). The estimate comes with
+    a warning naming other offsets that score as well."""
+    sharp, _, _ = case
+    t = np.arange(0.0, 1.2, 1 / 1000)
+    wc = np.zeros((t.size, 3))
+    wc[:, 1] = 6.0 * np.sin(2 * np.pi * 100.0 * t)
+    true = Capture(0.5, 0.04, 0.03, Camera.centred(W, H, 1.3 * W),
+                   GyroLog(t, wc @ parse_axes(TRUE_AXES)), axes=TRUE_AXES)
+    bad = _corrupt(true, offset=0.01, readout=1.0, focal=1.1, bias=(0, 0, 0), axes=TRUE_AXES)
+    res = calibrate([_blur(sharp, true)], bad, fix={"axes", "readout", "bias"})
+    assert abs(res.capture.camera.fx / true.camera.fx - 1) < 0.03     # the blur's length
+    assert res.offset_rivals
+    est = res.estimates["offset"][1]
+    for offset, worse in res.offset_rivals:
+        assert abs(offset - est) > 0.003 and 0 <= worse < 2.0
+    assert any("time offset is ambiguous" in note and "--time-offset" in note
+               for note in res.notes)
 
 
 def test_deblurring_with_the_calibrated_capture_is_close_to_the_true_one(case, recovered):

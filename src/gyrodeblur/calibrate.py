@@ -123,7 +123,8 @@ from .frame_registration import FrameRegistration
 from .gyrolog import rate_noise
 from .spectral_criterion import Corrections, PatchSpectra
 
-__all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS"]
+__all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
+           "OFFSET_APART", "OFFSET_RIVAL_NATS"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
@@ -157,6 +158,11 @@ class CalibrationResult:
         Wall-clock time of the calibration.
     notes : list of str
         Decisions worth reporting (twin tie-break, registration, patches).
+    offset_rivals : list of (float, float)
+        Other basins of the chosen mapping that the search reached: their time offset (s)
+        and how much higher their objective is (tempered nats), for offsets more than
+        ``OFFSET_APART`` from the estimate and within ``OFFSET_RIVAL_NATS`` of it, best
+        first. Empty when the offset is unambiguous as far as the search saw (or fixed).
     """
 
     captures: list
@@ -166,6 +172,7 @@ class CalibrationResult:
     fixed: set = field(default_factory=set)
     seconds: float = 0.0
     notes: list = field(default_factory=list)
+    offset_rivals: list = field(default_factory=list)
 
     @property
     def capture(self) -> Capture:
@@ -204,6 +211,11 @@ _READOUT_SCAN = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 #: three wrong mappings had gaps of 3.6-4.9, every gap of 8.9 or more was right, and five
 #: right ones (blurs of 3-6 px) were below 3.
 AXES_CONFIDENT_NATS = 8.0
+#: Another basin of the chosen mapping whose time offset lies more than ``OFFSET_APART``
+#: (s) from the estimate and whose objective is within ``OFFSET_RIVAL_NATS`` of it is
+#: reported: the photo cannot tell the two offsets apart.
+OFFSET_APART = 0.003
+OFFSET_RIVAL_NATS = 2.0
 #: Spectral cost gap (nats per patch) under which mirror twins are told apart by phase.
 _TWIN_NATS = 40.0
 #: ... and the phase must prefer the twin by this many standard errors of its mean over
@@ -340,15 +352,25 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                  f"kept unless the objective improves by {margin:.0f}", "  ")
         if f_given - fx < margin:
             from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
-            msg = (f"kept the given parameters{from_log}: "
-                   f"the best found ({axes_to_letters(M) or 'given'}) improves the objective "
-                   f"by only {f_given - fx:.1f} (< {margin:g})")
+            found = c0.time_offset + search.theta_of(x, M, fit.ubar).offset
+            msg = (f"kept the given parameters{from_log}: the best found "
+                   f"({axes_to_letters(M) or 'given'}, time offset {found * 1e3:+.1f} ms) "
+                   f"improves the objective by only {f_given - fx:.1f} (< {margin:g})")
             x, M, fx = x0, c0.axes, f_given
             _, _, Fm, sc = fit.refine(M, x, 0)
             kept = True
             note(msg, "  ")
             others = [r[0] for r in results if not np.allclose(r[2], M)]
             gap = float(min(others) - fx) if others else np.nan
+
+    # other offsets the photo(s) cannot tell from the chosen one: their basins were reached
+    rivals = [] if kept else [(c0.time_offset + o, df) for o, df in fit.offset_rivals(M, x, fx)]
+    if rivals:
+        alt = ", ".join(f"{o * 1e3:+.1f} ms ({df:+.1f})" for o, df in rivals[:3])
+        alt += f" and {len(rivals) - 3} more" if len(rivals) > 3 else ""
+        note(f"warning: the time offset is ambiguous: other offsets score within "
+             f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
+             f"is known, or calibrate on several photos of the session", "  ")
 
     # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
@@ -391,7 +413,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     secs = time.perf_counter() - t_start
     notes.append(f"{fit.coarse.evaluations} coarse and {fit.fine.evaluations} fine cost "
                  f"evaluations, {secs:.1f} s")
-    return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes)
+    return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes, rivals)
 
 
 def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarray]:
@@ -609,12 +631,13 @@ class _Fit:
     def refine_winner(self, M, x, alts):
         """The winning mapping's refinement from its best start, its other starts, the
         given focal length and bias, and time shifts around its own: the lowest objective
-        (x, f, F, scores)."""
-        best = self.refine(M, x, 10)
+        (x, f, F, scores). Every basin reached is kept in :attr:`basins`."""
+        self.basins = []
+        best = self.refine_fully(M, x)
         # The winner's other starts, refined as far: four iterations do not always tell which
         # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
         for xa in alts:
-            best = _lowest(best, self.refine(M, xa, 10))
+            best = _lowest(best, self.refine_fully(M, xa))
         # Focal length and a bias along the motion trade off (see Criterion), and the valley
         # between them holds several local minima: the coarse start's focal guess can leave
         # the refinement in one far from the given values. So the winner is refined once more
@@ -628,7 +651,7 @@ class _Fit:
             xs = x.copy()
             xs[2:] = np.r_[0.0, b_prior]
             xs = self.refine(M, np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
-            best = _lowest(best, self.refine(M, xs, 10))
+            best = _lowest(best, self.refine_fully(M, xs))
         # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from
         # the given (prior) values of the other parameters: the coarse start's line fits can
         # miss a nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined
@@ -662,8 +685,31 @@ class _Fit:
         refined as far as the winner: the lowest objective of those and ``best``."""
         scan = sorted((self.refine(M, xs0, 4)[:2] for xs0 in starts), key=lambda r: r[1])
         for xs0, _ in scan[:_SCAN_REFINED]:
-            best = _lowest(best, self.refine(M, xs0, 10))
+            best = _lowest(best, self.refine_fully(M, xs0))
         return best
+
+    def refine_fully(self, M, x0):
+        """:meth:`refine` as far as the winner (ten iterations), the basin reached kept in
+        :attr:`basins` as ``(x, objective)``."""
+        r = self.refine(M, x0, 10)
+        self.basins.append((r[0], r[1]))
+        return r
+
+    def offset_rivals(self, M, x, f) -> list[tuple[float, float]]:
+        """Of :attr:`basins`, those whose time offset correction lies more than
+        :data:`OFFSET_APART` from ``x``'s and whose objective is within
+        :data:`OFFSET_RIVAL_NATS` of ``f``: ``(offset correction (s), objective - f)``,
+        one per offset (the lowest), best first."""
+        if "offset" in self.fix:
+            return []
+        at = self.search.theta_of(x, M, self.ubar).offset
+        rivals = []
+        for xb, fb in sorted(self.basins, key=lambda b: b[1]):
+            ob = self.search.theta_of(xb, M, self.ubar).offset
+            if (abs(ob - at) > OFFSET_APART and fb - f < OFFSET_RIVAL_NATS
+                    and all(abs(ob - o) > OFFSET_APART for o, _ in rivals)):
+                rivals.append((ob, float(fb - f)))
+        return rivals
 
     def mirror_twin(self, M, x, given_biases):
         """Mapping ``M`` at ``x`` against its mirror twin at the same parameters (by the
