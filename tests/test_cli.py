@@ -123,6 +123,12 @@ def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
     assert read_photo(d / "blind.png").pixels.shape == (192, 256, 3)
     assert "--kernel-size" in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
                                           "8", "-o", str(d / "b2.png")], capsys)
+    assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9", "--grid",
+                 "1x2", "-o", str(d / "blind2.png"), "--quiet"]) == 0
+    assert "mode blind 1x2" in capsys.readouterr().out
+    for grid, problem in (("auto", "with --blind give RxC"), ("6x6", "too small for a 21 px")):
+        assert problem in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
+                                      "21", "--grid", grid, "-o", str(d / "b3.png")], capsys)
 
 
 def test_sparse_options_change_the_result_and_are_checked(capture_dir, capsys):

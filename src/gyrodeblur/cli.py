@@ -236,9 +236,15 @@ def cmd_deblur(args, say) -> None:
     t0 = time.perf_counter()
     if args.blind:
         from .deblur import deblur_blind
-        restored, field = deblur_blind(photo.pixels, args.kernel_size, method=args.method,
+        if grid == "auto":
+            raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
+                                       "--blind give RxC (default 1x1, one kernel)")
+        blind_grid = (1, 1) if grid is None else grid
+        restored, field = deblur_blind(photo.pixels, args.kernel_size, grid=blind_grid,
+                                       overlap=args.overlap, method=args.method,
                                        transfer=args.transfer, progress=progress, **options)
-        mode_txt, grid_txt = "blind", ""
+        mode_txt = "blind"
+        grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
     else:
         if args.fix and not args.refine:
             raise InputError("--fix", "applies with --refine only")
@@ -331,13 +337,15 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("deblur", help="deblur a photo",
                        description="Deblur a photo with the PSFs its gyro log implies "
                        "(space-variant patches by default), or blindly (--blind). The result is "
-                       "referenced to the camera's orientation at exposure start. " + FRAMES_HELP)
+                       "referenced to the camera's orientation at exposure start (a blind one "
+                       "keeps the blurred photo's geometry). " + FRAMES_HELP)
     s.add_argument("photo", metavar="PHOTO")
     s.add_argument("-o", "--output", required=True, metavar="OUT")
     s.add_argument("--mode", choices=("variant", "invariant"), default="variant")
     s.add_argument("--grid", default=None, metavar="RxC|auto",
                    help="patch grid; default: 6x8 (the chapter's) for --method wiener, 'auto' "
-                        "(patches small enough that the PSF changes < 2 px across one) otherwise")
+                        "(patches small enough that the PSF changes < 2 px across one) otherwise; "
+                        "with --blind, 1x1 (one kernel) unless given")
     s.add_argument("--overlap", type=float, default=0.25, help="patch overlap fraction (default 0.25)")
     s.add_argument("--method", choices=sorted(METHODS), default=None,
                    help="deconvolution method (default: the best available)")

@@ -544,35 +544,81 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     return out, DeblurReport(mode, method, field_.grid, field_, time.perf_counter() - t0, notes)
 
 
-def deblur_blind(image: np.ndarray, kernel_size: int, *, method: str | None = None,
+def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
+                 overlap: float = DEFAULT_OVERLAP, method: str | None = None,
                  transfer: str = "srgb", max_pixels: int = 1_000_000, clip: bool = True,
                  progress=None, **options):
-    """Deblur without a gyro log: estimate one PSF from the photo, then deconvolve.
+    """Deblur without a gyro log: estimate the blur from the photo, then deconvolve.
 
     The kernel is estimated by :func:`gyrodeblur.blind.estimate_kernel` (sec. 6.3.1:
     gradients, coarse-to-fine, L0 prior with a decreasing weight, positivity and support
     constraints) on the linear-light luminance of the central ``max_pixels`` of the photo
-    (the blur is assumed space-invariant; a crop keeps the time bounded on big photos),
-    then the whole photo is deconvolved with it by ``method``.
+    (a crop keeps the time bounded on big photos), then the photo is deconvolved with it
+    by ``method``.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, C)
+        The blurred photo, float32 in [0, 1].
+    kernel_size : int
+        Side of the kernel support, px (odd; a little more than the blur's extent).
+    grid : (rows, cols)
+        ``(1, 1)`` (default): one kernel for the whole photo, the space-invariant
+        baseline. A finer grid cuts the photo into overlapping patches
+        (:func:`gyrodeblur.tiling.patch_grid`, ``overlap``), estimates a kernel on each
+        patch's own pixels, and deconvolves and blends the patches as the gyro pipeline
+        does: a rotation about the optical axis or a rolling shutter makes the blur vary
+        across the photo. Each kernel is centred on its centre of mass, so each patch's
+        result keeps the blurred photo's geometry, and the patches stay registered to
+        one another.
+    overlap : float
+        Overlap of neighbouring patches (fraction of the patch size).
+    method, transfer, clip, progress, **options
+        As for :func:`deblur_with_psfs`.
+    max_pixels : int
+        Pixels the kernel is estimated on (the central part of the photo, or of each
+        patch in proportion).
 
     Returns
     -------
     restored : ndarray float32
     field : PSFField
-        The estimated PSF, at the image centre.
+        The estimated kernels at the patches' centres. Unlike the gyro pipeline's result,
+        the restored photo is not referenced to the exposure start: a blind kernel is
+        known only up to a shift, and each is centred on its centre of mass.
+
+    Raises
+    ------
+    InputError
+        A bad ``grid`` or ``overlap`` (sources ``"--grid"``, ``"--overlap"``), or
+        patches too small for the kernel (``"--grid"``).
     """
     from .blind import estimate_kernel
-    from .tiling import Patch
 
     H, W = image.shape[:2]
     lin = get_transfer_curve(transfer).decode(np.asarray(image, np.float32))
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
-    if H * W > max_pixels:
-        s = np.sqrt(max_pixels / (H * W))
-        h, w = int(H * s), int(W * s)
-        y0, x0 = (H - h) // 2, (W - w) // 2
-        lum = lum[y0:y0 + h, x0:x0 + w]
-    psf = estimate_kernel(lum, kernel_size)
-    out = deblur_with_psfs(image, [Patch(0, H, 0, W)], [psf], method=method, transfer=transfer,
+    patches = patch_grid((H, W), grid, overlap)
+    if len(patches) > 1 and kernel_size >= min(patches[0].shape) // 2:
+        raise InputError("--grid", f"{len(patches)} patches of {patches[0].shape[1]}x"
+                                   f"{patches[0].shape[0]} px are too small for a "
+                                   f"{kernel_size} px kernel (it must be under half a "
+                                   f"patch's shorter side): use a coarser grid")
+    share = max_pixels / len(patches)
+    psfs = [estimate_kernel(_central(lum[p.y0:p.y1, p.x0:p.x1], share), kernel_size)
+            for p in patches]
+    out = deblur_with_psfs(image, patches, psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, **options)
-    return out, PSFField(np.array([[(W - 1) / 2, (H - 1) / 2]]), [psf], (1, 1))
+    centres = np.array([[p.centre[1], p.centre[0]] for p in patches])
+    return out, PSFField(centres, psfs, tuple(int(g) for g in grid))
+
+
+def _central(a: np.ndarray, max_pixels: float) -> np.ndarray:
+    """The central part of ``a`` with at most ``max_pixels`` pixels (same aspect ratio)."""
+    h, w = a.shape[:2]
+    if h * w <= max_pixels:
+        return a
+    s = np.sqrt(max_pixels / (h * w))
+    hh, ww = int(h * s), int(w * s)
+    y0, x0 = (h - hh) // 2, (w - ww) // 2
+    return a[y0:y0 + hh, x0:x0 + ww]
