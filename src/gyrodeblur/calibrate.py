@@ -363,15 +363,6 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             others = [r[0] for r in results if not np.allclose(r[2], M)]
             gap = float(min(others) - fx) if others else np.nan
 
-    # other offsets the photo(s) cannot tell from the chosen one: their basins were reached
-    rivals = [] if kept else [(c0.time_offset + o, df) for o, df in fit.offset_rivals(M, x, fx)]
-    if rivals:
-        alt = ", ".join(f"{o * 1e3:+.1f} ms ({df:+.1f})" for o, df in rivals[:3])
-        alt += f" and {len(rivals) - 3} more" if len(rivals) > 3 else ""
-        note(f"warning: the time offset is ambiguous: other offsets score within "
-             f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
-             f"is known, or calibrate on several photos of the session", "  ")
-
     # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
     if "axes" not in fix and len(cand) > 1 and not kept:
@@ -379,6 +370,16 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         if twin is not None:
             x, fx, Fm, sc = twin
         note(msg, "  ")
+
+    # other offsets the photo(s) cannot tell from the chosen one: the winner's refinements
+    # reached their basins (a mirror twin taken starts from the winner's parameters)
+    rivals = [] if kept else [(c0.time_offset + o, df) for o, df in fit.offset_rivals(M, x, fx)]
+    if rivals:
+        alt = ", ".join(f"{o * 1e3:+.1f} ms ({df:+.1f})" for o, df in rivals[:3])
+        alt += f" and {len(rivals) - 3} more" if len(rivals) > 3 else ""
+        note(f"warning: the time offset is ambiguous: other offsets score within "
+             f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
+             f"is known, or calibrate on several photos of the session", "  ")
 
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         others = [r for r in results if not np.allclose(r[2], M)]
