@@ -158,11 +158,12 @@ class CalibrationResult:
         Wall-clock time of the calibration.
     notes : list of str
         Decisions worth reporting (twin tie-break, registration, patches).
-    offset_rivals : list of (float, float)
-        Other basins of the chosen mapping that the search reached: their time offset (s)
-        and how much higher their objective is (tempered nats), for offsets more than
-        ``OFFSET_APART`` from the estimate and within ``OFFSET_RIVAL_NATS`` of it, best
-        first. Empty when the offset is unambiguous as far as the search saw (or fixed).
+    offset_rivals : list of (float, float, float)
+        Other basins of the winning mapping that the search reached: their time offset
+        (s), readout time (s) and how much higher their objective is (tempered nats), for
+        offsets more than ``OFFSET_APART`` from the estimate and within
+        ``OFFSET_RIVAL_NATS`` of it, best first. Empty when the offset is unambiguous as
+        far as the search saw, fixed, or when the given parameters were kept.
     """
 
     captures: list
@@ -363,6 +364,19 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             others = [r[0] for r in results if not np.allclose(r[2], M)]
             gap = float(min(others) - fx) if others else np.nan
 
+    # other offsets the photo(s) cannot tell from the chosen one: the winner's refinements
+    # reached their basins (scored under the winner's mapping; a mirror twin taken below
+    # starts from the winner's parameters)
+    rivals = [] if kept else [(c0.time_offset + o, max(0.0, c0.readout_time + r), df)
+                              for o, r, df in fit.offset_rivals(M, x, fx)]
+    if rivals:
+        alt = ", ".join(f"{o * 1e3:+.1f} ms (readout {r * 1e3:.1f} ms, {df:+.1f})"
+                        for o, r, df in rivals[:3])
+        alt += f" and {len(rivals) - 3} more" if len(rivals) > 3 else ""
+        note(f"warning: the time offset is ambiguous: other offsets score within "
+             f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
+             f"is known, or calibrate on several photos of the session", "  ")
+
     # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
     if "axes" not in fix and len(cand) > 1 and not kept:
@@ -370,16 +384,6 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         if twin is not None:
             x, fx, Fm, sc = twin
         note(msg, "  ")
-
-    # other offsets the photo(s) cannot tell from the chosen one: the winner's refinements
-    # reached their basins (a mirror twin taken starts from the winner's parameters)
-    rivals = [] if kept else [(c0.time_offset + o, df) for o, df in fit.offset_rivals(M, x, fx)]
-    if rivals:
-        alt = ", ".join(f"{o * 1e3:+.1f} ms ({df:+.1f})" for o, df in rivals[:3])
-        alt += f" and {len(rivals) - 3} more" if len(rivals) > 3 else ""
-        note(f"warning: the time offset is ambiguous: other offsets score within "
-             f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
-             f"is known, or calibrate on several photos of the session", "  ")
 
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         others = [r for r in results if not np.allclose(r[2], M)]
@@ -696,20 +700,22 @@ class _Fit:
         self.basins.append((r[0], r[1]))
         return r
 
-    def offset_rivals(self, M, x, f) -> list[tuple[float, float]]:
+    def offset_rivals(self, M, x, f) -> list[tuple[float, float, float]]:
         """Of :attr:`basins`, those whose time offset correction lies more than
         :data:`OFFSET_APART` from ``x``'s and whose objective is within
-        :data:`OFFSET_RIVAL_NATS` of ``f``: ``(offset correction (s), objective - f)``,
-        one per offset (the lowest), best first."""
+        :data:`OFFSET_RIVAL_NATS` of ``f``: ``(offset correction (s), readout correction
+        (s), objective - f)``, one per offset (the lowest), best first. (A basin of another
+        readout at the same mid-frame timing has another offset too: the offset is the
+        first row's.)"""
         if "offset" in self.fix:
             return []
         at = self.search.theta_of(x, M, self.ubar).offset
         rivals = []
         for xb, fb in sorted(self.basins, key=lambda b: b[1]):
-            ob = self.search.theta_of(xb, M, self.ubar).offset
-            if (abs(ob - at) > OFFSET_APART and fb - f < OFFSET_RIVAL_NATS
-                    and all(abs(ob - o) > OFFSET_APART for o, _ in rivals)):
-                rivals.append((ob, float(fb - f)))
+            tb = self.search.theta_of(xb, M, self.ubar)
+            if (abs(tb.offset - at) > OFFSET_APART and fb - f < OFFSET_RIVAL_NATS
+                    and all(abs(tb.offset - o) > OFFSET_APART for o, _, _ in rivals)):
+                rivals.append((tb.offset, tb.readout, float(fb - f)))
         return rivals
 
     def mirror_twin(self, M, x, given_biases):

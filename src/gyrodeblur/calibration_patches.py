@@ -18,7 +18,7 @@ from .tonecurve import get_transfer_curve
 __all__ = ["CalibrationPhoto", "select_patch_centres"]
 
 #: a grid cell whose best window has less texture than this fraction of the photo's best
-#: (smaller structure-tensor eigenvalue) leaves its place to the best window elsewhere
+#: (smaller structure-tensor eigenvalue) gives no window: another cell's takes its place
 _FLAT_FRACTION = 0.05
 
 
@@ -62,8 +62,8 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     """Centres (full-res x, y) of up to ``n`` textured, unsaturated windows of side
     ``footprint`` spread over a grid of cells (best isotropic texture per cell: the
     smaller eigenvalue of the structure tensor; none from a cell whose best is nearly
-    flat, under ``_FLAT_FRACTION`` of the photo's best), then the best remaining
-    anywhere."""
+    flat, under ``_FLAT_FRACTION`` of the photo's best: the next cell, or the best
+    remaining anywhere, takes its place), then the best remaining anywhere."""
     th, sat, k = photo.thumbnail()
     h, w = th.shape
     win = max(3, int(round(footprint / k)))
@@ -98,8 +98,8 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     radius = 0.7 * win
     found = []
 
-    # a cell with nothing but a nearly flat window (sky, a wall) gives its place to the best
-    # window elsewhere: its spectrum would show noise, not blur
+    # a cell with nothing but a nearly flat window (sky, a wall) gives its place to another
+    # cell's window: its spectrum would show noise, not blur
     floor = _FLAT_FRACTION * float(valid.max()) if np.isfinite(valid).any() else 0.0
 
     def pick(y0, y1, x0, x1, least=0.0) -> bool:
