@@ -155,11 +155,8 @@ def registered_psnr(reference: np.ndarray, estimate: np.ndarray, border: int,
 
     from gyrodeblur.metrics import crop_border, psnr
 
-    def luma(a):
-        a = np.asarray(a, np.float32)
-        return crop_border(a.mean(axis=2) if a.ndim == 3 else a, border)
-
-    shift = phase_cross_correlation(luma(reference), luma(estimate),
+    shift = phase_cross_correlation(crop_border(_luma(reference), border),
+                                    crop_border(_luma(estimate), border),
                                     upsample_factor=upsample, normalization=None)[0]
     if np.allclose(shift, 0):
         return psnr(reference, estimate, border)
@@ -184,21 +181,19 @@ def field_registered_psnr(reference: np.ndarray, estimate: np.ndarray, border: i
 
     from gyrodeblur.metrics import psnr
 
-    def luma(a):
-        a = np.asarray(a, np.float32)
-        return a.mean(axis=2) if a.ndim == 3 else a
-
-    ref, est = luma(reference), luma(estimate)
+    ref, est = _luma(reference), _luma(estimate)
     h, w = ref.shape
     block = min(block, h, w)
     ys = np.arange(0, h - block + 1, step)
     xs = np.arange(0, w - block + 1, step)
     shifts = np.zeros((ys.size, xs.size, 2))
-    for i, y in enumerate(ys):
-        for j, x in enumerate(xs):
-            shifts[i, j] = phase_cross_correlation(
-                ref[y:y + block, x:x + block], est[y:y + block, x:x + block],
-                upsample_factor=upsample, normalization=None)[0]
+    with warnings.catch_warnings():     # a flat block (clipped, black) has no error
+        warnings.simplefilter("ignore", UserWarning)   # figure; the median filter copes
+        for i, y in enumerate(ys):
+            for j, x in enumerate(xs):
+                shifts[i, j] = phase_cross_correlation(
+                    ref[y:y + block, x:x + block], est[y:y + block, x:x + block],
+                    upsample_factor=upsample, normalization=None)[0]
     shifts = np.stack([ndimage.median_filter(shifts[..., k], 3, mode="nearest")
                        for k in range(2)], -1)
     # field at every pixel: bilinear between block centres, constant beyond the outer ones
@@ -209,4 +204,10 @@ def field_registered_psnr(reference: np.ndarray, estimate: np.ndarray, border: i
     img = np.ascontiguousarray(estimate, np.float32)
     moved = cv2.remap(img, (xx - d[1]).astype(np.float32), (yy - d[0]).astype(np.float32),
                       cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
-    return psnr(reference, moved, border)
+    return psnr(reference, np.clip(moved, 0, 1), border)     # no bicubic overshoot
+
+
+def _luma(a) -> np.ndarray:
+    """Mean of the channels (float32): what the registrations align."""
+    a = np.asarray(a, np.float32)
+    return a.mean(axis=2) if a.ndim == 3 else a
