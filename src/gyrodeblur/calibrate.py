@@ -477,6 +477,7 @@ class _Fit:
     def __init__(self, photos, search: SearchSpace, fix: set, bias_prior: BiasPrior,
                  n_patches: int, n_mappings: int, say):
         self.search, self.fix, self.bias_prior, self.say = search, fix, bias_prior, say
+        self.basins: list = []          # (x, objective) of the winner's full refinements
         self.theta0 = Corrections(axes=photos[0].cap.axes)
         # working scales and patches from the blur at the given parameters
         probe = [search.tau_lo, 0.5 * search.tau_lo, 0.0, 0.5 * search.tau_hi, search.tau_hi]
