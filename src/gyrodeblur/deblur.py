@@ -565,12 +565,13 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     grid : (rows, cols)
         ``(1, 1)`` (default): one kernel for the whole photo, the space-invariant
         baseline. A finer grid cuts the photo into overlapping patches
-        (:func:`gyrodeblur.tiling.patch_grid`, ``overlap``), estimates a kernel on each
-        patch's own pixels, and deconvolves and blends the patches as the gyro pipeline
-        does: a rotation about the optical axis or a rolling shutter makes the blur vary
-        across the photo. Each kernel is centred on its centre of mass, so each patch's
-        result keeps the blurred photo's geometry, and the patches stay registered to
-        one another.
+        (:func:`gyrodeblur.tiling.patch_grid`, ``overlap``), refines the photo's kernel
+        on each patch's own pixels (the finest two pyramid levels, started from it: a
+        patch with little texture strays less than an estimate from scratch), and
+        deconvolves and blends the patches as the gyro pipeline does: a rotation about
+        the optical axis or a rolling shutter makes the blur vary across the photo. Each
+        kernel keeps the photo kernel's centre of mass, so each patch's result keeps the
+        blurred photo's geometry, and the patches stay registered to one another.
     overlap : float
         Overlap of neighbouring patches (fraction of the patch size).
     method, transfer, clip, progress, **options
@@ -604,9 +605,11 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
                                    f"{patches[0].shape[0]} px are too small for a "
                                    f"{kernel_size} px kernel (it must be under half a "
                                    f"patch's shorter side): use a coarser grid")
-    share = max_pixels / len(patches)
-    psfs = [estimate_kernel(_central(lum[p.y0:p.y1, p.x0:p.x1], share), kernel_size)
-            for p in patches]
+    psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
+    if len(patches) > 1:       # each patch refines the photo's kernel on its own pixels
+        share = max_pixels / len(patches)
+        psfs = [estimate_kernel(_central(lum[p.y0:p.y1, p.x0:p.x1], share), kernel_size,
+                                init_psf=psfs[0]) for p in patches]
     out = deblur_with_psfs(image, patches, psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, **options)
     centres = np.array([[p.centre[1], p.centre[0]] for p in patches])
