@@ -280,12 +280,11 @@ def burst_partner(case, interval: float | None = None):
     dt = interval if interval is not None else max(1 / 30, cap.exposure_time + 0.001)
     nxt = cap.replace(exposure_start=cap.exposure_start + dt)
     cam = cap.camera
-    Hm = cam.K @ cap.orientation.matrices(np.array([nxt.exposure_start]))[0] @ cam.K_inv
+    R = cap.orientation.matrices(np.array([nxt.exposure_start]))[0]
     h, w = case.sharp.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-    den = Hm[2, 0] * xs + Hm[2, 1] * ys + Hm[2, 2]
-    coords = np.stack([(Hm[1, 0] * xs + Hm[1, 1] * ys + Hm[1, 2]) / den,
-                       (Hm[0, 0] * xs + Hm[0, 1] * ys + Hm[0, 2]) / den])
+    src = cam.project(cam.rays(xs, ys) @ R.T)                  # K R K^-1 x, (h, w, 2)
+    coords = np.stack([src[..., 1], src[..., 0]])
     lin = srgb_to_linear(case.sharp).reshape(h, w, -1)
     warped = np.stack([ndimage.map_coordinates(lin[..., c], coords, order=3, mode="mirror")
                        for c in range(lin.shape[2])], axis=2).reshape(case.sharp.shape)

@@ -193,7 +193,7 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     first = (rows, cols)
     while True:
         patches = patch_grid((H, W), (rows, cols), overlap)
-        pts = np.array([[p.centre[1], p.centre[0]] for p in patches])
+        pts = _centres_xy(patches)
         psfs = [render_psf(cap, x, y, centred=align) for x, y in pts]
         side = min(patches[0].shape)
         worst = max(psf_extent(p) for p in psfs)
@@ -612,8 +612,12 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
                                 init_psf=psfs[0]) for p in patches]
     out = deblur_with_psfs(image, patches, psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, **options)
-    centres = np.array([[p.centre[1], p.centre[0]] for p in patches])
-    return out, PSFField(centres, psfs, tuple(int(g) for g in grid))
+    return out, PSFField(_centres_xy(patches), psfs, tuple(int(g) for g in grid))
+
+
+def _centres_xy(patches) -> np.ndarray:
+    """``(N, 2)`` centres (x, y) of ``patches``, pixels: where their PSFs belong."""
+    return np.array([[p.centre[1], p.centre[0]] for p in patches])
 
 
 def _central(a: np.ndarray, max_pixels: float) -> np.ndarray:
