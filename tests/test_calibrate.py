@@ -396,56 +396,6 @@ def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
     assert "3 capture descriptions for 2 photos" in capsys.readouterr().err
 
 
-def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
-    """Negating the camera's x and y rates reflects the PSFs only if the bias is negated with
-    them: the twin's parameters give exactly the winner's camera rates, x and y negated; with
-    photos of unequal given biases, as nearly as one shared correction can; a fixed bias stays."""
-    from gyrodeblur.calibrate import TWIN, _twin_parameters
-    from gyrodeblur.spectral_criterion import Corrections
-
-    base = _true_capture(0.5)
-    caps = [base.replace(bias=np.array([0.03, -0.01, 0.02])),
-            base.replace(bias=np.array([-0.05, 0.04, 0.02]))]
-    x = np.array([0.004, -0.002, 0.05, 0.01, 0.04, -0.03])
-    M = parse_axes("Xyz")
-
-    def rates(v, axes, cap):
-        th = Corrections(axes=axes, offset=v[0], readout=v[1], focal=float(np.exp(v[2])),
-                    bias=np.asarray(v[3:6], float))
-        return th.apply(cap).camera_rates()[1]
-
-    def miss(v, cap):               # twin's rates against the winner's reflected
-        return rates(v, TWIN @ M, cap) - rates(x, M, cap) @ TWIN
-
-    xt = _twin_parameters(x, [caps[0].bias])
-    np.testing.assert_allclose(xt[:3], x[:3])
-    np.testing.assert_allclose(miss(xt, caps[0]), 0.0, atol=1e-12)
-    # left as it is, the bias turns the twin's rates away from the reflection
-    assert np.abs(miss(x, caps[0])).max() > 0.05
-    # unequal given biases: the misses cancel over the photos, and each is smaller than
-    # with the first photo's bias alone
-    xt2 = _twin_parameters(x, [c.bias for c in caps])
-    m0, m1 = miss(xt2, caps[0])[0], miss(xt2, caps[1])[0]
-    np.testing.assert_allclose(m0 + m1, 0.0, atol=1e-12)
-    worst_first = max(np.abs(miss(xt, c)[0]).max() for c in caps)
-    assert max(np.abs(m0).max(), np.abs(m1).max()) < worst_first
-    # a fixed bias is not changed
-    np.testing.assert_array_equal(_twin_parameters(x, [caps[0].bias], fix={"bias"}), x)
-
-
-def test_the_twin_needs_a_clear_phase_preference():
-    """Without frame registration the twin replaces the winner only when its spectra are not
-    clearly worse and the phase prefers it by two standard errors, not by a coin toss."""
-    from gyrodeblur.calibrate import _phase_prefers_twin
-
-    clear = np.array([-0.05, -0.04, -0.06, -0.03, -0.05])
-    toss = np.array([0.02, -0.03, 0.01, -0.04, 0.015, -0.02, -0.01, 0.01, -0.03])   # mean < 0
-    assert _phase_prefers_twin(-14.0, clear)
-    assert not _phase_prefers_twin(-14.0, toss)
-    assert not _phase_prefers_twin(60.0, clear)          # the spectra favour the winner
-    assert not _phase_prefers_twin(-14.0, clear[:1])     # one patch: no standard error
-
-
 def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):
     """The real Shield-tablet pan (examples/shield-tablet): from the published focal length,
     no time offset and the wrong one of the two proper mappings next to the published matrix,

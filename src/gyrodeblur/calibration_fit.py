@@ -1,0 +1,426 @@
+"""The search of a calibration: working scales and patches, the coarse ranking of the axis
+mappings, the candidates' starts and refinements, the winner's further refinements, and
+the mirror-twin check.
+
+:func:`gyrodeblur.calibrate.calibrate` runs these steps in order and decides what to
+report and what to keep; its module docstring (Search) tells why each step is there and
+what it bought on the benchmark. The criterion is :mod:`gyrodeblur.spectral_criterion`;
+parameter vectors, bounds and Levenberg-Marquardt are :mod:`gyrodeblur.calibration_search`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .axes import axes_to_letters
+from .bias_prior import PRIOR_BIAS, BiasPrior
+from .calibration_patches import select_patch_centres
+from .calibration_search import (X_NAMES, SearchSpace, line_fit, lm_refine, objective,
+                                 psf_extent_and_path)
+from .errors import InputError
+from .frame_registration import FrameRegistration
+from .spectral_criterion import Corrections, PatchSpectra
+
+__all__ = ["CalibrationFit", "relative_ranking", "shortlist", "with_twin", "TWIN",
+           "OFFSET_APART", "OFFSET_RIVAL_NATS"]
+
+#: The mirror twin of a mapping ``M`` is ``TWIN @ M``: the camera's x and y rates negated
+#: (a proper rotation), which nearly reflects every PSF (see Search, 3).
+TWIN = np.diag([-1.0, -1.0, 1.0])
+#: The Whittle cost over-counts (neighbouring frequencies of a Hann-windowed patch are
+#: correlated, images are not Gaussian): on the benchmark cases the patch-sandwich
+#: variance of the estimates is 15-170x the Fisher variance, median ~100. The cost is
+#: divided by this before the priors are added.
+_TEMPERATURE = 100.0
+#: Prior standard deviations around the given capture: readout (fraction), log focal scale,
+#: bias (rad/s per axis). They matter only where the photo cannot tell (e.g. focal length
+#: against a bias along a nearly straight, uniform motion).
+_PRIOR_READOUT = 0.3
+_PRIOR_FOCAL = 0.1
+#: Starts refined per candidate mapping (the best line fits over time shift x readout x
+#: focal scale that differ by more than these, s): on the 24-case benchmark 3 starts rather
+#: than 1 got 22 rather than 21 mappings right and a mean PSNR gap of -3.67 rather than
+#: -4.05 dB, for 40 % more time.
+_CANDIDATE_STARTS = 3
+_DISTINCT_SHIFT = 0.004
+_DISTINCT_READOUT = 0.006
+#: Time shifts scanned around the winner's (s): step, reach either side, and how many of
+#: the best (after four iterations) are refined fully.
+_SCAN_STEP = 0.002
+_SCAN_REACH = 0.006
+_SCAN_REFINED = 2
+#: Readout corrections (fractions of the given readout time) scanned at the winner's
+#: mid-row time.
+_READOUT_SCAN = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
+#: Another basin of the chosen mapping whose time offset lies more than ``OFFSET_APART``
+#: (s) from the estimate and whose objective is within ``OFFSET_RIVAL_NATS`` of it is
+#: reported: the photo cannot tell the two offsets apart.
+OFFSET_APART = 0.003
+OFFSET_RIVAL_NATS = 2.0
+#: Spectral cost gap (nats per patch) under which mirror twins are told apart by phase.
+_TWIN_NATS = 40.0
+#: ... and the phase must prefer the twin by this many standard errors of its mean over
+#: the patches (a blur of a few pixels has hardly any phase: a coin toss keeps the winner;
+#: with a single patch there is no standard error, and the phase never swaps).
+_TWIN_SIGMAS = 2.0
+_TARGET_EXTENT = 32.0      # px: working scale makes the largest PSF about this long
+_PATCH = 128               # px: patch side at working scale
+_COARSE_EXTENT = 16.0      # px: the same for the coarse search
+_COARSE_PATCH = 64
+_COARSE_STEP = 0.002       # s: time-shift grid of the coarse search
+
+
+class CalibrationFit:
+    """The fitting context of one calibration: working scales, the patches at the fine and
+    coarse scales (:attr:`fine`, :attr:`coarse`), the frame registration, the free
+    coordinates with their bounds, steps and priors; and each step of the search (see the
+    docstring of :mod:`gyrodeblur.calibrate`, Search).
+
+    Parameter vectors ``x`` are those of :class:`gyrodeblur.calibration_search.SearchSpace`;
+    :meth:`refine` and :meth:`refine_winner` return what
+    :func:`gyrodeblur.calibration_search.lm_refine` does: ``(x, objective, Gauss-Newton
+    Hessian, per-patch scores)``."""
+
+    def __init__(self, photos, search: SearchSpace, fix: set, bias_prior: BiasPrior,
+                 n_patches: int, n_mappings: int, say):
+        self.search, self.fix, self.bias_prior, self.say = search, fix, bias_prior, say
+        self.basins: list = []          # (x, objective) of the winner's full refinements
+        self.theta0 = Corrections(axes=photos[0].cap.axes)
+        # working scales and patches from the blur at the given parameters
+        probe = [search.tau_lo, 0.5 * search.tau_lo, 0.0, 0.5 * search.tau_hi, search.tau_hi]
+        extent, path = psf_extent_and_path(photos, self.theta0, sorted(set(probe)))
+        extent = max(extent, 2.0)
+        s_f = min(1.0, _TARGET_EXTENT / extent)
+        s_c = min(1.0, _COARSE_EXTENT / extent)
+        small = min(min(ph.H, ph.W) for ph in photos)
+        P_f = int(min(_PATCH, 16 * (small * s_f // 16)))
+        P_c = int(min(_COARSE_PATCH, 16 * (small * s_c // 16)))
+        if P_f < 48 or P_c < 32:
+            raise InputError(None, f"the photos are too small ({small} px) for the blur "
+                                   f"(~{extent:.0f} px) to be calibrated")
+        per = max(3, int(np.ceil(n_patches / len(photos))))
+        centres = []
+        for i, ph in enumerate(photos):
+            centres += [(i, x, y) for x, y in select_patch_centres(ph, per, int(round(P_f / s_f)))]
+        if not centres:
+            raise InputError(None, "no textured, unsaturated patch found for calibration")
+        self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
+                                 n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
+        self.coarse = PatchSpectra(photos, centres, s_c, P_c, rows=(0.0,), envelope=False,
+                                   n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)))
+        u = np.array([y / photos[i].H for i, _, y in self.fine.points])
+        # pivot row of the (time shift, readout) parametrisation: the mean patch row, so the
+        # two are nearly uncorrelated; with the offset fixed the time shift stays 0
+        self.ubar = 0.0 if "offset" in fix else float(u.mean())
+        self.uc = u - 0.5
+        say(f"calibrating on {len(centres)} patches of {P_f} px at scale {self.fine.scale:.2f} "
+            f"(coarse: {P_c} px at {self.coarse.scale:.2f}; blur ~{extent:.0f} px), "
+            f"{n_mappings} axis mapping(s)")
+        self.reg = FrameRegistration(photos, extent) if len(photos) > 1 else None
+        if self.reg is not None and self.reg.pairs:
+            for a_, b_, d, sig, q in self.reg.pairs:
+                say(f"  photos {a_ + 1} -> {b_ + 1}: image motion ({d[0]:+.1f}, {d[1]:+.1f}) px "
+                    f"(phase correlation, prominence {q:.1f}), weight 1/{sig:.1f} px")
+        # the search grids, the free coordinates, their bounds, steps and priors
+        if search.tau_hi > search.tau_lo:
+            self.taus = np.arange(search.tau_lo, search.tau_hi + 1e-9, _COARSE_STEP)
+        else:
+            self.taus = np.array([search.tau_lo])
+        if "readout" in fix or search.r0 == 0:
+            self.kappas = np.array([0.0])
+        else:
+            self.kappas = search.r0 * np.linspace(-0.35, 0.35, 8)
+        self.fgrid = [1.0] if "focal" in fix else [0.8, 0.87, 0.94, 1.0, 1.07, 1.15, 1.25]
+        self.idx = [X_NAMES.index(k) for k in search.free()]
+        self.lo, self.hi = search.bounds(self.ubar)
+        self.hs = np.array([0.0005, 0.001, 0.01, 0.004, 0.004, 0.004])    # finite differences
+        self.caps = np.array([0.004, max(0.15 * search.r0, 0.004), 0.08, 0.03, 0.03, 0.03])
+        self.prior_sig = np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
+                                   PRIOR_BIAS, PRIOR_BIAS, PRIOR_BIAS])
+
+    # -- pieces -------------------------------------------------------------------------
+    def theta_of(self, M):
+        return lambda v: self.search.theta_of(v, M, self.ubar)
+
+    def prior_for(self, M):
+        """(mean, sd, temperature) of the priors for mapping ``M``: the bias's combines
+        the given bias with the log's typical rate, when the log is long enough."""
+        mu, sig = np.zeros(6), self.prior_sig.copy()
+        mu[3:6], sig[3:6] = self.bias_prior.for_mapping(M)
+        return mu, sig, _TEMPERATURE
+
+    def extra_for(self, M):
+        """The frame registration's residuals for mapping ``M`` (``None`` without one)."""
+        reg = self.reg
+        if reg is None or not reg.pairs:
+            return None
+        return lambda v: reg.residuals(self.search.theta_of(v, M, self.ubar))
+
+    def start_vec(self, tau0, kap, M, fo=1.0):
+        """A start from a line fit (time shift ``tau0`` at the middle row, readout error
+        ``kap``), focal scale ``fo`` and the prior's bias."""
+        x = np.zeros(6)
+        x[3:6] = self.bias_prior.for_mapping(M)[0]
+        x[1] = kap
+        x[0] = 0.0 if "offset" in self.fix else tau0 + kap * (0.5 - self.ubar)
+        x[2] = np.log(fo)
+        return np.clip(x, self.lo, self.hi)
+
+    def refine(self, M, x0, iters, which=None):
+        """Levenberg-Marquardt under mapping ``M`` from ``x0``: (x, f, F, scores)."""
+        return lm_refine(self.fine, self.theta_of(M), x0, self.idx if which is None else which,
+                         self.lo, self.hi, self.hs, self.caps, self.prior_for(M), iters=iters,
+                         extra=self.extra_for(M))
+
+    def given_objective(self, M) -> tuple[float, np.ndarray]:
+        """The objective of the given parameters under mapping ``M`` (the bias the prior's),
+        and their vector."""
+        x0 = np.clip(np.r_[0.0, 0.0, 0.0, self.bias_prior.for_mapping(M)[0]], self.lo, self.hi)
+        return objective(self.fine, self.theta_of(M), x0, self.idx, self.prior_for(M),
+                         self.extra_for(M)), x0
+
+    # -- steps --------------------------------------------------------------------------
+    def coarse_rankings(self, cand) -> list[list]:
+        """Per coarse criterion (flat, then fitted envelope), the mappings' rows
+        ``(score, time shift, readout error, 1.0, M)``, best first."""
+        rankings = []
+        for envelope in (False, True):
+            self.coarse.envelope = envelope
+            scored = []
+            for M in cand:
+                C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.bias_prior.for_mapping(M)[0]),
+                                      taus=self.taus)
+                tot, tau0, kap = line_fit(C, self.taus, self.uc, self.kappas)
+                scored.append((tot, tau0, kap, 1.0, M))
+            scored.sort(key=lambda r: r[0])
+            rankings.append(scored)
+            ranking = relative_ranking(scored)
+            self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
+                     + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
+        return rankings
+
+    def candidate(self, tau0, kap, M):
+        """Mapping ``M`` at the working scale: per-patch time shifts x focal grid with the
+        envelopes held from the coarse start, combined along the readout line; from the
+        best few distinct starts, Levenberg-Marquardt. Returns (objective, x, M, the other
+        starts' results)."""
+        search = self.search
+        if "offset" in self.fix:
+            tm = np.array([0.0])
+        else:
+            tm = np.arange(tau0 - 0.016, tau0 + 0.0161, _COARSE_STEP)
+            tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
+            if tm.size == 0:
+                tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
+        self.fine.set_envelope(search.theta_of(self.start_vec(tau0, kap, M), M, self.ubar))
+        starts = []
+        for fo in self.fgrid:
+            C = self.fine.costs(self.theta0.copy(axes=M, focal=fo,
+                                                 bias=self.bias_prior.for_mapping(M)[0]),
+                                taus=tm, rows=(0.0,))
+            for kap in self.kappas:
+                tot, t0, kp = line_fit(C, tm, self.uc, [kap])
+                starts.append((tot, t0, kp, fo))
+        # the best few starts that differ in time shift (at the pivot row) or readout: the
+        # refinement from the best line fit alone can stop in the wrong basin
+        starts.sort(key=lambda r: r[0])
+        chosen = [starts[0]]
+        for r in starts[1:]:
+            if len(chosen) >= _CANDIDATE_STARTS:
+                break
+            if all(abs((r[1] - c[1]) + (r[2] - c[2]) * (0.5 - self.ubar)) > _DISTINCT_SHIFT
+                   or abs(r[2] - c[2]) > _DISTINCT_READOUT for c in chosen):
+                chosen.append(r)
+        fx, alts = np.inf, []
+        for best in chosen:
+            x1, f1, _, _ = self.refine(M, self.start_vec(best[1], best[2], M, best[3]), 4)
+            alts.append(x1)
+            if f1 < fx:
+                x, fx = x1, f1
+        self.say(f"  candidate {axes_to_letters(M) or 'given'}: time shift {x[0] * 1e3:+.1f} ms, "
+                 f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
+        return fx, x, M, [a for a in alts if a is not x]
+
+    def refine_winner(self, M, x, alts):
+        """The winning mapping's refinement from its best start, its other starts, the
+        given focal length and bias, and time shifts around its own: the lowest objective
+        (x, f, F, scores). Every basin reached is kept in :attr:`basins`."""
+        self.basins = []
+        best = self.refine_fully(M, x)
+        # The winner's other starts, refined as far: four iterations do not always tell which
+        # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
+        for xa in alts:
+            best = _lowest(best, self.refine_fully(M, xa))
+        # Focal length and a bias along the motion trade off (see Criterion), and the valley
+        # between them holds several local minima: the coarse start's focal guess can leave
+        # the refinement in one far from the given values. So the winner is refined once more
+        # from the given focal length and bias (the prior's: with a long log, the log's; first
+        # with the focal length held, so that the bias settles on its own), and the lower
+        # objective is kept.
+        idx, lo, hi = self.idx, self.lo, self.hi
+        b_prior = self.bias_prior.for_mapping(M)[0]
+        x = best[0]
+        if any(j >= 2 for j in idx) and np.any(x[2:] != np.r_[0.0, b_prior]):
+            xs = x.copy()
+            xs[2:] = np.r_[0.0, b_prior]
+            xs = self.refine(M, np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
+            best = _lowest(best, self.refine_fully(M, xs))
+        # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from
+        # the given (prior) values of the other parameters: the coarse start's line fits can
+        # miss a nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined
+        # as far.
+        if "offset" not in self.fix:
+            x = best[0]
+            starts, tried = [], {round(float(x[0]), 6)}
+            for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
+                xs0 = np.clip(np.r_[x[0] + dt, 0.0, 0.0, b_prior], lo, hi)
+                if round(float(xs0[0]), 6) in tried:   # the winner's own, or clipped to a bound
+                    continue
+                tried.add(round(float(xs0[0]), 6))
+                starts.append(xs0)
+            best = self._scan(M, starts, best)
+        # And readout times across the prior's range at the winner's mid-row time: with the
+        # rows between well timed, a readout 30-40 % off can sit in a basin of its own
+        # (the top and bottom patches then fit other parts of the trace).
+        if "readout" not in self.fix and self.search.r0 > 0:
+            x, r0, starts = best[0], self.search.r0, []
+            for fr in _READOUT_SCAN:
+                if abs(fr * r0 - x[1]) < 0.05 * r0:
+                    continue
+                xs0 = x.copy()
+                xs0[1] = fr * r0
+                starts.append(np.clip(xs0, lo, hi))
+            best = self._scan(M, starts, best)
+        return best
+
+    def _scan(self, M, starts, best):
+        """``starts`` refined four iterations each, the best :data:`_SCAN_REFINED` of them
+        refined as far as the winner: the lowest objective of those and ``best``."""
+        scan = sorted((self.refine(M, xs0, 4)[:2] for xs0 in starts), key=lambda r: r[1])
+        for xs0, _ in scan[:_SCAN_REFINED]:
+            best = _lowest(best, self.refine_fully(M, xs0))
+        return best
+
+    def refine_fully(self, M, x0):
+        """:meth:`refine` as far as the winner (ten iterations), the basin reached kept in
+        :attr:`basins` as ``(x, objective)``."""
+        r = self.refine(M, x0, 10)
+        self.basins.append((r[0], r[1]))
+        return r
+
+    def offset_rivals(self, M, x, f) -> list[tuple[float, float, float]]:
+        """Of :attr:`basins`, those whose time offset correction lies more than
+        :data:`OFFSET_APART` from ``x``'s and whose objective is within
+        :data:`OFFSET_RIVAL_NATS` of ``f``: ``(offset correction (s), readout correction
+        (s), objective - f)``, one per offset (the lowest), best first. (A basin of another
+        readout at the same mid-frame timing has another offset too: the offset is the
+        first row's.)"""
+        if "offset" in self.fix:
+            return []
+        at = self.search.theta_of(x, M, self.ubar).offset
+        rivals = []
+        for xb, fb in sorted(self.basins, key=lambda b: b[1]):
+            tb = self.search.theta_of(xb, M, self.ubar)
+            if (abs(tb.offset - at) > OFFSET_APART and fb - f < OFFSET_RIVAL_NATS
+                    and all(abs(tb.offset - o) > OFFSET_APART for o, _, _ in rivals)):
+                rivals.append((tb.offset, tb.readout, float(fb - f)))
+        return rivals
+
+    def mirror_twin(self, M, x, given_biases):
+        """Mapping ``M`` at ``x`` against its mirror twin at the same parameters (by the
+        frame registration when there is one, else by :func:`_phase_prefers_twin`).
+        Returns the mapping taken, its refinement when it is the twin (else ``None``), and
+        a note that says why."""
+        Mt = TWIN @ M
+        xt = np.clip(_twin_parameters(x, given_biases, self.fix), self.lo, self.hi)
+        th_w = self.search.theta_of(x, M, self.ubar)
+        th_t = self.search.theta_of(xt, Mt, self.ubar)
+        per_patch = (self.fine.cost(th_t) - self.fine.cost(th_w)) / len(self.fine.points)
+        d = np.log(self.fine.sparsity(th_t) / self.fine.sparsity(th_w))
+        margin, sem = _mean_and_error(d)
+        msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
+               f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
+               f"{int((d > 0).sum())}/{d.size} patches prefer {axes_to_letters(M)})")
+        reg = self.reg
+        if reg is not None and reg.pairs:
+            r_w = float(np.sum(reg.residuals(th_w) ** 2))
+            r_t = float(np.sum(reg.residuals(th_t) ** 2))
+            msg += f", registration chi2 {r_w:.1f} vs {r_t:.1f}"
+            swap = r_t < r_w
+        else:
+            swap = _phase_prefers_twin(per_patch, d)
+        twin = None
+        if swap:
+            twin = self.refine(Mt, xt, 6)
+            msg += f": {axes_to_letters(Mt)} taken"
+            M = Mt
+        return M, twin, msg
+
+
+def with_twin(top: list, everything: list) -> list:
+    """``top`` (rows whose last item is a mapping) plus the best row holding the mirror
+    twin of its first mapping, when that is not already in."""
+    if not top:
+        return top
+    tw = TWIN @ top[0][-1]
+    if any(np.allclose(tw, r[-1]) for r in top):
+        return list(top)
+    return list(top) + [r for r in everything if np.allclose(r[-1], tw)][:1]
+
+
+def relative_ranking(scored: list) -> list[tuple[str, float]]:
+    """``(letters, score relative to the best)`` of a coarse ranking's rows (best first)."""
+    return [(axes_to_letters(r[4]) or "given", float(r[0] - scored[0][0])) for r in scored]
+
+
+def shortlist(rankings: list) -> list:
+    """The coarse rankings' rows merged, each ranking's best in turn, each mapping once.
+
+    The two coarse criteria fail on different scenes (a flat 1/f^2 spectrum is misled by
+    oriented texture, a fitted envelope soaks up part of a long blur)."""
+    short = []
+    for pair in zip(*rankings):
+        for r in pair:
+            if not any(np.allclose(r[4], q[4]) for q in short):
+                short.append(r)
+    return short
+
+
+def _lowest(a: tuple, b: tuple) -> tuple:
+    """Of two refinements ``(x, objective, ...)``, the one with the lower objective (``a``
+    on a tie)."""
+    return b if b[1] < a[1] else a
+
+
+def _mean_and_error(d: np.ndarray) -> tuple[float, float]:
+    """Mean of ``d`` and its standard error (infinite for fewer than two values)."""
+    d = np.asarray(d, float)
+    sem = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else np.inf
+    return float(d.mean()), sem
+
+
+def _phase_prefers_twin(per_patch: float, log_ratio: np.ndarray) -> bool:
+    """Whether the mirror twin replaces the winner when no frame registration decides:
+    its spectra (cost, nats per patch, twin minus winner) do not favour the winner by
+    :data:`_TWIN_NATS` or more, and the per-patch log sparsity ratios (twin over winner)
+    favour the twin by :data:`_TWIN_SIGMAS` standard errors of their mean."""
+    margin, sem = _mean_and_error(log_ratio)
+    return bool(per_patch < _TWIN_NATS and margin + _TWIN_SIGMAS * sem < 0)
+
+
+def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
+    """The parameter vector under which the mirror twin's camera rates are the winner's,
+    x and y negated.
+
+    The time shift, readout and focal scale stay. Each photo's bias is its given one
+    (``given_biases``, rad/s, camera frame) plus the shared correction ``x[3:6]``, and is
+    mirrored as well: exactly when the photos' given biases are equal, else in the least
+    squares sense over the photos (one correction cannot mirror several biases). A fixed
+    bias (``"bias"`` in ``fix``) stays as given: the twin's PSFs are then the reflections
+    turned by twice its x and y components.
+    """
+    xt = np.array(x, float)
+    if "bias" not in fix:
+        b = np.mean(np.asarray(given_biases, float).reshape(-1, 3), axis=0)
+        xt[3:6] = TWIN @ xt[3:6] + (TWIN - np.eye(3)) @ b
+    return xt

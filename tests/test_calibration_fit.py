@@ -1,0 +1,93 @@
+"""Tests of the calibration's search steps (gyrodeblur.calibration_fit): the shortlist of
+mappings, the mirror twin's parameters and the phase tie-break. The search as a whole is
+tested through ``calibrate`` in test_calibrate.py."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyrodeblur.axes import parse_axes
+from gyrodeblur.calibration_fit import (TWIN, _phase_prefers_twin, _twin_parameters,
+                                        relative_ranking, shortlist, with_twin)
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture
+from gyrodeblur.gyrolog import GyroLog
+from gyrodeblur.spectral_criterion import Corrections
+
+
+def _capture() -> Capture:
+    """A 384x256 capture with a wobbling 200 Hz log (rad/s) and an identity mapping."""
+    t = np.arange(0.0, 1.2, 1 / 200)
+    w = np.stack([0.5 * np.sin(2 * np.pi * 3 * t), 0.7 * np.cos(2 * np.pi * 2 * t),
+                  0.2 * np.sin(2 * np.pi * 4 * t)], 1)
+    return Capture(0.5, 0.04, 0.03, Camera.centred(384, 256, 500.0), GyroLog(t, w), axes="Xyz")
+
+
+def _row(score, letters):
+    """A coarse-ranking row: (score, time shift, readout error, focal, mapping)."""
+    return (score, 0.0, 0.0, 1.0, parse_axes(letters))
+
+
+def test_the_shortlist_takes_each_ranking_in_turn_and_each_mapping_once():
+    flat = [_row(0, "Xyz"), _row(5, "yXZ"), _row(9, "xYz")]
+    fitted = [_row(0, "yXZ"), _row(3, "ZXY"), _row(4, "Xyz")]
+    got = [r[4] for r in shortlist([flat, fitted])]
+    want = [parse_axes(a) for a in ("Xyz", "yXZ", "ZXY", "xYz")]
+    assert len(got) == len(want)
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
+    assert relative_ranking(fitted)[1] == ("ZXY", 3.0)
+
+
+def test_the_best_mappings_twin_joins_the_candidates_once():
+    everything = [_row(0, "Xyz"), _row(2, "yXZ"), _row(7, "xYz"), _row(8, "YxZ")]
+    top = with_twin(everything[:2], everything)
+    assert len(top) == 3
+    np.testing.assert_array_equal(top[-1][4], TWIN @ parse_axes("Xyz"))
+    assert len(with_twin(top, everything)) == 3        # already in: not added again
+    assert with_twin([], everything) == []
+
+
+def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
+    """Negating the camera's x and y rates reflects the PSFs only if the bias is negated with
+    them: the twin's parameters give exactly the winner's camera rates, x and y negated; with
+    photos of unequal given biases, as nearly as one shared correction can; a fixed bias stays."""
+    base = _capture()
+    caps = [base.replace(bias=np.array([0.03, -0.01, 0.02])),
+            base.replace(bias=np.array([-0.05, 0.04, 0.02]))]
+    x = np.array([0.004, -0.002, 0.05, 0.01, 0.04, -0.03])
+    M = parse_axes("Xyz")
+
+    def rates(v, axes, cap):
+        th = Corrections(axes=axes, offset=v[0], readout=v[1], focal=float(np.exp(v[2])),
+                    bias=np.asarray(v[3:6], float))
+        return th.apply(cap).camera_rates()[1]
+
+    def miss(v, cap):               # twin's rates against the winner's reflected
+        return rates(v, TWIN @ M, cap) - rates(x, M, cap) @ TWIN
+
+    xt = _twin_parameters(x, [caps[0].bias])
+    np.testing.assert_allclose(xt[:3], x[:3])
+    np.testing.assert_allclose(miss(xt, caps[0]), 0.0, atol=1e-12)
+    # left as it is, the bias turns the twin's rates away from the reflection
+    assert np.abs(miss(x, caps[0])).max() > 0.05
+    # unequal given biases: the misses cancel over the photos, and each is smaller than
+    # with the first photo's bias alone
+    xt2 = _twin_parameters(x, [c.bias for c in caps])
+    m0, m1 = miss(xt2, caps[0])[0], miss(xt2, caps[1])[0]
+    np.testing.assert_allclose(m0 + m1, 0.0, atol=1e-12)
+    worst_first = max(np.abs(miss(xt, c)[0]).max() for c in caps)
+    assert max(np.abs(m0).max(), np.abs(m1).max()) < worst_first
+    # a fixed bias is not changed
+    np.testing.assert_array_equal(_twin_parameters(x, [caps[0].bias], fix={"bias"}), x)
+
+
+def test_the_twin_needs_a_clear_phase_preference():
+    """Without frame registration the twin replaces the winner only when its spectra are not
+    clearly worse and the phase prefers it by two standard errors, not by a coin toss."""
+    clear = np.array([-0.05, -0.04, -0.06, -0.03, -0.05])
+    toss = np.array([0.02, -0.03, 0.01, -0.04, 0.015, -0.02, -0.01, 0.01, -0.03])   # mean < 0
+    assert _phase_prefers_twin(-14.0, clear)
+    assert not _phase_prefers_twin(-14.0, toss)
+    assert not _phase_prefers_twin(60.0, clear)          # the spectra favour the winner
+    assert not _phase_prefers_twin(-14.0, clear[:1])     # one patch: no standard error
