@@ -311,6 +311,22 @@ def test_cli_capture_per_photo_count_must_match(cli_dir, capsys):
     assert "one per photo" in capsys.readouterr().err
 
 
+def test_cli_a_photo_without_texture_is_named_in_the_error(cli_dir, capsys):
+    """A problem with the photo itself (nothing textured to calibrate on) names the photo,
+    in calibrate and in deblur --refine, and writes nothing."""
+    from gyrodeblur.imageio import write_photo
+    d = cli_dir
+    flat = d / "flat.png"
+    write_photo(flat, np.full((H, W), 0.5, np.float32), bit_depth=8)
+    for cmd, out in (("calibrate", d / "out" / "flat.json"), ("deblur", d / "out" / "flat_out.png")):
+        argv = [cmd, str(flat), "--capture", str(d / "cap.json"), "-o", str(out)]
+        rc = main(argv + (["--refine", "--quiet"] if cmd == "deblur" else []))
+        assert rc == 2
+        err = capsys.readouterr().err
+        assert f"{flat}: no textured" in err
+        assert not out.exists()
+
+
 def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
     d = cli_dir
     out = d / "out" / "refined.png"

@@ -256,9 +256,9 @@ def cmd_deblur(args, say) -> None:
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         if args.refine:
-            from .calibrate import calibrate
-            from .calibrate_cli import format_estimates
-            res = calibrate([photo.pixels], cap, fix=fix, say=say, downscale=args.downscale)
+            from .calibrate_cli import calibrate_named, format_estimates
+            res = calibrate_named([args.photo], [photo.pixels], cap, fix=fix, say=say,
+                                  downscale=args.downscale)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
