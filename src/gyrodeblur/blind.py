@@ -326,6 +326,13 @@ def _max_levels(kernel_size: int, shape: tuple[int, int]) -> int:
 
 
 def _downscale(gray: np.ndarray, scale: float) -> np.ndarray:
+    """One pyramid level: ``gray`` resized by ``scale`` (bilinear, with skimage's Gaussian
+    anti-aliasing of sigma ``(1 / scale - 1) / 2`` px), float32.
+
+    The kernel goes down the pyramid through the same prefilter (:func:`_resample_kernel`),
+    so image and kernel stay consistent at every level. (``calibrate``'s ``downscale`` uses
+    area averaging instead: it shrinks a photo softer than its pixel grid once, before
+    anything else, and what softening that adds is part of the photo the criterion sees.)"""
     if scale >= 0.999:
         return gray
     from skimage.transform import resize
