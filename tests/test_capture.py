@@ -99,3 +99,26 @@ def test_not_json(tmp_path):
     (tmp_path / "c.json").write_text("{nope")
     with pytest.raises(InputError, match="c.json: not valid JSON"):
         load_capture(tmp_path / "c.json")
+
+
+def test_unknown_keys_are_warned_of_and_notes_are_not(capture_files):
+    """A misspelt key would silently fall back to a default (here: a global shutter)."""
+    d, doc = capture_files
+    doc["readout_tme"] = doc.pop("readout_time")
+    doc["camera"]["focal"] = 5.0
+    doc["comment"] = "taken at dusk"
+    doc["gyro"]["_note"] = "phone B"
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning) as rec:
+        cap = load_capture(d / "cap.json")
+    text = " | ".join(str(r.message) for r in rec)
+    assert "cap.json: unknown key(s) readout_tme ignored" in text
+    assert "camera.focal" in text
+    assert "comment" not in text.replace("known:", "") and "_note" not in text
+    assert cap.readout_time == 0.0
+    doc.pop("readout_tme"), doc["camera"].pop("focal")
+    (d / "cap.json").write_text(json.dumps(doc))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_capture(d / "cap.json")                   # a clean file: no warning

@@ -154,3 +154,100 @@ def test_sparse_options_change_the_result_and_are_checked(capture_dir, capsys):
                                         str(d / "x.png"), "--method", "wiener", "--iterations",
                                         "3"], capsys)
     assert sorted(p.name for p in d.iterdir()) == before
+
+
+def _edited_capture(d, name, edit):
+    """``cap.json`` with ``edit(doc)`` applied, written as ``name``."""
+    doc = json.loads((d / "cap.json").read_text())
+    edit(doc)
+    (d / name).write_text(json.dumps(doc))
+    return str(d / name)
+
+
+@pytest.mark.parametrize("edit,match", [
+    (lambda doc: doc.update(camera=[1, 2]), "'camera' must be a JSON object"),
+    (lambda doc: doc.update(gyro="gyro.gcsv"), "'gyro' must be a JSON object"),
+    (lambda doc: doc["gyro"].update(path=None), "gyro.path must be a file path"),
+    (lambda doc: doc["gyro"].update(path=5), "gyro.path must be a file path"),
+    (lambda doc: doc["gyro"].update(max_gap="abc"), "'max_gap' must be a number"),
+    (lambda doc: doc["gyro"].update(max_gap=-1), "max_gap must be a positive number"),
+    (lambda doc: doc["gyro"].update(rate_columns=5), "rate_columns must list three"),
+    (lambda doc: doc["gyro"].update(bias={"x": 1}), "bias must be three finite numbers"),
+    (lambda doc: doc["gyro"].update(bias=["a", "b", "c"]), "bias must be three finite numbers"),
+    (lambda doc: doc.update(exposure_time=True), "'exposure_time' must be a number"),
+    (lambda doc: doc["camera"].update(fx=True), "'fx' must be a number"),
+    (lambda doc: doc["camera"].update(width=256.5), "camera.width must be a whole number"),
+    (lambda doc: doc["camera"].update(height="abc"), "camera.height must be a whole number"),
+    (lambda doc: doc["camera"].update(fx=-5.0), "focal lengths must be positive"),
+    (lambda doc: doc["camera"].pop("width"), "camera.width missing"),
+])
+def test_bad_capture_fields_are_named_not_tracebacks(capture_dir, capsys, edit, match):
+    """Every field of the wrong type or value is one error line naming the JSON file."""
+    d = capture_dir
+    cap = _edited_capture(d, "edited.json", edit)
+    for argv in (["psf", "--capture", cap, "--at", "5,5", "-o", str(d / "p.npy")],
+                 ["deblur", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "o.png")]):
+        msg = _run_error(argv, capsys)
+        assert "edited.json" in msg and match in msg
+    assert not (d / "p.npy").exists() and not (d / "o.png").exists()
+
+
+def test_a_blur_longer_than_the_frame_is_refused_before_any_work(capture_dir, capsys):
+    """A focal length of 1 px puts the frame's edge nearly 90 degrees off axis: the blur there
+    would span thousands of pixels. Every command refuses it (instead of exhausting memory,
+    or time in simulate) and names what to check."""
+    d = capture_dir
+    cap = str(d / "cap.json")
+    for argv in (["psf", "--capture", cap, "--fx", "1", "--at", "0,0", "-o", str(d / "p.npy")],
+                 ["deblur", str(d / "sharp.jpg"), "--capture", cap, "--fx", "1", "-o", str(d / "o.png")],
+                 ["simulate", str(d / "sharp.jpg"), "--capture", cap, "--fx", "1", "-o", str(d / "s.png")]):
+        msg = _run_error(argv, capsys)
+        assert "cap.json" in msg and "more than the" in msg and "focal length" in msg
+    assert not any((d / n).exists() for n in ("p.npy", "o.png", "s.png"))
+
+
+def test_options_out_of_range_or_ignored_are_refused(capture_dir, capsys):
+    d = capture_dir
+    cap = str(d / "cap.json")
+    photo = str(d / "sharp.jpg")
+    cases = [
+        (["psf", "--capture", cap, "--at", "nan,3", "-o", str(d / "p.npy")], "--at"),
+        (["psf", "--capture", cap, "--at", "5000,5", "-o", str(d / "p.npy")], "--at"),
+        (["simulate", photo, "--capture", cap, "--snr-db", "nan", "-o", str(d / "s.png")], "--snr-db"),
+        (["simulate", photo, "--capture", cap, "--snr-db", "30", "--seed", "-1", "-o",
+          str(d / "s.png")], "--seed"),
+        (["deblur", photo, "--capture", cap, "--overlap", "1", "-o", str(d / "o.png")], "--overlap"),
+        (["deblur", photo, "--capture", cap, "--overlap", "nan", "-o", str(d / "o.png")], "--overlap"),
+        (["deblur", photo, "--capture", cap, "--max-gap", "nan", "-o", str(d / "o.png")], "--max-gap"),
+        (["deblur", photo, "--capture", cap, "-o", str(d / "o.png"), "--save-psf", str(d / "o.png")],
+         "is also the output photo"),
+        (["deblur", photo, "--capture", cap, "--kernel-size", "9", "-o", str(d / "o.png")],
+         "--kernel-size: applies with --blind only"),
+        (["deblur", photo, "--blind", "--refine", "-o", str(d / "o.png")], "--refine: does not apply"),
+        (["deblur", photo, "--blind", "--capture", cap, "-o", str(d / "o.png")], "--capture: does not apply"),
+        (["deblur", photo, "--capture", cap, "--mode", "invariant", "--grid", "2x2", "-o",
+          str(d / "o.png")], "--grid: applies to --mode variant only"),
+    ]
+    for argv, match in cases:
+        assert match in _run_error(argv, capsys), argv
+    assert not any((d / n).exists() for n in ("p.npy", "s.png", "o.png"))
+
+
+def test_calibrate_never_overwrites_its_inputs(capture_dir, capsys):
+    """Not the photo, the capture description or the gyro log, --overwrite or not."""
+    d = capture_dir
+    main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o", str(d / "b.png")])
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()}
+    for target in ("b.png", "cap.json", "gyro.gcsv"):
+        msg = _run_error(["calibrate", str(d / "b.png"), "--capture", str(d / "cap.json"),
+                          "-o", str(d / target), "--overwrite"], capsys)
+        assert target in msg and "inputs" in msg
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()} == before
+
+
+def test_a_too_small_photo_is_named(capture_dir, capsys):
+    d = capture_dir
+    write_photo(d / "tiny.png", np.full((8, 8, 3), 0.5, np.float32))
+    msg = _run_error(["deblur", str(d / "tiny.png"), "--blind", "-o", str(d / "o.png")], capsys)
+    assert "tiny.png: the image has only 8 rows" in msg

@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -77,7 +79,8 @@ def test_shared_android_log(shared_data):
 
 
 @pytest.mark.parametrize("content,match", [
-    ("t_s,x,y,z\n0,0,0,0\n0.01,0,0,0\n0.005,0,0,0\n", "not increasing"),
+    ("t_s,x,y,z\n0,0,0,0\n0.01,0,0,0\n0.005,0,0,0\n",
+     r"not increasing \(sample 3: 0.005000 s after 0.010000 s\)"),
     ("t_s,x,y,z\n0,0,0,0\n0.01,nan,0,0\n0.02,0,0,0\n", "NaN"),
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
     ("t_s,x,y,z\n0,0,0\n", "expected 4 values"),
@@ -90,6 +93,23 @@ def test_bad_logs(tmp_path, content, match):
     with pytest.raises(InputError, match=match) as e:
         read_gyro_log(p, "csv")
     assert "bad.csv" in str(e.value)
+
+
+@pytest.mark.parametrize("header,row,match", [
+    ("tscale,0.001\ngscale,0\n", "5,1,2,3", "tscale and gscale must be positive"),
+    ("tscale,-1\ngscale,0.01\n", "5,1,2,3", "tscale and gscale must be positive"),
+    ("tscale,0.001\ngscale,0.01\n", "5,inf,2,3", "NaN or infinite value in gyro sample 2"),
+])
+def test_bad_gcsv_scales_and_values(tmp_path, header, row, match):
+    """A zero scale would silently give a still camera; an infinite rate must be refused
+    before the header's axis rotation meets it (no floating-point warning on the way)."""
+    p = tmp_path / "g.gcsv"
+    p.write_text(f"GYROFLOW IMU LOG\norientation,YxZ\n{header}t,gx,gy,gz\n0,1,2,3\n{row}\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match=match) as e:
+            read_gcsv(p)
+    assert "g.gcsv" in str(e.value)
 
 
 def test_missing_file_and_unknown_format(tmp_path):

@@ -264,10 +264,22 @@ def test_float_tiffs_are_clipped_and_reported_as_16bit(tmp_path):
     rgb = np.stack([grey, grey, grey], axis=-1)
     tifffile.imwrite(tmp_path / "c.tif", rgb, photometric="rgb", metadata=None)
     for name in ("g.tif", "c.tif"):
-        photo = read_photo(tmp_path / name)
+        with pytest.warns(UserWarning, match=f"{name}: .* outside \\[0, 1\\] are clipped"):
+            photo = read_photo(tmp_path / name)
         assert photo.bit_depth == 16 and photo.pixels.dtype == np.float32
         assert np.allclose(photo.pixels.reshape(-1, 3 if name == "c.tif" else 1)[:, 0],
                            [0.0, 0.25, 1.0])
+    tifffile.imwrite(tmp_path / "n.tif", np.array([[0.5, np.nan]], np.float32), metadata=None)
+    with pytest.warns(UserWarning, match="1 NaN or infinite samples are read as 0"):
+        assert np.array_equal(read_photo(tmp_path / "n.tif").pixels, [[0.5, 0.0]])
+
+
+def test_only_the_first_page_of_a_stack_is_read_with_a_warning(tmp_path):
+    stack = np.stack([np.full((4, 5), 10, np.uint8), np.full((4, 5), 200, np.uint8)])
+    tifffile.imwrite(tmp_path / "s.tif", stack)
+    with pytest.warns(UserWarning, match="only the first of its 2 pages"):
+        photo = read_photo(tmp_path / "s.tif")
+    assert photo.pixels.shape == (4, 5) and np.allclose(photo.pixels, 10 / 255)
 
 
 def test_palette_grey_alpha_and_bilevel_are_normalised(tmp_path):

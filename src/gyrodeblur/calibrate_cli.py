@@ -69,17 +69,6 @@ def fixed_parameters(args) -> set[str]:
     return fix
 
 
-def calibrate_named(paths, images, captures, **options):
-    """:func:`gyrodeblur.calibrate.calibrate` on photos read from ``paths``: a problem with
-    the photos themselves (too small for their blur, no textured patch) names them."""
-    try:
-        return calibrate(images, captures, **options)
-    except InputError as exc:
-        if exc.source is not None:
-            raise
-        raise InputError(", ".join(os.fspath(p) for p in paths), exc.problem) from None
-
-
 def calibrate_command(args, say, load_capture) -> None:
     """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json`.
 
@@ -106,8 +95,10 @@ def calibrate_command(args, say, load_capture) -> None:
         a = argparse.Namespace(**vars(args))
         a.capture = paths[k] if len(paths) > 1 else paths[0]
         caps.append(load_capture(a, ph, say))
-    res = calibrate_named(args.photos, [p.pixels for p in photos], caps, fix=fix, say=say,
-                          downscale=args.downscale)
+    inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
+    check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)
+    res = calibrate([p.pixels for p in photos], caps, fix=fix, say=say,
+                    downscale=args.downscale)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):

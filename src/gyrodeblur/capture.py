@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
@@ -100,10 +101,17 @@ class Capture:
         if self.readout_time < 0:
             raise InputError(src, f"readout_time must be >= 0, got {self.readout_time}")
         object.__setattr__(self, "axes", parse_axes(self.axes, source=src))
-        bias = np.asarray(self.bias, dtype=np.float64).reshape(-1)
+        try:
+            bias = np.asarray(self.bias, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            bias = np.full(1, np.nan)
         if bias.shape != (3,) or not np.all(np.isfinite(bias)):
-            raise InputError(src, "gyro bias must be three finite numbers (rad/s)")
+            raise InputError(src, f"gyro bias must be three finite numbers (rad/s), got {self.bias!r}")
         object.__setattr__(self, "bias", bias)
+        gap = float(self.max_gap)
+        if not (np.isfinite(gap) and gap > 0):
+            raise InputError(src, f"max_gap must be a positive number of seconds, got {self.max_gap!r}")
+        object.__setattr__(self, "max_gap", gap)
         t0, t1 = self.window
         check_coverage(self.log, t0 - self.time_offset, t1 - self.time_offset,
                        max_gap=self.max_gap)
@@ -206,10 +214,56 @@ def _get(d: dict, key: str, source: str, kind=float, required=True):
         if required:
             raise InputError(source, f"missing {key!r}")
         return None
+    v = d[key]
     try:
-        return kind(d[key])
-    except (TypeError, ValueError):
-        raise InputError(source, f"{key!r} must be a number, got {d[key]!r}") from None
+        if isinstance(v, bool):           # JSON true/false is not a number here
+            raise TypeError
+        return kind(v)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(source, f"{key!r} must be a number, got {v!r}") from None
+
+
+def _whole(v) -> int:
+    """A pixel count: a finite whole number (``1024`` or ``1024.0``, not ``1024.5``)."""
+    if isinstance(v, bool):
+        raise TypeError(v)
+    f = float(v)
+    if not np.isfinite(f) or f != int(f):
+        raise ValueError(v)
+    return int(f)
+
+
+#: The keys of a capture description, per section ("" = top level).
+KNOWN_KEYS = {
+    "": ("exposure_start", "exposure_time", "readout_time", "camera", "gyro"),
+    "camera": ("fx", "fy", "cx", "cy", "width", "height"),
+    "gyro": ("path", "format", "orientation", "time_offset", "bias", "max_gap") + CSV_OPTION_KEYS,
+}
+
+
+def _warn_unknown_keys(data: dict, source: str) -> None:
+    """Warn of keys no reader uses (a misspelt ``readout_time`` would silently mean a global
+    shutter). Keys that start with ``_`` or are ``comment`` are notes, and stay quiet."""
+    sections = [("", data)] + [(k, data[k]) for k in ("camera", "gyro")
+                               if isinstance(data.get(k), dict)]
+    for name, d in sections:
+        unknown = [k for k in d if k not in KNOWN_KEYS[name] and not str(k).startswith("_")
+                   and k != "comment"]
+        if unknown:
+            where = f"{name}." if name else ""
+            warnings.warn(f"{source}: unknown key(s) {', '.join(where + str(k) for k in unknown)} "
+                          f"ignored (known: {', '.join(where + k for k in KNOWN_KEYS[name])})",
+                          stacklevel=3)
+
+
+def _section(data: dict, key: str, source: str) -> dict:
+    """``data[key]`` (a JSON object, or absent/null: empty) as a new dict."""
+    v = data.get(key)
+    if v is None:
+        return {}
+    if not isinstance(v, dict):
+        raise InputError(source, f"{key!r} must be a JSON object, got {v!r}")
+    return dict(v)
 
 
 def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | None = None,
@@ -229,8 +283,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         (3 numbers or ``"auto"``), ``max_gap`` and the csv options. ``None`` values are
         ignored.
     image_size : (width, height), optional
-        The photo's size; fills a missing camera size and the principal point (image
-        centre) and rescales the intrinsics to the photo.
+        The photo's size; gives the camera size when the JSON gives neither width nor
+        height, the principal point (image centre) when it is missing, and rescales the
+        intrinsics to the photo.
     exif_hints : dict, optional
         ``exposure_time`` (s) and ``fx`` (pixels at ``image_size``) read from the photo,
         used only where the JSON and the options leave the value out.
@@ -253,10 +308,11 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             raise InputError(src, f"cannot read ({exc})") from None
         if not isinstance(data, dict):
             raise InputError(src, "the capture description must be a JSON object")
+        _warn_unknown_keys(data, src)
         base = os.path.dirname(os.path.abspath(src))
     ov = {k: v for k, v in (overrides or {}).items() if v is not None}
-    cam_d = dict(data.get("camera") or {})
-    gyro_d = dict(data.get("gyro") or {})
+    cam_d = _section(data, "camera", src)
+    gyro_d = _section(data, "gyro", src)
     for k in ("fx", "fy", "cx", "cy", "width", "height"):
         if k in ov:
             cam_d[k] = ov[k]
@@ -275,11 +331,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         data["exposure_time"] = hints["exposure_time"]
         if report:
             report(f"exposure_time = {hints['exposure_time']:.6g} s (from EXIF)")
-    if image_size is not None:
-        cam_d.setdefault("width", image_size[0])
-        cam_d.setdefault("height", image_size[1])
+    if image_size is not None and "width" not in cam_d and "height" not in cam_d:
+        cam_d["width"], cam_d["height"] = image_size      # one alone would not match
     if "fx" not in cam_d and "fx" in hints and image_size is not None:
-        s = float(cam_d["width"]) / image_size[0]
+        s = _get(cam_d, "width", src) / image_size[0]
         cam_d["fx"] = hints["fx"] * s
         if report:
             report(f"fx = {cam_d['fx']:.1f} px (from EXIF focal length)")
@@ -287,20 +342,37 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise InputError(src, "no focal length: give camera.fx (pixels), --fx, or a photo "
                               "whose EXIF has FocalLength and FocalLengthIn35mmFilm")
     cam_d.setdefault("fy", cam_d["fx"])
-    if "width" not in cam_d or "height" not in cam_d:
-        raise InputError(src, "camera.width and camera.height are missing")
-    cam_d.setdefault("cx", (float(cam_d["width"]) - 1) / 2)
-    cam_d.setdefault("cy", (float(cam_d["height"]) - 1) / 2)
-    camera = Camera(*(_get(cam_d, k, src) for k in ("fx", "fy", "cx", "cy")),
-                    int(_get(cam_d, "width", src)), int(_get(cam_d, "height", src)))
+    missing = [k for k in ("width", "height") if k not in cam_d]
+    if missing:
+        raise InputError(src, f"camera.{' and camera.'.join(missing)} missing")
+    size = []
+    for k in ("width", "height"):
+        try:
+            size.append(_whole(cam_d[k]))
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(src, f"camera.{k} must be a whole number of pixels, got "
+                                  f"{cam_d[k]!r}") from None
+    width, height = size
+    cam_d.setdefault("cx", (width - 1) / 2)
+    cam_d.setdefault("cy", (height - 1) / 2)
+    intrinsics = [_get(cam_d, k, src) for k in ("fx", "fy", "cx", "cy")]
+    try:
+        camera = Camera(*intrinsics, width, height)
+    except InputError as exc:             # name the file (or the options) it came from
+        raise InputError(src, f"{exc.source}: {exc.problem}") from None
 
     if "path" not in gyro_d:
         raise InputError(src, "missing gyro.path (or --gyro)")
+    if not isinstance(gyro_d["path"], (str, os.PathLike)):
+        raise InputError(src, f"gyro.path must be a file path (a string), got {gyro_d['path']!r}")
     gpath = os.path.join(base, os.fspath(gyro_d["path"]))
     fmt = gyro_d.get("format")
     csv_opts = {k: gyro_d[k] for k in CSV_OPTION_KEYS if k in gyro_d}
-    if csv_opts.get("rate_columns") is not None:
-        csv_opts["rate_columns"] = tuple(csv_opts["rate_columns"])
+    rc = csv_opts.get("rate_columns")
+    if rc is not None:
+        if isinstance(rc, str) or not isinstance(rc, (list, tuple)) or len(rc) != 3:
+            raise InputError(src, f"gyro.rate_columns must list three columns, got {rc!r}")
+        csv_opts["rate_columns"] = tuple(rc)
     log = read_gyro_log(gpath, fmt, **(csv_opts if fmt in (None, "csv") else {}))
     axes = parse_axes(gyro_d.get("orientation", "XYZ"), source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
@@ -323,5 +395,6 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         bias = bias_spec
     spec = {k: v for k, v in gyro_d.items() if k not in ("bias",)}
     spec["path"] = os.fspath(gyro_d["path"])
+    max_gap = _get(gyro_d, "max_gap", src, required=False)
     return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
-                   spec, src, float(gyro_d.get("max_gap", 0.05)))
+                   spec, src, 0.05 if max_gap is None else max_gap)

@@ -15,6 +15,10 @@ import warnings
 import numpy as np
 
 from .errors import InputError
+from .tiling import DEFAULT_OVERLAP
+
+#: Kernel size (px) of ``deblur --blind`` when ``--kernel-size`` is not given.
+BLIND_KERNEL_SIZE = 31
 
 FRAMES_HELP = ("Frames: image x right, y down, pixel centres at integer coordinates; camera "
                "x right, y down, z forward; angular rates in rad/s; times in seconds.")
@@ -78,6 +82,34 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
                    help="largest gap between gyro samples allowed inside the exposure (default 0.05)")
 
 
+#: The capture options' destinations (``--capture`` and those that override its fields).
+_CAPTURE_OPTIONS = ("capture", "exposure_start", "exposure_time", "readout_time", "fx", "fy",
+                    "cx", "cy", "gyro", "gyro_format", "orientation", "time_offset", "bias",
+                    "time_unit", "rate_unit", "max_gap")
+
+
+def _ignored_options(args) -> None:
+    """Refuse deblur options that the chosen mode would ignore (naming the first)."""
+    def given(name):
+        return getattr(args, name, None) not in (None, False, "")
+
+    if args.blind:
+        for name in ("refine",) + _CAPTURE_OPTIONS:
+            if given(name):
+                raise InputError("--" + name.replace("_", "-"),
+                                 "does not apply with --blind, which uses no gyro log")
+        if args.mode != "variant":
+            raise InputError("--mode", "does not apply with --blind (--grid sets its patches)")
+        return
+    if given("kernel_size"):
+        raise InputError("--kernel-size", "applies with --blind only")
+    if args.mode == "invariant":
+        for name in ("grid", "overlap"):
+            if given(name):
+                raise InputError("--" + name, "applies to --mode variant only (invariant "
+                                              "deblurs the whole photo with one PSF)")
+
+
 def _load_capture(args, photo=None, say=None):
     from .capture import load_capture
 
@@ -89,6 +121,8 @@ def _load_capture(args, photo=None, say=None):
         "bias": _bias(args.bias), "time_unit": args.time_unit, "rate_unit": args.rate_unit,
         "max_gap": args.max_gap,
     }
+    if args.max_gap is not None and not (np.isfinite(args.max_gap) and args.max_gap > 0):
+        raise InputError("--max-gap", f"must be a positive number of seconds, got {args.max_gap!r}")
     if args.capture is None and args.gyro is None:
         raise InputError("--capture", "give a capture description (--capture C.json) or --gyro "
                                       "with the exposure options")
@@ -149,6 +183,10 @@ def cmd_psf(args, say) -> None:
     _check_output(out, None, args.overwrite, image=out.lower().endswith(".png"))
     if args.at is not None:
         x, y = _pair(args.at, "--at", float, sep=",")
+        cam = cap.camera
+        if not (0 <= x <= cam.width - 1 and 0 <= y <= cam.height - 1):
+            raise InputError("--at", f"({x:g}, {y:g}) is not a pixel of the {cam.width}x"
+                                     f"{cam.height} frame (x 0-{cam.width - 1}, y 0-{cam.height - 1})")
         psf = render_psf(cap, x, y)
         if out.lower().endswith(".npy"):
             _atomic_npy(out, psf)
@@ -190,6 +228,10 @@ def cmd_simulate(args, say) -> None:
 
     photo = read_photo(args.sharp)
     _check_output(args.output, photo, args.overwrite)
+    if args.snr_db is not None and not np.isfinite(args.snr_db):
+        raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
+    if args.seed is not None and args.seed < 0:
+        raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
     cap = _load_capture(args, photo, say)
     curve = get_transfer_curve(args.transfer)
     t0 = time.perf_counter()
@@ -213,6 +255,10 @@ def cmd_deblur(args, say) -> None:
     _check_output(args.output, photo, args.overwrite)
     if args.save_psf:
         _check_output(args.save_psf, photo, args.overwrite)
+        if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
+            raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
+    _ignored_options(args)
+    overlap = DEFAULT_OVERLAP if args.overlap is None else args.overlap
     method = args.method or DEFAULT_METHOD
     options = {}
     if args.phi is not None:
@@ -225,10 +271,10 @@ def cmd_deblur(args, say) -> None:
         flag = "--" + name.replace("_", "-")
         if method != "sparse":
             raise InputError(flag, "applies to --method sparse only")
-        if (name == "iterations" and not 1 <= value <= 100) or (name == "noise_sigma"
-                                                                and not 0 <= value < 1):
-            raise InputError(flag, f"out of range: {value!r} (iterations 1-100; noise sigma "
-                                   "in [0, 1), pixel-value units)")
+        if name == "iterations" and not 1 <= value <= 100:
+            raise InputError(flag, f"must be 1-100, got {value!r}")
+        if name == "noise_sigma" and not 0 <= value < 1:
+            raise InputError(flag, f"must be in [0, 1) (pixel-value units), got {value!r}")
         options[name] = value
     grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
     progress = _Progress("deblurring", args.quiet)
@@ -240,8 +286,9 @@ def cmd_deblur(args, say) -> None:
             raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
                                        "--blind give RxC (default 1x1, one kernel)")
         blind_grid = (1, 1) if grid is None else grid
-        restored, field = deblur_blind(photo.pixels, args.kernel_size, grid=blind_grid,
-                                       overlap=args.overlap, method=args.method,
+        kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
+        restored, field = deblur_blind(photo.pixels, kernel_size, grid=blind_grid,
+                                       overlap=overlap, method=args.method,
                                        transfer=args.transfer, progress=progress, **options)
         mode_txt = "blind"
         grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
@@ -256,14 +303,14 @@ def cmd_deblur(args, say) -> None:
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         if args.refine:
-            from .calibrate_cli import calibrate_named, format_estimates
-            res = calibrate_named([args.photo], [photo.pixels], cap, fix=fix, say=say,
-                                  downscale=args.downscale)
+            from .calibrate import calibrate
+            from .calibrate_cli import format_estimates
+            res = calibrate([photo.pixels], cap, fix=fix, say=say, downscale=args.downscale)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
         restored, report = deblur(photo.pixels, cap, mode=args.mode, grid=grid,
-                                  overlap=args.overlap, method=args.method,
+                                  overlap=overlap, method=args.method,
                                   transfer=args.transfer, progress=progress,
                                   return_report=True, **options)
         field = report.field
@@ -346,7 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="patch grid; default: 6x8 (the chapter's) for --method wiener, 'auto' "
                         "(patches small enough that the PSF changes < 2 px across one) otherwise; "
                         "with --blind, 1x1 (one kernel) unless given")
-    s.add_argument("--overlap", type=float, default=0.25, help="patch overlap fraction (default 0.25)")
+    s.add_argument("--overlap", type=float, default=None, help=f"patch overlap fraction (default {DEFAULT_OVERLAP:g})")
     s.add_argument("--method", choices=sorted(METHODS), default=None,
                    help="deconvolution method (default: the best available)")
     s.add_argument("--phi", type=float, default=None,
@@ -359,7 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "prior weight (default: measured on the photo)")
     s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
-    s.add_argument("--kernel-size", type=int, default=31, help="blind kernel size, px (odd)")
+    s.add_argument("--kernel-size", type=int, default=None,
+                   help=f"blind kernel size, px (odd; default {BLIND_KERNEL_SIZE})")
     s.add_argument("--refine", action="store_true",
                    help="self-calibrate time offset, bias, readout, focal length and axes first "
                         "(a value given with --time-offset, --bias, --readout-time, --fx/--fy or "
@@ -398,6 +446,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _photos(args) -> str | None:
+    """The photo file(s) a command reads, for an error that names no other source."""
+    paths = [getattr(args, "photo", None), getattr(args, "sharp", None),
+             *(getattr(args, "photos", None) or [])]
+    return ", ".join(p for p in paths if p) or None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -412,6 +467,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args.func(args, say)
     except InputError as exc:
+        if exc.source is None and _photos(args):     # a problem of the photo(s) themselves
+            exc = InputError(_photos(args), exc.problem)
         sys.stderr.write(f"gyrodeblur: error: {exc}\n")
         return 2
     except KeyboardInterrupt:

@@ -21,7 +21,8 @@ from .capture import Capture
 from .errors import InputError
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .sparse import _CLIP_VALUE, _ZONE_AREA
-from .tiling import DEFAULT_GRID, DEFAULT_OVERLAP, deconvolve_patchwise, patch_grid
+from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, check_overlap, deconvolve_patchwise,
+                     patch_grid)
 from .tonecurve import get_transfer_curve
 from .wiener import DEFAULT_PHI, wiener_deconvolve
 
@@ -125,6 +126,7 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     (rows, cols)
     """
     H, W = shape[:2]
+    overlap = check_overlap(overlap)
     cap = capture.scaled_to(W, H)
     variation = psf_variation(cap, centred=centred)
     extent = max(psf_extent(render_psf(cap, x, y, max_step=0.5))

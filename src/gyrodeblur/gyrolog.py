@@ -115,7 +115,7 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
         raise InputError(source, f"timestamps are not increasing (sample {i + 2}: "
-                                 f"{t[i + 1]!r} s after {t[i]!r} s)")
+                                 f"{float(t[i + 1]):.6f} s after {float(t[i]):.6f} s)")
     med = float(np.median(np.linalg.norm(w, axis=1)))
     if med > IMPLAUSIBLE_MEDIAN_RATE:
         raise InputError(source, f"median angular rate {med:.1f} rad/s is implausible for a "
@@ -281,12 +281,16 @@ def read_gcsv(path: str | os.PathLike) -> GyroLog:
         gscale = float(header.get("gscale", "1"))
     except ValueError:
         raise InputError(path, "tscale/gscale are not numbers") from None
+    if not (np.isfinite(tscale) and tscale > 0 and np.isfinite(gscale) and gscale > 0):
+        raise InputError(path, f"tscale and gscale must be positive numbers, got {tscale!r} "
+                               f"and {gscale!r}")
     rows = _parse_numeric_rows(path, lines[start + 1:], len(columns), first_line=start + 2,
                                sep=",")
     t = rows[:, 0] * tscale
     w = rows[:, gi] * gscale
     meta = {k: v for k, v in header.items() if k not in ("tscale", "gscale")}
     axes = parse_axes(header.get("orientation", "XYZ"), source=f"{path} (orientation header)")
+    _validate(t, w, path)                 # before the rotation: a NaN must not reach it
     return GyroLog(t, w @ axes.T, path, meta)
 
 

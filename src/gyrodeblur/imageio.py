@@ -15,10 +15,12 @@ Conventions
   4th channel, untouched (not premultiplied, not used). Palette images become RGB, or RGBA
   when the palette has transparency; 1-bit images become 8-bit grey. PNG colour-key
   transparency (``tRNS`` on grey/RGB images) is ignored.
-* Floating-point TIFFs are accepted: samples are clipped to ``[0, 1]`` (NaN -> 0) and
-  ``bit_depth`` is reported as 16, so a ``like=`` output keeps the most precision.
+* Floating-point TIFFs are accepted: samples are clipped to ``[0, 1]`` (NaN -> 0, with a
+  warning when any is outside) and ``bit_depth`` is reported as 16, so a ``like=`` output
+  keeps the most precision.
   CMYK, Lab, signed and 32-bit integer images are refused.
-* Only the first frame of a multi-page TIFF or animated PNG is read.
+* Only the first frame of a multi-page TIFF or animated PNG is read (with a warning; the
+  preview frames of an MPO JPEG are skipped silently).
 * ``Photo.exif`` is the EXIF block as a JPEG APP1 segment holds it: ``b"Exif\\0\\0"``
   followed by a TIFF-structured directory. From JPEG and PNG it is the file's own block,
   byte for byte. TIFF files keep EXIF in their own tags, so for TIFF the block is
@@ -47,6 +49,7 @@ import os
 import secrets
 import struct
 import sys
+import warnings
 import zlib
 from dataclasses import dataclass
 
@@ -187,6 +190,10 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None]:
             exif, icc = _tiff_exif(im), im.info.get("icc_profile")
             ints = _read_tiff_pixels(p, im)
         else:
+            frames = int(getattr(im, "n_frames", 1))
+            if fmt == "PNG" and frames > 1:
+                warnings.warn(f"{p}: an animated PNG; only the first of its {frames} frames "
+                              "is read", stacklevel=2)
             ints = _read_pillow_pixels(p, im)
             exif, icc = _pillow_exif(im), im.info.get("icc_profile")
     return fmt, ints, exif, icc
@@ -375,6 +382,9 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
 def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
     """First page of a TIFF with tifffile: (samples as (H, W) or (H, W, C), ICC)."""
     with tifffile.TiffFile(path) as tif:
+        if len(tif.pages) > 1:
+            warnings.warn(f"{path}: only the first of its {len(tif.pages)} pages is read",
+                          stacklevel=2)
         page = tif.pages.first
         photometric = int(page.photometric)
         if photometric not in (1, 2):  # MINISBLACK, RGB
@@ -404,7 +414,19 @@ def _to_float(path: str, arr: np.ndarray) -> tuple[np.ndarray, int]:
     if arr.dtype == np.bool_:
         return arr.astype(np.float32), 8
     if arr.dtype.kind == "f":
-        out = np.nan_to_num(arr.astype(np.float32), nan=0.0, posinf=1.0, neginf=0.0)
+        a = arr.astype(np.float32)
+        bad = int(np.count_nonzero(~np.isfinite(a)))
+        over = int(np.count_nonzero(a > 1)) + int(np.count_nonzero(a < 0))
+        if bad or over:
+            what = []
+            if over:
+                what.append(f"{over} float samples outside [0, 1] are clipped (range "
+                            f"{np.nanmin(a):.3g} to {np.nanmax(a):.3g})")
+            if bad:
+                what.append(f"{bad} NaN or infinite samples are read as 0 (+inf as 1)")
+            warnings.warn(f"{path}: " + "; ".join(what) + ": scale a scene-linear or HDR "
+                          "image to [0, 1] first", stacklevel=2)
+        out = np.nan_to_num(a, nan=0.0, posinf=1.0, neginf=0.0)
         return np.clip(out, 0.0, 1.0), 16
     kind = {"i": "signed integers", "u": "unsigned integers"}.get(arr.dtype.kind, str(arr.dtype))
     raise InputError(path, f"unsupported samples ({8 * arr.dtype.itemsize}-bit {kind}); "
@@ -652,7 +674,7 @@ def _format_of(path: str) -> str:
 
 
 def check_destination(path: str | os.PathLike, like: Photo | None = None,
-                      overwrite: bool = False, *, image: bool = True) -> None:
+                      overwrite: bool = False, *, image: bool = True, inputs=()) -> None:
     """Check, before any work, that :func:`write_photo` may write ``path``.
 
     Parameters
@@ -666,12 +688,15 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     image : bool
         Whether ``path`` must have an image extension (``False`` for other outputs such
         as ``.npy`` or ``.json``, which get the same folder and overwrite checks).
+    inputs : iterable of str or os.PathLike
+        Other files the command reads (photos, capture descriptions, gyro logs), which
+        are never overwritten either, ``overwrite`` or not.
 
     Raises
     ------
     InputError
-        Unknown extension, missing folder, ``path`` is a folder or the input photo, or
-        it exists and ``overwrite`` is false.
+        Unknown extension, missing folder, ``path`` is a folder, the input photo or
+        another input, or it exists and ``overwrite`` is false.
     """
     path = os.fspath(path)
     if image:
@@ -681,6 +706,9 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
         raise InputError(path, f"folder {folder} does not exist")
     if like is not None and like.path is not None and _same_file(path, like.path):
         raise InputError(path, "is the input photo; choose another output file")
+    for other in inputs:
+        if other is not None and _same_file(path, os.fspath(other)):
+            raise InputError(path, "is one of the command's inputs; choose another output file")
     if os.path.isdir(path):
         raise InputError(path, "is a folder")
     if os.path.lexists(path) and not overwrite:

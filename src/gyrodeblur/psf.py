@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .capture import Capture
+from .errors import InputError
 
 __all__ = ["trace", "render_psf", "splat", "PSFField", "psf_field", "psf_extent",
-           "psf_variation", "displacement_field"]
+           "psf_variation", "displacement_field", "check_blur_span"]
 
 #: Largest allowed distance (px) between consecutive trace samples when rendering.
 MAX_STEP_PX = 0.25
@@ -48,15 +49,33 @@ def _project(capture: Capture, xy: np.ndarray, times: np.ndarray) -> np.ndarray:
     return cam.project(d)
 
 
+def check_blur_span(capture: Capture, span: float, where: str) -> None:
+    """Refuse a blur longer than the frame: ``span`` (px) is how far a point moves during
+    its exposure (at ``where``, for the message). Such a blur comes from wrong capture
+    values (a focal length in mm rather than pixels, deg/s read as rad/s, an exposure in
+    ms read as s), and rendering or simulating it would exhaust memory or time."""
+    cam = capture.camera
+    limit = max(cam.width, cam.height)
+    if not span <= limit:                     # NaN too
+        raise InputError(capture.source,
+                         f"the blur {where} would span {span:.0f} px, more than the "
+                         f"{cam.width}x{cam.height} frame: check the focal length (fx, fy, "
+                         "pixels), the gyro's rate unit and the exposure and readout times")
+
+
 def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float,
                     row: float | None = None) -> np.ndarray:
+    if not (np.isfinite(x0) and np.isfinite(y0)):
+        raise InputError(None, f"pixel position ({x0}, {y0}) is not finite")
     n = 64
+    pts = trace(capture, x0, y0, n, row)
+    check_blur_span(capture, float(np.ptp(pts, axis=0).max()), f"at ({x0:.0f}, {y0:.0f})")
     while True:
-        pts = trace(capture, x0, y0, n, row)
         step = np.abs(np.diff(pts, axis=0)).max() if n > 1 else 0.0
         if step < max_step or n >= _MAX_SAMPLES:
             return pts
         n = min(_MAX_SAMPLES, int(np.ceil(n * step / (0.8 * max_step))))
+        pts = trace(capture, x0, y0, n, row)
 
 
 def splat(offsets: np.ndarray, weights: np.ndarray | None = None,

@@ -13,6 +13,7 @@ import numpy as np
 from scipy import ndimage
 
 from .capture import Capture
+from .psf import check_blur_span
 
 __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
 
@@ -43,6 +44,7 @@ def warp_samples(capture: Capture, max_step: float = MAX_STEP_PX) -> int:
     H = cam.K @ R @ cam.K_inv
     p = np.einsum("spij,jp->spi", H, pts)
     xy = p[..., :2] / p[..., 2:3]
+    check_blur_span(capture, float(np.ptp(xy, axis=0).max()), "across the frame")
     step = np.abs(np.diff(xy, axis=0)).max()
     return max(8, int(np.ceil(n0 * step / (0.8 * max_step))))
 

@@ -32,6 +32,7 @@ from .fftutils import FFT_WORKERS
 
 __all__ = [
     "Patch",
+    "check_overlap",
     "patch_grid",
     "blend_weights",
     "deconvolve_patchwise",
@@ -123,7 +124,7 @@ def patch_grid(shape: Sequence[int], grid: Sequence[int] = DEFAULT_GRID,
     (48, (630, 640), 480)
     """
     rows, cols = _check_grid(grid)
-    overlap = _check_overlap(overlap)
+    overlap = check_overlap(overlap)
     height, width = int(shape[0]), int(shape[1])
     ys = _axis_windows(height, rows, overlap, "rows")
     xs = _axis_windows(width, cols, overlap, "columns")
@@ -358,7 +359,9 @@ def _check_grid(grid: Sequence[int]) -> tuple[int, int]:
     return int(items[0]), int(items[1])
 
 
-def _check_overlap(overlap: float) -> float:
+def check_overlap(overlap: float) -> float:
+    """``overlap`` as a float, or :class:`InputError` (``--overlap``) unless it is a finite
+    fraction of the patch size in [0, :data:`MAX_OVERLAP`]."""
     if (isinstance(overlap, bool) or not isinstance(overlap, numbers.Real)
             or not math.isfinite(overlap) or not 0.0 <= overlap <= MAX_OVERLAP):
         raise InputError("--overlap", "must be a fraction of the patch size in "
@@ -369,8 +372,8 @@ def _check_overlap(overlap: float) -> float:
 def _axis_windows(length: int, n: int, overlap: float, axis_name: str) -> list[tuple[int, int]]:
     if n == 1:
         if length < MIN_WINDOW:
-            raise InputError("--grid", f"image has only {length} {axis_name}; need at least "
-                                       f"{MIN_WINDOW}")
+            raise InputError(None, f"the image has only {length} {axis_name}; need at "
+                                   f"least {MIN_WINDOW}")
         return [(0, length)]
     best = None
     # n w - (n - 1) v = L  =>  w = L (mod n - 1); stride w - v >= 1 and v >= 0.
