@@ -280,6 +280,11 @@ def test_only_the_first_page_of_a_stack_is_read_with_a_warning(tmp_path):
     with pytest.warns(UserWarning, match="only the first of its 2 pages"):
         photo = read_photo(tmp_path / "s.tif")
     assert photo.pixels.shape == (4, 5) and np.allclose(photo.pixels, 10 / 255)
+    # the stack's layout note ({"shape": [2, 4, 5]}) is not carried to a one-page output
+    write_photo(tmp_path / "o.tif", photo.pixels, like=photo)
+    with tifffile.TiffFile(tmp_path / "o.tif") as tif:
+        assert "shape" not in tif.pages.first.description
+        assert tif.series[0].shape == (4, 5)
 
 
 def test_palette_grey_alpha_and_bilevel_are_normalised(tmp_path):

@@ -459,7 +459,7 @@ def _tiff_exif(im: Image.Image) -> bytes | None:
         src = im.getexif()
         out = Image.Exif()
         for tag in (*_IFD0_ASCII, _ORIENTATION):
-            if tag in src:
+            if tag in src and not (tag == 270 and _is_layout_note(src[tag])):
                 out[tag] = src[tag]
         sub = _sub_ifds(src)
         for tag, values in sub.items():
@@ -467,6 +467,13 @@ def _tiff_exif(im: Image.Image) -> bytes | None:
         return out.tobytes() if len(out) else None
     except _DECODE_ERRORS:
         return None  # damaged metadata is not worth refusing the photo for
+
+
+def _is_layout_note(description) -> bool:
+    """Whether a TIFF ImageDescription is tifffile's note of the file's array layout
+    (``{"shape": [...]}``): it describes that file, not the photo, and would misdescribe
+    the output."""
+    return str(description).lstrip().startswith('{"shape"')
 
 
 def _sub_ifds(exif: Image.Exif) -> dict[int, dict]:
