@@ -211,14 +211,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     Parameters
     ----------
     images : list of ndarray
-        Blurred photos (float in [0, 1], (H, W) or (H, W, C)), one per capture.
+        Blurred photos (float in [0, 1], (H, W) or (H, W, C)), one per capture (a single
+        array is one photo).
     captures : Capture or list of Capture
         Their capture descriptions (one shared, or one per photo, any resolution with the
         photo's aspect ratio); the photos share the unknown corrections (one camera, one
         gyro, one session): one time-offset change, one readout change, one focal scale,
         one bias change and one axis mapping for all.
-    fix : iterable of str
-        Parameters not to estimate, from :data:`PARAMETERS`.
+    fix : iterable of str, or str
+        Parameters not to estimate, from :data:`PARAMETERS` (a string: comma-separated).
     offset_range : float
         Seconds searched on each side of the given time offset.
     transfer : str
@@ -243,18 +244,26 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     CalibrationResult
     """
     t_start = time.perf_counter()
-    images = list(images)
+    images = [images] if isinstance(images, np.ndarray) else list(images)   # one photo
     if not images:
         raise InputError(None, "no photo to calibrate on")
     if isinstance(captures, Capture):
         captures = [captures] * len(images)
+    if captures is None or not all(isinstance(c, Capture) for c in captures):
+        raise TypeError("captures must be a Capture or a list of them, one per photo")
     captures = list(captures)
     if len(captures) != len(images):
         raise InputError("--capture", f"{len(images)} photos but {len(captures)} captures")
     fix = checked_fix(fix)
     say_ = say or (lambda msg: None)
-    if not 0 < downscale <= 1:
+    if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
+            or not 0 < downscale <= 1:
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
+    if not (isinstance(offset_range, (int, float, np.number)) and 0 <= offset_range < np.inf):
+        raise InputError(None, f"offset_range must be a number of seconds >= 0, got {offset_range!r}")
+    if n_patches is not None and (isinstance(n_patches, bool)
+                                  or not isinstance(n_patches, (int, np.integer)) or n_patches < 1):
+        raise InputError(None, f"n_patches must be a whole number >= 1, got {n_patches!r}")
     work_caps = captures
     if downscale < 1:
         images, work_caps = _shrunk_photos(images, captures, downscale)
@@ -471,8 +480,15 @@ def _uncertainties(x, idx, F, scores, ubar) -> dict:
 
 
 def checked_fix(names) -> set[str]:
-    """``names`` (empty ones dropped) as a set, each one of :data:`PARAMETERS`."""
-    fix = {n for n in names if n}
+    """``names`` (empty ones dropped; ``None`` or ``"a,b"`` as well as a list) as a set,
+    each one of :data:`PARAMETERS`."""
+    if names is None:
+        names = ()
+    elif isinstance(names, str):
+        names = names.split(",")
+    fix = {n.strip() if isinstance(n, str) else n for n in names}
+    fix.discard("")
+    fix.discard(None)
     unknown = fix - set(PARAMETERS)
     if unknown:
         raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "

@@ -12,7 +12,7 @@ import numpy as np
 from scipy import ndimage
 
 from .capture import Capture
-from .errors import InputError
+from .images import check_image
 from .tonecurve import get_transfer_curve
 
 __all__ = ["CalibrationPhoto", "select_patch_centres"]
@@ -26,9 +26,7 @@ class CalibrationPhoto:
     """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
 
     def __init__(self, image, capture: Capture, transfer: str, index: int):
-        img = np.asarray(image)
-        if img.ndim not in (2, 3):
-            raise InputError(None, f"photo {index + 1}: expected an (H, W) or (H, W, C) array")
+        img = check_image(image, f"photo {index + 1}")
         if img.ndim == 3 and img.shape[2] == 4:
             img = img[..., :3]
         self.image = img

@@ -39,8 +39,14 @@ class Camera:
     def __post_init__(self):
         for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
-            if not np.isfinite(v):
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not np.isfinite(v):
                 raise InputError(f"camera.{name}", f"must be a finite number, got {v!r}")
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not np.isfinite(v) or v != int(v):
+                raise InputError(f"camera.{name}", f"must be a whole number of pixels, got {v!r}")
         if self.fx <= 0 or self.fy <= 0:
             raise InputError("camera", f"focal lengths must be positive (fx={self.fx}, fy={self.fy})")
         if int(self.width) < 2 or int(self.height) < 2:
@@ -79,6 +85,10 @@ class Camera:
         """
         if (width, height) == (self.width, self.height):
             return self
+        if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 2
+                   for v in (width, height)):
+            raise InputError(source, f"photo size {width!r}x{height!r} is not two whole "
+                                     "numbers of pixels, each at least 2")
         sx, sy = width / self.width, height / self.height
         if abs(sx / sy - 1) > tolerance:
             raise InputError(source, f"photo is {width}x{height} but the capture's camera is "

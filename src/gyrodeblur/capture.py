@@ -91,8 +91,15 @@ class Capture:
 
     def __post_init__(self):
         src = self.source
+        if not isinstance(self.camera, Camera):
+            raise TypeError(f"camera must be a Camera, got {type(self.camera).__name__}")
+        if not isinstance(self.log, GyroLog):
+            raise TypeError(f"log must be a GyroLog, got {type(self.log).__name__}")
         for name in ("exposure_start", "exposure_time", "readout_time", "time_offset"):
-            v = float(getattr(self, name))
+            try:
+                v = float(getattr(self, name))
+            except (TypeError, ValueError):
+                raise InputError(src, f"{name} must be a number, got {getattr(self, name)!r}") from None
             if not np.isfinite(v):
                 raise InputError(src, f"{name} must be a finite number")
             object.__setattr__(self, name, v)
@@ -102,7 +109,7 @@ class Capture:
             raise InputError(src, f"readout_time must be >= 0, got {self.readout_time}")
         object.__setattr__(self, "axes", parse_axes(self.axes, source=src))
         try:
-            bias = np.asarray(self.bias, dtype=np.float64).reshape(-1)
+            bias = np.array(self.bias, dtype=np.float64).reshape(-1)     # a copy
         except (TypeError, ValueError):
             bias = np.full(1, np.nan)
         if bias.shape != (3,) or not np.all(np.isfinite(bias)):
@@ -233,6 +240,10 @@ def _whole(v) -> int:
     return int(f)
 
 
+#: The keys :func:`load_capture` takes in ``overrides``.
+OVERRIDE_KEYS = ("exposure_start", "exposure_time", "readout_time", "fx", "fy", "cx", "cy",
+                 "width", "height", "gyro_path", "gyro_format", "orientation", "time_offset",
+                 "bias", "max_gap") + CSV_OPTION_KEYS
 #: The keys of a capture description, per section ("" = top level).
 KNOWN_KEYS = {
     "": ("exposure_start", "exposure_time", "readout_time", "camera", "gyro"),
@@ -310,7 +321,13 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             raise InputError(src, "the capture description must be a JSON object")
         _warn_unknown_keys(data, src)
         base = os.path.dirname(os.path.abspath(src))
+    if overrides is not None and not isinstance(overrides, dict):
+        raise TypeError(f"overrides must be a dict, got {type(overrides).__name__}")
     ov = {k: v for k, v in (overrides or {}).items() if v is not None}
+    unknown = sorted(set(ov) - set(OVERRIDE_KEYS))
+    if unknown:
+        raise ValueError(f"unknown override(s) {', '.join(unknown)} (known: "
+                         f"{', '.join(OVERRIDE_KEYS)})")
     cam_d = _section(data, "camera", src)
     gyro_d = _section(data, "gyro", src)
     for k in ("fx", "fy", "cx", "cy", "width", "height"):

@@ -19,10 +19,11 @@ import numpy as np
 
 from .capture import Capture
 from .errors import InputError
+from .images import check_image
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .sparse import _CLIP_VALUE, _ZONE_AREA
-from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, check_overlap, deconvolve_patchwise,
-                     patch_grid)
+from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
+                     deconvolve_patchwise, patch_grid)
 from .tonecurve import get_transfer_curve
 from .wiener import DEFAULT_PHI, wiener_deconvolve
 
@@ -32,7 +33,8 @@ __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHOD
 Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-def _wiener_factory(image: np.ndarray, *, phi: float = DEFAULT_PHI, **_) -> Deconvolver:
+def _wiener_factory(image: np.ndarray, *, phi: float = DEFAULT_PHI,
+                    encoded: np.ndarray | None = None) -> Deconvolver:
     return partial(wiener_deconvolve, phi=phi)
 
 
@@ -40,11 +42,17 @@ def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
                     noise_sigma: float | None = None, **options) -> Deconvolver:
     """Sparse-prior (TV) ADMM deconvolution; the noise level is measured once on the
     photo as encoded (where sensor noise is roughly uniform), not in linear light."""
+    import inspect
+
     from .noise import estimate_noise_sigma
     from .sparse import sparse_deconvolve
+    known = set(inspect.signature(sparse_deconvolve).parameters) - {"image", "psf"}
+    unknown = sorted(set(options) - known)
+    if unknown:                      # refused now, not from inside a worker thread
+        raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'sparse' "
+                        f"(known: {', '.join(sorted(known))})")
     if noise_sigma is None:
         noise_sigma = estimate_noise_sigma(image if encoded is None else encoded)
-    options.pop("phi", None)
     return partial(sparse_deconvolve, noise_sigma=noise_sigma, **options)
 
 
@@ -137,7 +145,11 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     def count(length: int) -> int:
         return max(1, int(np.ceil((length / window - overlap) / (1 - overlap))))
 
-    rows, cols = max(count(H), DEFAULT_GRID[0]), max(count(W), DEFAULT_GRID[1])
+    def fits(length: int) -> int:        # most patches of twice the smallest window
+        return max(1, int((length / (2 * MIN_WINDOW) - overlap) / (1 - overlap)))
+
+    rows = min(max(count(H), DEFAULT_GRID[0]), fits(H))
+    cols = min(max(count(W), DEFAULT_GRID[1]), fits(W))
     if rows * cols > max_patches:
         f = np.sqrt(max_patches / (rows * cols))
         rows, cols = max(1, int(rows * f)), max(1, int(cols * f))
@@ -184,7 +196,7 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
         if grid != "auto":
             raise InputError("--grid", f"expected RxC (e.g. 6x8) or 'auto', got {grid!r}")
         grid = auto_grid(cap, (H, W), overlap, centred=align)
-    rows, cols = int(grid[0]), int(grid[1])
+    rows, cols = check_grid(grid)
     if disp is not None:
         slope = _displacement_slope(disp)
         if slope < ALIGN_MIN_SLOPE:
@@ -449,7 +461,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
     curve = get_transfer_curve(transfer)
-    encoded = np.asarray(image, dtype=np.float32)
+    encoded = check_image(image)
     img = curve.decode(encoded)
     deconvolve = METHODS[method](img, encoded=encoded, **options)
     if displacement is not None:
@@ -532,6 +544,10 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     with the scene as the first row saw it, free of rolling-shutter skew.
     """
     t0 = time.perf_counter()
+    image = check_image(image)
+    if not isinstance(capture, Capture):
+        raise TypeError(f"capture must be a Capture (see gyrodeblur.capture.load_capture), "
+                        f"got {type(capture).__name__}")
     method = method or DEFAULT_METHOD
     defaults = METHOD_DEFAULTS.get(method, _OTHER_DEFAULTS)
     grid = defaults["grid"] if grid is None else grid
@@ -598,8 +614,9 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     """
     from .blind import estimate_kernel
 
+    image = check_image(image)
     H, W = image.shape[:2]
-    lin = get_transfer_curve(transfer).decode(np.asarray(image, np.float32))
+    lin = get_transfer_curve(transfer).decode(image)
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
     patches = patch_grid((H, W), grid, overlap)
     if len(patches) > 1 and kernel_size >= min(patches[0].shape) // 2:

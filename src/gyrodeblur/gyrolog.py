@@ -83,8 +83,8 @@ class GyroLog:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        t = np.asarray(self.t, dtype=np.float64)
-        w = np.asarray(self.omega, dtype=np.float64)
+        t = np.array(self.t, dtype=np.float64)         # copies: the caller's arrays may
+        w = np.array(self.omega, dtype=np.float64)     # change after validation
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "omega", w)
         _validate(t, w, self.source)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from skimage.metrics import structural_similarity
 
+from .images import check_image
+
 __all__ = ["psnr", "ssim", "crop_border", "default_border"]
 
 
@@ -24,7 +26,9 @@ def default_border(shape: tuple[int, ...], psf_radius: int | None = None,
 
 def crop_border(image: np.ndarray, border: int) -> np.ndarray:
     """``image`` without ``border`` pixels on each side."""
-    if border <= 0:
+    if isinstance(border, bool) or not isinstance(border, (int, np.integer)) or border < 0:
+        raise ValueError(f"border must be a whole number of pixels >= 0, got {border!r}")
+    if border == 0:
         return image
     if 2 * border >= min(image.shape[:2]):
         raise ValueError(f"border {border} leaves nothing of an image of shape {image.shape}")
@@ -35,8 +39,8 @@ def psnr(reference: np.ndarray, estimate: np.ndarray, border: int = 0) -> float:
     """PSNR in dB on the 8-bit scale, eq. of sec. 6.6:
     ``10 log10(|Omega| 255^2 / ||u - u_hat||^2)`` with images in [0, 1] scaled by 255,
     over the central region and all channels (i.e. the channel-averaged MSE)."""
-    a = crop_border(np.asarray(reference, np.float64), border) * 255.0
-    b = crop_border(np.asarray(estimate, np.float64), border) * 255.0
+    a, b = _pair(reference, estimate, border)
+    a, b = a * 255.0, b * 255.0
     mse = np.mean((a - b) ** 2)
     return float("inf") if mse == 0 else float(10 * np.log10(255.0 ** 2 / mse))
 
@@ -44,10 +48,22 @@ def psnr(reference: np.ndarray, estimate: np.ndarray, border: int = 0) -> float:
 def ssim(reference: np.ndarray, estimate: np.ndarray, border: int = 0) -> float:
     """SSIM (scikit-image's, Gaussian-weighted as Wang et al. 2004, data range 1) over the
     central region, averaged over channels."""
-    a = crop_border(np.asarray(reference, np.float64), border)
-    b = crop_border(np.asarray(estimate, np.float64), border)
+    a, b = _pair(reference, estimate, border, min_size=7)      # SSIM's 7x7 window
     kw = dict(data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
     if a.ndim == 3:
         return float(np.mean([structural_similarity(a[..., c], b[..., c], **kw)
                               for c in range(a.shape[2])]))
     return float(structural_similarity(a, b, **kw))
+
+
+def _pair(reference, estimate, border: int, min_size: int = 1):
+    """Both images checked (float, finite, the same shape) and cropped, as float64."""
+    a = check_image(reference, "reference", min_size=1, dtype=np.float64)
+    b = check_image(estimate, "estimate", min_size=1, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"reference and estimate differ in shape: {a.shape} and {b.shape}")
+    a, b = crop_border(a, border), crop_border(b, border)
+    if min(a.shape[:2]) < min_size:
+        raise ValueError(f"{a.shape[1]}x{a.shape[0]} pixels (after a border of {border}) are "
+                         f"too few; need at least {min_size}x{min_size}")
+    return a, b

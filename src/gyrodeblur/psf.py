@@ -133,11 +133,28 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     Returns
     -------
     ndarray, float32, shape (2r+1, 2r+1), sums to 1.
+
+    Raises
+    ------
+    InputError
+        A PSF (trace, or its distance from ``(x, y)``) larger than the frame, a
+        ``max_step`` that is not a positive number, or a ``radius`` that is not a whole
+        number from 0 to the frame's size.
     """
+    if not (isinstance(max_step, (int, float, np.floating, np.integer)) and max_step > 0
+            and np.isfinite(max_step)):
+        raise InputError(None, f"max_step must be a positive number of pixels, got {max_step!r}")
+    cam = capture.camera
+    if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, np.integer))
+                               or not 0 <= radius <= max(cam.width, cam.height)):
+        raise InputError(None, f"radius must be a whole number of pixels from 0 to "
+                               f"{max(cam.width, cam.height)}, got {radius!r}")
     pts = _adaptive_trace(capture, float(x), float(y), max_step, row)
     offsets = pts - np.array([x, y])
     if centred:
         offsets -= offsets.mean(axis=0)
+    if radius is None:     # a point far off the frame sees its trace far from itself
+        check_blur_span(capture, 2 * float(np.abs(offsets).max()), f"at ({x:.0f}, {y:.0f})")
     return splat(offsets, radius=radius)
 
 
@@ -226,6 +243,10 @@ def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
         Mean displacement (dx, dy) in pixels at each grid point.
     """
     cam = capture.camera
+    if not (np.isfinite(step) and step >= 1) or isinstance(n, bool) or not (
+            isinstance(n, (int, np.integer)) and n >= 1):
+        raise InputError(None, f"displacement_field needs step >= 1 px and n >= 1 time steps, "
+                               f"got step={step!r}, n={n!r}")
     ny = max(2, int(np.ceil((cam.height - 1) / step)) + 1)
     nx = max(2, int(np.ceil((cam.width - 1) / step)) + 1)
     ys = np.linspace(0, cam.height - 1, ny)

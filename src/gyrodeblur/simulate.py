@@ -13,6 +13,7 @@ import numpy as np
 from scipy import ndimage
 
 from .capture import Capture
+from .images import check_image
 from .psf import check_blur_span
 
 __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
@@ -79,7 +80,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     Sampling is bilinear (``scipy.ndimage.map_coordinates``, order 1); outside the frame
     the image is mirrored (half-sample symmetric).
     """
-    img = np.asarray(sharp, dtype=np.float32)
+    img = check_image(sharp, "sharp image")
     H, W = img.shape[:2]
     cam = capture.camera
     if (W, H) != (cam.width, cam.height):

@@ -26,6 +26,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad
+from .images import check_image
 from .noise import estimate_noise_sigma
 from .packedfft import pack_spectrum, packed_irfft2, packed_multiply, packed_rfft2
 
@@ -225,9 +226,7 @@ def sparse_deconvolve(
     >>> out.shape, out.dtype
     ((64, 64), dtype('float32'))
     """
-    g = np.asarray(image, dtype=np.float32)
-    if g.ndim not in (2, 3):
-        raise ValueError(f"image must be (H, W) or (H, W, C), got shape {g.shape}")
+    g = check_image(image)
     h = np.asarray(psf, dtype=np.float64)
     if h.ndim != 2 or h.shape[0] % 2 == 0 or h.shape[1] % 2 == 0:
         raise ValueError(f"psf must be a 2-D odd-sized array, got shape {h.shape}")
@@ -243,12 +242,17 @@ def sparse_deconvolve(
         warnings.warn("sparse_deconvolve(workers=...) is ignored: its FFTs are OpenCV's, "
                       "which threads them itself (cv2.setNumThreads)", DeprecationWarning,
                       stacklevel=2)
+    if noise_sigma is not None and not (np.isfinite(noise_sigma) and 0 <= noise_sigma < 1):
+        raise ValueError(f"noise_sigma must be in [0, 1) (pixel-value units), got {noise_sigma!r}")
+    if saturation_level is not None and not (np.isfinite(saturation_level)
+                                             and 0 < saturation_level <= 1):
+        raise ValueError(f"saturation_level must be in (0, 1] or None, got {saturation_level!r}")
     if weight is None:
         if noise_sigma is None:
             noise_sigma = estimate_noise_sigma(g)
         weight = regularization_weight(noise_sigma, exponent)
-    if weight <= 0:
-        raise ValueError(f"weight must be positive, got {weight}")
+    if not (np.isfinite(weight) and weight > 0):
+        raise ValueError(f"weight must be a positive number, got {weight!r}")
 
     color = g.ndim == 3
     gc = np.moveaxis(g, 2, 0) if color else g[None]  # (C, H, W) view

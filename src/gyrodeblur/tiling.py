@@ -32,6 +32,7 @@ from .fftutils import FFT_WORKERS
 
 __all__ = [
     "Patch",
+    "check_grid",
     "check_overlap",
     "patch_grid",
     "blend_weights",
@@ -123,7 +124,7 @@ def patch_grid(shape: Sequence[int], grid: Sequence[int] = DEFAULT_GRID,
     >>> len(patches), patches[0].shape, patches[1].x0
     (48, (630, 640), 480)
     """
-    rows, cols = _check_grid(grid)
+    rows, cols = check_grid(grid)
     overlap = check_overlap(overlap)
     height, width = int(shape[0]), int(shape[1])
     ys = _axis_windows(height, rows, overlap, "rows")
@@ -346,7 +347,9 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
     return out
 
 
-def _check_grid(grid: Sequence[int]) -> tuple[int, int]:
+def check_grid(grid: Sequence[int]) -> tuple[int, int]:
+    """``grid`` as ``(rows, cols)``, or :class:`InputError` (``--grid``) unless it is two
+    positive integers."""
     try:
         items = list(grid)
     except TypeError:
@@ -390,6 +393,10 @@ def _axis_windows(length: int, n: int, overlap: float, axis_name: str) -> list[t
         raise InputError("--grid", f"{n} patches across {length} {axis_name} are too many: "
                                    f"windows would be under {MIN_WINDOW} px")
     _, w, v = best
+    if v / w > MAX_OVERLAP + 0.1:       # the windows are as small as allowed and still crowd
+        raise InputError("--grid", f"{n} patches across {length} {axis_name} are too many: "
+                                   f"they would overlap by {100 * v / w:.0f} % (at most "
+                                   f"{100 * MAX_OVERLAP:.0f} %)")
     return [(i * (w - v), i * (w - v) + w) for i in range(n)]
 
 

@@ -33,6 +33,7 @@ import scipy.fft as sfft
 
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
+from .images import check_image
 
 __all__ = [
     "wiener_deconvolve",
@@ -262,10 +263,7 @@ def normalize_range(result: np.ndarray, reference: np.ndarray,
 
 
 def _as_image(image: np.ndarray) -> np.ndarray:
-    image = np.asarray(image)
-    if image.ndim not in (2, 3):
-        raise ValueError(f"image must have shape (H, W) or (H, W, C), got {image.shape}")
-    return image.astype(np.float32, copy=False)
+    return check_image(image)
 
 
 def _as_psf(psf: np.ndarray) -> np.ndarray:

@@ -1,0 +1,73 @@
+"""Image arrays as the library's functions take them, checked once at the door.
+
+Inside the library an image is a float array of shape ``(H, W)`` or ``(H, W, C)`` (channels
+last, ``C`` from 1 to 4), with values in [0, 1] (8- and 16-bit integers live only in files,
+see :mod:`gyrodeblur.imageio`). :func:`check_image` refuses anything else with one clear
+:class:`~gyrodeblur.errors.InputError`, rather than letting it turn into a silently wrong
+result: ``uint8`` values read as 0-255 come out nearly white, and a single NaN pixel
+spreads over its whole patch through the FFTs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["check_image", "MAX_CHANNELS"]
+
+#: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
+MAX_CHANNELS = 4
+
+
+def check_image(image, what: str = "image", *, min_size: int = 2,
+                dtype=np.float32) -> np.ndarray:
+    """``image`` as a float32 (or ``dtype``) array, or :class:`InputError` saying what is
+    wrong.
+
+    Parameters
+    ----------
+    image : array_like, shape (H, W) or (H, W, C)
+        Floating-point pixel values (any float dtype; float32 is returned without a copy).
+    what : str
+        How the messages name the argument (e.g. ``"photo 2"``).
+    min_size : int
+        Smallest height and width accepted, pixels.
+    dtype : numpy dtype
+        Floating-point type of the result (float64 for metrics).
+
+    Returns
+    -------
+    ndarray of ``dtype``, the same shape.
+
+    Raises
+    ------
+    InputError
+        An integer, boolean or complex dtype (the values would be misread), a shape that is
+        not ``(H, W)`` or channels-last ``(H, W, C)`` with ``C <= 4``, a side under
+        ``min_size``, or NaN/infinite values.
+    """
+    if isinstance(image, np.ndarray):
+        arr = image
+    else:
+        try:
+            arr = np.asarray(image)
+        except (TypeError, ValueError) as exc:
+            raise InputError(None, f"{what} is not an array of pixel values ({exc})") from None
+    if arr.dtype.kind != "f":
+        hint = (" (divide 8-bit values by 255, 16-bit ones by 65535)"
+                if arr.dtype.kind in "ui" else "")
+        raise InputError(None, f"{what} must hold floating-point values in [0, 1], got dtype "
+                               f"{arr.dtype}{hint}")
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= MAX_CHANNELS):
+        raise InputError(None, f"{what} must have shape (H, W) or (H, W, C) with at most "
+                               f"{MAX_CHANNELS} channels last, got {arr.shape}")
+    if min(arr.shape[:2]) < min_size:
+        raise InputError(None, f"{what} is {arr.shape[1]}x{arr.shape[0]} pixels; need at "
+                               f"least {min_size}x{min_size}")
+    arr = arr.astype(dtype, copy=False)
+    finite = np.isfinite(arr)
+    if not finite.all():
+        n = int(arr.size - np.count_nonzero(finite))
+        raise InputError(None, f"{what} has {n} NaN or infinite value(s)")
+    return arr

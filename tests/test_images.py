@@ -1,0 +1,125 @@
+"""Tests of gyrodeblur.images (the one check of image arrays) and of the public functions
+that rely on it: wrong dtypes, shapes and NaN pixels are refused, not misread."""
+
+import numpy as np
+import pytest
+
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture
+from gyrodeblur.deblur import deblur, deblur_blind
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import GyroLog
+from gyrodeblur.images import check_image
+from gyrodeblur.metrics import psnr, ssim
+from gyrodeblur.simulate import simulate_blur
+from gyrodeblur.sparse import sparse_deconvolve
+from gyrodeblur.wiener import wiener_deconvolve
+
+
+def _capture(w=96, h=64) -> Capture:
+    t = np.arange(0.0, 1.0, 1 / 200)
+    rates = np.stack([0.3 * np.sin(7 * t), 0.5 * np.cos(5 * t), 0.1 * np.sin(3 * t)], 1)
+    return Capture(0.4, 0.03, 0.02, Camera.centred(w, h, 100.0), GyroLog(t, rates))
+
+
+@pytest.fixture
+def image():
+    return np.random.default_rng(0).random((64, 96, 3)).astype(np.float32)
+
+
+def test_a_valid_float_image_passes_without_a_copy(image):
+    assert check_image(image) is image
+    assert check_image(image.astype(np.float64)).dtype == np.float32
+    assert check_image(image, dtype=np.float64).dtype == np.float64
+
+
+@pytest.mark.parametrize("bad,match", [
+    (lambda im: (im * 255).astype(np.uint8), "dtype uint8 .*divide 8-bit values by 255"),
+    (lambda im: im > 0.5, "dtype bool"),
+    (lambda im: im.astype(np.complex64), "dtype complex64"),
+    (lambda im: im.transpose(2, 0, 1), r"at most 4 channels last, got \(3, 64, 96\)"),
+    (lambda im: im[0, :, 0], r"shape \(H, W\)"),
+    (lambda im: im[:1], "1 pixels; need at least 2x2|96x1 pixels"),
+    (lambda im: np.where(np.arange(96) == 5, np.nan, im[..., 0]), "64 NaN or infinite"),
+])
+def test_what_is_refused_and_named(image, bad, match):
+    with pytest.raises(InputError, match=match):
+        check_image(bad(image), "photo")
+
+
+def test_public_functions_refuse_integer_and_nan_images(image):
+    """uint8 would come out nearly white, and one NaN spreads over its patch: refused."""
+    cap = _capture()
+    psf = np.ones((3, 3), np.float32) / 9
+    u8 = (image * 255).astype(np.uint8)
+    nan = image.copy()
+    nan[10, 10, 0] = np.nan
+    for bad in (u8, nan):
+        for call in (lambda im: deblur(im, cap, method="wiener", grid=(2, 2)),
+                     lambda im: deblur_blind(im, 5),
+                     lambda im: simulate_blur(im, cap),
+                     lambda im: wiener_deconvolve(im, psf),
+                     lambda im: sparse_deconvolve(im, psf, noise_sigma=0.01)):
+            with pytest.raises(InputError):
+                call(bad)
+    with pytest.raises(TypeError, match="capture must be a Capture"):
+        deblur(image, None)
+
+
+def test_method_options_are_checked_before_any_work(image):
+    cap = _capture()
+    with pytest.raises(TypeError, match="unknown option.*bogus"):
+        deblur(image, cap, bogus=1)
+    with pytest.raises(TypeError, match="unknown option.*phi"):
+        deblur(image, cap, phi=0.01)                 # a Wiener option, given to sparse
+    with pytest.raises(TypeError):
+        deblur(image, cap, method="wiener", grid=(2, 2), iterations=3)
+    for kw in ({"noise_sigma": np.nan}, {"noise_sigma": -1.0}, {"weight": np.inf}):
+        with pytest.raises(ValueError):
+            deblur(image, cap, grid=(2, 2), **kw)
+
+
+@pytest.mark.parametrize("grid", [(2, 2, 2), (2.5, 3.7), (True, True), (2,), 2.5, ("a", "b")])
+def test_a_grid_is_two_positive_integers(image, grid):
+    with pytest.raises(InputError, match="--grid"):
+        deblur(image, _capture(), method="wiener", grid=grid)
+
+
+def test_a_grid_too_fine_for_the_photo_is_refused(image):
+    with pytest.raises(InputError, match="too many"):
+        deblur(image, _capture(), method="wiener", grid=(40, 40))
+
+
+def test_a_small_photo_works_with_the_default_grid():
+    """The automatic grid never asks for more patches than the photo holds."""
+    small = np.random.default_rng(1).random((64, 96)).astype(np.float32)
+    out = deblur(small, _capture())
+    assert out.shape == small.shape and np.isfinite(out).all()
+
+
+def test_metrics_refuse_mismatched_or_integer_images(image):
+    with pytest.raises(ValueError, match="differ in shape"):
+        psnr(image, image[..., :1])
+    with pytest.raises(ValueError, match="differ in shape"):
+        ssim(image[..., :1], image)
+    with pytest.raises(InputError, match="uint8"):
+        psnr((image * 255).astype(np.uint8), (image * 255).astype(np.uint8))
+    with pytest.raises(ValueError, match="border"):
+        psnr(image, image, border=-1)
+    with pytest.raises(ValueError, match="too few"):
+        ssim(image[:6, :6], image[:6, :6])
+    assert psnr(image, image) == float("inf")
+
+
+def test_capture_and_log_keep_their_own_copies():
+    t = np.arange(0.0, 1.0, 0.01)
+    w = np.zeros((t.size, 3))
+    bias = np.array([0.01, 0.0, 0.0])
+    cap = Capture(0.4, 0.03, 0.0, Camera.centred(96, 64, 100.0), GyroLog(t, w), bias=bias)
+    t[:] = t[::-1].copy()
+    bias[0] = 5.0
+    assert np.all(np.diff(cap.log.t) > 0) and cap.bias[0] == 0.01
+    with pytest.raises(TypeError, match="camera must be a Camera"):
+        Capture(0.4, 0.03, 0.0, None, GyroLog(np.arange(3.0), np.zeros((3, 3))))
+    with pytest.raises(InputError, match="whole number"):
+        Camera(100.0, 100.0, 47.5, 31.5, 96.5, 64)
