@@ -119,6 +119,24 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
     assert res.offset_rivals == [] and not any("ambiguous" in note for note in res.notes)
 
 
+def test_a_compressed_jpeg_is_calibrated_on_the_band_it_kept(case):
+    """JPEG quantisation empties the top of the spectrum; calibrate notices the 8 px blocks,
+    says so, leaves those frequencies out, and still recovers the injected errors."""
+    import io
+
+    from PIL import Image
+    _, true, blurred = case
+    buf = io.BytesIO()
+    Image.fromarray((blurred * 255).round().astype(np.uint8)).save(buf, "JPEG", quality=75)
+    jpeg = np.asarray(Image.open(io.BytesIO(buf.getvalue()))).astype(np.float32) / 255
+    res = calibrate([jpeg], _corrupt(true))
+    assert any("JPEG's 8 px blocks" in note for note in res.notes)
+    assert axes_to_letters(res.capture.axes) == TRUE_AXES
+    assert abs(res.capture.time_offset - true.time_offset) < 0.003
+    # the PNG photo has no blocks, and no such note
+    assert not any("JPEG" in note for note in calibrate([blurred], true, fix=["axes"]).notes)
+
+
 def test_an_uncertain_axis_mapping_is_reported(case):
     """A 6 ms exposure blurs by a few pixels: too little to tell the mapping (and its
     mirror twin) apart. Whatever is chosen, the user is told it is uncertain."""

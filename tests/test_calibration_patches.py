@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 import pytest
+from PIL import Image
 from scipy import ndimage
+from skimage import data, transform
 
+from gyrodeblur.calibration_fit import BLOCKY
 from gyrodeblur.calibration_patches import CalibrationPhoto, select_patch_centres
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture
@@ -72,3 +77,22 @@ def test_texture_in_every_direction_beats_stripes():
 def test_a_photo_must_be_an_image():
     with pytest.raises(InputError, match="photo 1"):
         CalibrationPhoto(np.zeros(10), _capture(), "srgb", 0)
+
+
+def test_blockiness_tells_a_jpeg_from_the_same_photo_uncompressed():
+    """JPEG's 8 px blocks stand out in one phase of the neighbour differences, at any grid
+    offset (a crop); an uncompressed photo has no such phase."""
+    img = transform.resize(data.astronaut(), (256, 384), anti_aliasing=True).astype(np.float32)
+    img = ndimage.gaussian_filter(img, (1.5, 1.5, 0))           # a blurred photo
+    u8 = (img * 255).round().astype(np.uint8)
+
+    def photo(a):
+        return CalibrationPhoto(a.astype(np.float32) / 255, _capture(a.shape[1], a.shape[0]),
+                                "srgb", 0)
+
+    buf = io.BytesIO()
+    Image.fromarray(u8).save(buf, format="JPEG", quality=80)
+    jpeg = np.asarray(Image.open(io.BytesIO(buf.getvalue())))
+    assert photo(u8).blockiness() < 1.05
+    assert photo(jpeg).blockiness() > BLOCKY
+    assert photo(jpeg[3:, 5:]).blockiness() > BLOCKY                  # the grid shifted

@@ -117,7 +117,7 @@ import numpy as np
 
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
-from .calibration_fit import (OFFSET_APART, OFFSET_RIVAL_NATS, CalibrationFit,
+from .calibration_fit import (BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, CalibrationFit,
                               relative_ranking, shortlist, with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
@@ -291,6 +291,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     given_letters = axes_to_letters(c0.axes)
     cand = _candidate_mappings(c0.axes, fix, mappings)
     fit = CalibrationFit(photos, search, fix, bias_prior, n_patches, len(cand), say_)
+    if np.isfinite(fit.band):
+        note(f"the photos show JPEG's 8 px blocks (strength {fit.blockiness:.2f} > {BLOCKY:g}): "
+             f"frequencies above {fit.band:g} cycles/px are left out, where compression "
+             f"removed detail that would read as blur")
 
     # 1. coarse: every mapping x time shifts per patch, combined along a line (time offset +
     #    readout error x row); the two rankings take turns in the shortlist

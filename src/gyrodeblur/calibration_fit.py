@@ -22,7 +22,7 @@ from .frame_registration import FrameRegistration
 from .spectral_criterion import Corrections, PatchSpectra
 
 __all__ = ["CalibrationFit", "relative_ranking", "shortlist", "with_twin", "TWIN",
-           "OFFSET_APART", "OFFSET_RIVAL_NATS"]
+           "OFFSET_APART", "OFFSET_RIVAL_NATS", "BLOCKY", "COMPRESSED_BAND"]
 
 #: The mirror twin of a mapping ``M`` is ``TWIN @ M``: the camera's x and y rates negated
 #: (a proper rotation), which nearly reflects every PSF (see Search, 3).
@@ -68,6 +68,16 @@ _PATCH = 128               # px: patch side at working scale
 _COARSE_EXTENT = 16.0      # px: the same for the coarse search
 _COARSE_PATCH = 64
 _COARSE_STEP = 0.002       # s: time-shift grid of the coarse search
+#: A photo whose 8 px block grid is this strong (:meth:`CalibrationPhoto.blockiness`) is
+#: taken for a compressed JPEG, and the criterion keeps frequencies up to
+#: ``COMPRESSED_BAND`` cycles per pixel of the photo rather than 0.42: JPEG quantisation
+#: empties the top of the spectrum, which reads as blur. Benchmark photos (PNG): 1.005-1.086
+#: on the 24 calibration cases, up to 1.144 where the sharp original was itself a small
+#: JPEG (lai_text_02); saved as JPEG, 1.09-1.59 at quality 90 and 1.04-1.41 at 95. On the
+#: PNG benchmark the cut for every photo cost too much to be the rule (BENCHMARKS.md,
+#: section 4, JPEG compression).
+BLOCKY = 1.10
+COMPRESSED_BAND = 0.3
 
 
 class CalibrationFit:
@@ -104,10 +114,15 @@ class CalibrationFit:
             centres += [(i, x, y) for x, y in select_patch_centres(ph, per, int(round(P_f / s_f)))]
         if not centres:
             raise InputError(None, "no textured, unsaturated patch found for calibration")
+        # a JPEG's quantisation empties the top of the spectrum, which would read as blur
+        self.blockiness = max(ph.blockiness() for ph in photos)
+        self.band = COMPRESSED_BAND if self.blockiness > BLOCKY else np.inf
         self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
-                                 n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)))
+                                 n_samples=int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400)),
+                                 band=self.band)
         self.coarse = PatchSpectra(photos, centres, s_c, P_c, rows=(0.0,), envelope=False,
-                                   n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)))
+                                   n_samples=int(np.clip(np.ceil(1.3 * path * s_c / 0.7), 24, 200)),
+                                   band=self.band)
         u = np.array([y / photos[i].H for i, _, y in self.fine.points])
         # pivot row of the (time shift, readout) parametrisation: the mean patch row, so the
         # two are nearly uncorrelated; with the offset fixed the time shift stays 0

@@ -9,7 +9,10 @@ Hann-windowed periodogram ``P(w)`` is then exponentially distributed around
 (``D`` the discrete gradient: a Gaussian gradient prior; ``A`` the resampling filter), and
 ``-log p(g | h) = sum_w P/M + log M`` (Whittle): the chapter's marginal ``p(h | g)``
 (eq. 6.7) for a Gaussian prior, which penalises too little blur and too much alike. The
-scale ``a`` is profiled in closed form, the noise ratio ``rho`` by Newton steps.
+scale ``a`` is profiled in closed form, the noise ratio ``rho`` by Newton steps. The sum
+runs over frequencies up to 0.42 cycles per working-scale pixel, and up to ``band`` cycles
+per photo pixel for a JPEG whose compression emptied the top of the band
+(:data:`gyrodeblur.calibration_fit.BLOCKY`).
 
 Real patches are not isotropic ``1/f^2`` textures: edges and oriented texture make the
 spectrum anisotropic, optics and resampling soften it, and a fixed prior then trades those
@@ -74,7 +77,8 @@ class PatchSpectra:
     """Patches of the photos at one working scale, and the cost of a parameter set."""
 
     def __init__(self, photos: list[CalibrationPhoto], centres, scale: float, size: int, *,
-                 rows=(0.0,), n_samples: int = 128, envelope: bool = True):
+                 rows=(0.0,), n_samples: int = 128, envelope: bool = True,
+                 band: float = np.inf):
         self.photos = photos
         P = self.size = int(size)
         F = self.F = max(P, int(round(P / scale))) if scale < 1 else P
@@ -93,7 +97,10 @@ class PatchSpectra:
         prior_ext = a2 / np.maximum(d2, 1e-12)
         fyh, fxh = FY[:, 1:-1], FX[:, 1:-1]
         rad = np.hypot(fyh, fxh)
-        mask = (rad >= _FMIN_BINS / P) & (rad <= _FMAX)
+        self.band = float(band)
+        # frequencies kept: up to _FMAX of the working scale, and up to ``band`` cycles per
+        # full-resolution pixel (what a compressed photo still holds)
+        mask = (rad >= _FMIN_BINS / P) & (rad <= min(_FMAX, self.band / self.scale))
         mask &= ~((fyh < 0) & ((fxh == 0) | np.isclose(fxh, 0.5)))   # redundant halves
         self.mask = mask
         self._build_smoother(prior_ext)
