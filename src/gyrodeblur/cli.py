@@ -94,12 +94,14 @@ def _ignored_options(args) -> None:
         return getattr(args, name, None) not in (None, False, "")
 
     if args.blind:
-        for name in ("refine",) + _CAPTURE_OPTIONS:
+        for name in ("refine", "fix") + _CAPTURE_OPTIONS:
             if given(name):
                 raise InputError("--" + name.replace("_", "-"),
                                  "does not apply with --blind, which uses no gyro log")
         if args.mode != "variant":
             raise InputError("--mode", "does not apply with --blind (--grid sets its patches)")
+        if args.downscale != 1.0:
+            raise InputError("--downscale", "applies with --refine only")
         return
     if given("kernel_size"):
         raise InputError("--kernel-size", "applies with --blind only")
