@@ -145,8 +145,8 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     def count(length: int) -> int:
         return max(1, int(np.ceil((length / window - overlap) / (1 - overlap))))
 
-    def fits(length: int) -> int:        # most patches of twice the smallest window
-        return max(1, int((length / (2 * MIN_WINDOW) - overlap) / (1 - overlap)))
+    def fits(length: int) -> int:        # most patches whose windows keep 1.25x the smallest
+        return max(1, int((length / (1.25 * MIN_WINDOW) - overlap) / (1 - overlap)))
 
     rows = min(max(count(H), DEFAULT_GRID[0]), fits(H))
     cols = min(max(count(W), DEFAULT_GRID[1]), fits(W))
