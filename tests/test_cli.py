@@ -225,6 +225,8 @@ def test_options_out_of_range_or_ignored_are_refused(capture_dir, capsys):
          "--kernel-size: applies with --blind only"),
         (["deblur", photo, "--blind", "--refine", "-o", str(d / "o.png")], "--refine: does not apply"),
         (["deblur", photo, "--blind", "--fix", "bias", "-o", str(d / "o.png")], "--fix: does not apply"),
+        (["deblur", photo, "--blind", "--time-offset", "0", "-o", str(d / "o.png")],
+         "--time-offset: does not apply"),                       # a zero is a value given
         (["deblur", photo, "--blind", "--downscale", "0.5", "-o", str(d / "o.png")],
          "--downscale: applies with --refine only"),
         (["deblur", photo, "--blind", "--capture", cap, "-o", str(d / "o.png")], "--capture: does not apply"),

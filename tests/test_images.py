@@ -123,3 +123,20 @@ def test_capture_and_log_keep_their_own_copies():
         Capture(0.4, 0.03, 0.0, None, GyroLog(np.arange(3.0), np.zeros((3, 3))))
     with pytest.raises(InputError, match="whole number"):
         Camera(100.0, 100.0, 47.5, 31.5, 96.5, 64)
+
+
+def test_review_findings_stay_fixed(image):
+    """0-255 floats are named as such; the shrunk path of calibrate checks too; a generator
+    of captures is one list; SSIM's 11 px window is checked; max_gap must be a number."""
+    from gyrodeblur.calibrate import PARAMETERS, calibrate
+    cap = _capture()
+    with pytest.raises(InputError, match="values up to 2.*divide 8-bit values by 255"):
+        deblur(image * 255, cap)
+    with pytest.raises(InputError, match="dtype uint8"):
+        calibrate([(image * 255).astype(np.uint8)], cap, downscale=0.5)
+    res = calibrate([image], (c for c in [cap]), fix=PARAMETERS)       # nothing to estimate
+    assert res.capture.time_offset == cap.time_offset
+    with pytest.raises(ValueError, match="too few"):
+        ssim(image[:9, :9], image[:9, :9])
+    with pytest.raises(InputError, match="max_gap"):
+        cap.replace(max_gap=None)

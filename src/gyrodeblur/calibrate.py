@@ -123,6 +123,7 @@ from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .capture import Capture
 from .errors import InputError
+from .images import check_image
 from .gyrolog import rate_noise
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
@@ -249,9 +250,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         raise InputError(None, "no photo to calibrate on")
     if isinstance(captures, Capture):
         captures = [captures] * len(images)
+    captures = list(captures) if captures is not None else None
     if captures is None or not all(isinstance(c, Capture) for c in captures):
         raise TypeError("captures must be a Capture or a list of them, one per photo")
-    captures = list(captures)
     if len(captures) != len(images):
         raise InputError("--capture", f"{len(images)} photos but {len(captures)} captures")
     fix = checked_fix(fix)
@@ -291,7 +292,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     given_letters = axes_to_letters(c0.axes)
     cand = _candidate_mappings(c0.axes, fix, mappings)
     fit = CalibrationFit(photos, search, fix, bias_prior, n_patches, len(cand), say_)
-    if np.isfinite(fit.band):
+    if fit.fine.band_cuts:
         note(f"the photos show JPEG's 8 px blocks (strength {fit.blockiness:.2f} > {BLOCKY:g}): "
              f"frequencies above {fit.band:g} cycles/px are left out, where compression "
              f"removed detail that would read as blur")
@@ -410,8 +411,8 @@ def _shrunk_photos(images, captures, factor: float):
     scaled to the sizes they got (checked against the full-size photos first: rounding
     the size may change the aspect ratio slightly, which the scaled cameras follow)."""
     out_imgs, out_caps = [], []
-    for img, cap in zip(images, captures):
-        img = np.asarray(img)
+    for k, (img, cap) in enumerate(zip(images, captures)):
+        img = check_image(img, f"photo {k + 1}")
         h, w = img.shape[:2]
         full = cap.scaled_to(w, h, source=cap.source)    # the photo fits its capture
         small = _shrunk(img, factor)

@@ -72,10 +72,10 @@ _COARSE_STEP = 0.002       # s: time-shift grid of the coarse search
 #: taken for a compressed JPEG, and the criterion keeps frequencies up to
 #: ``COMPRESSED_BAND`` cycles per pixel of the photo rather than 0.42: JPEG quantisation
 #: empties the top of the spectrum, which reads as blur. Benchmark photos (PNG): 1.005-1.086
-#: on the 24 calibration cases, up to 1.144 where the sharp original was itself a small
-#: JPEG (lai_text_02); saved as JPEG, 1.09-1.59 at quality 90 and 1.04-1.41 at 95. On the
-#: PNG benchmark the cut for every photo cost too much to be the rule (BENCHMARKS.md,
-#: section 4, JPEG compression).
+#: on the 24 calibration cases; saved as JPEG, 1.09-1.59 at quality 90 and 1.04-1.41 at 95.
+#: A false positive exists: lai_text_02_w2 (not among the 24; its small sharp original was
+#: itself a JPEG, 1.21) measures 1.144 as PNG and would be cut. On the PNG benchmark the cut
+#: for every photo cost too much to be the rule (BENCHMARKS.md, section 4).
 BLOCKY = 1.10
 COMPRESSED_BAND = 0.3
 

@@ -115,7 +115,10 @@ class Capture:
         if bias.shape != (3,) or not np.all(np.isfinite(bias)):
             raise InputError(src, f"gyro bias must be three finite numbers (rad/s), got {self.bias!r}")
         object.__setattr__(self, "bias", bias)
-        gap = float(self.max_gap)
+        try:
+            gap = float(self.max_gap)
+        except (TypeError, ValueError):
+            gap = np.nan
         if not (np.isfinite(gap) and gap > 0):
             raise InputError(src, f"max_gap must be a positive number of seconds, got {self.max_gap!r}")
         object.__setattr__(self, "max_gap", gap)

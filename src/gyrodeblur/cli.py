@@ -90,8 +90,9 @@ _CAPTURE_OPTIONS = ("capture", "exposure_start", "exposure_time", "readout_time"
 
 def _ignored_options(args) -> None:
     """Refuse deblur options that the chosen mode would ignore (naming the first)."""
-    def given(name):
-        return getattr(args, name, None) not in (None, False, "")
+    def given(name):                 # 0 is a value given; False/None/"" are defaults
+        v = getattr(args, name, None)
+        return v is not None and v is not False and not (isinstance(v, str) and v == "")
 
     if args.blind:
         for name in ("refine", "fix") + _CAPTURE_OPTIONS:

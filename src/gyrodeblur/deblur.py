@@ -19,7 +19,7 @@ import numpy as np
 
 from .capture import Capture
 from .errors import InputError
-from .images import check_image
+from .images import PHOTO_MAX, check_image
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
@@ -125,7 +125,8 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     px). Windows are made about ``tolerance / variation`` pixels wide, but never
     narrower than the largest PSF's extent (the margin of real neighbours around each
     window gives the deconvolution its context) nor 32 px, never coarser than the
-    chapter's 6 x 8, and never more than ``max_patches`` in all.
+    chapter's 6 x 8 (unless the photo is too small for it: windows stay at least 1.25x
+    :data:`~gyrodeblur.tiling.MIN_WINDOW`), and never more than ``max_patches`` in all.
     ``centred``: count only the change of the PSFs' shape (the photo is aligned by the
     displacement field first, see :func:`plan_psf_field`).
 
@@ -544,7 +545,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     with the scene as the first row saw it, free of rolling-shutter skew.
     """
     t0 = time.perf_counter()
-    image = check_image(image)
+    image = check_image(image, "photo", max_value=PHOTO_MAX)
     if not isinstance(capture, Capture):
         raise TypeError(f"capture must be a Capture (see gyrodeblur.capture.load_capture), "
                         f"got {type(capture).__name__}")
@@ -614,7 +615,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     """
     from .blind import estimate_kernel
 
-    image = check_image(image)
+    image = check_image(image, "photo", max_value=PHOTO_MAX)
     H, W = image.shape[:2]
     lin = get_transfer_curve(transfer).decode(image)
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin

@@ -415,13 +415,14 @@ def _to_float(path: str, arr: np.ndarray) -> tuple[np.ndarray, int]:
         return arr.astype(np.float32), 8
     if arr.dtype.kind == "f":
         a = arr.astype(np.float32)
-        bad = int(np.count_nonzero(~np.isfinite(a)))
-        over = int(np.count_nonzero(a > 1)) + int(np.count_nonzero(a < 0))
+        finite = np.isfinite(a)
+        bad = int(a.size - np.count_nonzero(finite))
+        over = int(np.count_nonzero(finite & ((a > 1) | (a < 0))))
         if bad or over:
             what = []
             if over:
                 what.append(f"{over} float samples outside [0, 1] are clipped (range "
-                            f"{np.nanmin(a):.3g} to {np.nanmax(a):.3g})")
+                            f"{a[finite].min():.3g} to {a[finite].max():.3g})")
             if bad:
                 what.append(f"{bad} NaN or infinite samples are read as 0 (+inf as 1)")
             warnings.warn(f"{path}: " + "; ".join(what) + ": scale a scene-linear or HDR "

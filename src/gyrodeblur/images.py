@@ -14,14 +14,17 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_image", "MAX_CHANNELS"]
+__all__ = ["check_image", "MAX_CHANNELS", "PHOTO_MAX"]
 
 #: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
 MAX_CHANNELS = 4
+#: Largest value a photo to deblur or calibrate may hold (a little overshoot from earlier
+#: processing passes; 0-255 values do not).
+PHOTO_MAX = 2.0
 
 
 def check_image(image, what: str = "image", *, min_size: int = 2,
-                dtype=np.float32) -> np.ndarray:
+                dtype=np.float32, max_value: float = np.inf) -> np.ndarray:
     """``image`` as a float32 (or ``dtype``) array, or :class:`InputError` saying what is
     wrong.
 
@@ -35,6 +38,10 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
         Smallest height and width accepted, pixels.
     dtype : numpy dtype
         Floating-point type of the result (float64 for metrics).
+    max_value : float
+        Largest value accepted: a photo in [0, 1] has none far above 1, and one with values
+        up to 255 was not scaled (:data:`PHOTO_MAX` for photos; a scene to blur may hold
+        brighter light).
 
     Returns
     -------
@@ -70,4 +77,9 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
     if not finite.all():
         n = int(arr.size - np.count_nonzero(finite))
         raise InputError(None, f"{what} has {n} NaN or infinite value(s)")
+    if np.isfinite(max_value):
+        top = float(arr.max())
+        if top > max_value:
+            raise InputError(None, f"{what} has values up to {top:.4g}; expected [0, 1] "
+                                   "(divide 8-bit values by 255, 16-bit ones by 65535)")
     return arr

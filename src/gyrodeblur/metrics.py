@@ -48,7 +48,7 @@ def psnr(reference: np.ndarray, estimate: np.ndarray, border: int = 0) -> float:
 def ssim(reference: np.ndarray, estimate: np.ndarray, border: int = 0) -> float:
     """SSIM (scikit-image's, Gaussian-weighted as Wang et al. 2004, data range 1) over the
     central region, averaged over channels."""
-    a, b = _pair(reference, estimate, border, min_size=7)      # SSIM's 7x7 window
+    a, b = _pair(reference, estimate, border, min_size=11)     # the 11x11 Gaussian window
     kw = dict(data_range=1.0, gaussian_weights=True, sigma=1.5, use_sample_covariance=False)
     if a.ndim == 3:
         return float(np.mean([structural_similarity(a[..., c], b[..., c], **kw)

@@ -100,6 +100,7 @@ class PatchSpectra:
         self.band = float(band)
         # frequencies kept: up to _FMAX of the working scale, and up to ``band`` cycles per
         # full-resolution pixel (what a compressed photo still holds)
+        self.band_cuts = self.band / self.scale < _FMAX       # whether ``band`` removes any
         mask = (rad >= _FMIN_BINS / P) & (rad <= min(_FMAX, self.band / self.scale))
         mask &= ~((fyh < 0) & ((fxh == 0) | np.isclose(fxh, 0.5)))   # redundant halves
         self.mask = mask
