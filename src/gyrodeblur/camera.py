@@ -37,15 +37,17 @@ class Camera:
     height: int
 
     def __post_init__(self):
+        def finite(v) -> bool:
+            return (not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
+                    and bool(np.isfinite(v)))
+
         for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                    or not np.isfinite(v):
+            if not finite(v):
                 raise InputError(f"camera.{name}", f"must be a finite number, got {v!r}")
         for name in ("width", "height"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                    or not np.isfinite(v) or v != int(v):
+            if not finite(v) or v != int(v):
                 raise InputError(f"camera.{name}", f"must be a whole number of pixels, got {v!r}")
         if self.fx <= 0 or self.fy <= 0:
             raise InputError("camera", f"focal lengths must be positive (fx={self.fx}, fy={self.fy})")

@@ -101,16 +101,18 @@ def _ignored_options(args) -> None:
                                  "does not apply with --blind, which uses no gyro log")
         if args.mode != "variant":
             raise InputError("--mode", "does not apply with --blind (--grid sets its patches)")
-        if args.downscale != 1.0:
-            raise InputError("--downscale", "applies with --refine only")
-        return
-    if given("kernel_size"):
-        raise InputError("--kernel-size", "applies with --blind only")
-    if args.mode == "invariant":
-        for name in ("grid", "overlap"):
-            if given(name):
-                raise InputError("--" + name, "applies to --mode variant only (invariant "
-                                              "deblurs the whole photo with one PSF)")
+    else:
+        if args.fix and not args.refine:
+            raise InputError("--fix", "applies with --refine only")
+        if given("kernel_size"):
+            raise InputError("--kernel-size", "applies with --blind only")
+        if args.mode == "invariant":
+            for name in ("grid", "overlap"):
+                if given(name):
+                    raise InputError("--" + name, "applies to --mode variant only (invariant "
+                                                  "deblurs the whole photo with one PSF)")
+    if args.downscale != 1.0 and not args.refine:   # (with --blind, --refine is refused)
+        raise InputError("--downscale", "applies with --refine only")
 
 
 def _load_capture(args, photo=None, say=None):
@@ -296,10 +298,6 @@ def cmd_deblur(args, say) -> None:
         mode_txt = "blind"
         grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
     else:
-        if args.fix and not args.refine:
-            raise InputError("--fix", "applies with --refine only")
-        if args.downscale != 1.0 and not args.refine:
-            raise InputError("--downscale", "applies with --refine only")
         fix = None
         if args.refine:
             from .calibrate_cli import fixed_parameters
