@@ -37,6 +37,7 @@ Usage::
     python benchmarks/calibration.py --timing        # all cases, + a 12 MP timing run
     python benchmarks/calibration.py --quick         # 2 cases at 512 px
     python benchmarks/calibration.py --dataset DIR   # a dataset folder (built if absent)
+    python benchmarks/calibration.py --photos DIR --gyro LOG   # your own photos and shake
     python benchmarks/calibration.py --cases 6 --max-size 768
     python benchmarks/calibration.py --sessions      # each photo's windows as one session
     python benchmarks/calibration.py --burst         # each case and the next frame of a burst
@@ -387,6 +388,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true",
                     help="2 cases at 512 px (with --sessions: one photo's 2 windows)")
     ap.add_argument("--dataset", help="dataset folder (loaded, or built there if absent)")
+    ap.add_argument("--photos", help="folder of sharp photos to build cases from (default "
+                                     "../shared/data/photos)")
+    ap.add_argument("--gyro", help="gyro log to draw shake from (default the shared hand-held "
+                                   "phone log; also the source trace of --log-seconds)")
     ap.add_argument("--cases", type=int, default=None, help="use only the first N cases")
     ap.add_argument("--windows", type=int, default=2, help="shake windows per photo (built cases)")
     ap.add_argument("--max-size", type=int, default=None, help="downscale photos (built cases)")
@@ -431,7 +436,8 @@ def main(argv: list[str] | None = None) -> int:
         args.windows = 2 if args.sessions else 1
     say = _common.say
     t_start = time.perf_counter()
-    opts = {"windows_per_photo": args.windows, "max_size": args.max_size}
+    opts = {"windows_per_photo": args.windows, "max_size": args.max_size,
+            "photos": args.photos, "gyro": args.gyro}
     if (args.quick or args.cases) and not args.dataset:
         n_photos = args.cases if args.cases and args.cases < 12 else None
         if n_photos:
@@ -440,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.cases:
         cases = cases[:args.cases]
     if args.log_seconds is not None:
-        cases = with_long_logs(cases, args.log_seconds)
+        cases = with_long_logs(cases, args.log_seconds, args.gyro)
     rows, session_secs = [], []
     injected = ("nothing injected" if args.no_errors
                 else f"errors injected with seed {args.seed}")

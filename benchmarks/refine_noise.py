@@ -46,10 +46,10 @@ TARGET_LEVEL = 0.02
 TARGET_DB = 1.0
 
 
-def pick_case(photo: str, max_size: int, windows: int, seed: int):
-    data = default_shared_data()
-    path = Path(photo) if Path(photo).is_file() else data / "photos" / photo
-    log = read_gyro_log(default_gyro())
+def pick_case(photo: str, max_size: int, windows: int, seed: int, *, photos=None, gyro=None):
+    folder = Path(photos) if photos else default_shared_data() / "photos"
+    path = Path(photo) if Path(photo).is_file() else folder / photo
+    log = read_gyro_log(gyro or default_gyro())
     sharp = read_sharp(path, max_size)
     h, w = sharp.shape[:2]
     gaps = find_gaps(log)
@@ -65,7 +65,9 @@ def pick_case(photo: str, max_size: int, windows: int, seed: int):
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="levels 0 and 0.02, 1 realisation, 400 px")
-    ap.add_argument("--photo", default="lai_manmade_01.png")
+    ap.add_argument("--photo", default="lai_manmade_01.png", help="photo file, or name in --photos")
+    ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
+    ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
     ap.add_argument("--max-size", type=int, default=None, help="longer side, px (default 640)")
     ap.add_argument("--realisations", type=int, default=None, help="per level (default 3)")
     ap.add_argument("--windows-considered", type=int, default=5)
@@ -77,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     max_size = args.max_size or (400 if args.quick else 640)
     say = _common.say
     t_start = time.perf_counter()
-    case = pick_case(args.photo, max_size, args.windows_considered, args.seed)
+    case = pick_case(args.photo, max_size, args.windows_considered, args.seed,
+                     photos=args.photos, gyro=args.gyro)
     cap, sharp, blurred = case.capture, case.sharp, case.blurred
     border = default_border(sharp.shape)
     with _common.quiet():

@@ -272,3 +272,35 @@ def test_field_registered_psnr_forgives_a_smooth_warp_but_not_blur():
     assert psnr(sharp, warped, b) < 22
     assert common.field_registered_psnr(sharp, warped, b) > 35
     assert common.field_registered_psnr(sharp, blurred, b) < psnr(sharp, box, b) + 0.5
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_calibration_runs_on_other_photos_and_another_gyro_log(tmp_path):
+    """--photos and --gyro build the cases from the user's folder and shake log (here a
+    bundled photo and a synthetic 20 s hand shake written as gcsv): the report names the
+    folder's photo, and a log that does not exist is an error, not the shared log."""
+    from PIL import Image
+    from skimage import data
+
+    from gyrodeblur.gyrolog import GyroLog, write_gcsv
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    Image.fromarray(data.astronaut()).save(photos / "astro.png")
+    t = np.arange(0.0, 20.0, 1 / 200)
+    rng = np.random.default_rng(2)
+    freqs = rng.uniform(2.0, 9.0, (3, 4))
+    phases = rng.uniform(0, 2 * np.pi, (3, 4))
+    w = np.stack([0.25 * np.sin(2 * np.pi * freqs[a][:, None] * t + phases[a][:, None]).sum(0)
+                  for a in range(3)], axis=1)
+    write_gcsv(tmp_path / "shake.gcsv", GyroLog(t, w))
+    out = tmp_path / "cal.json"
+    args = ["--photos", str(photos), "--cases", "1", "--windows", "1", "--max-size", "320",
+            "--out", str(out)]
+    cal = _load("calibration")
+    with pytest.raises(Exception, match="missing.gcsv"):
+        cal.main(args[:-2] + ["--gyro", str(tmp_path / "missing.gcsv"), "--out", str(out)])
+    assert cal.main(args + ["--gyro", str(tmp_path / "shake.gcsv")]) == 0
+    row, = json.loads(out.read_text())["cases"]
+    assert row["case"] == "astro_w0" and row["blur_px"] > 2
+    assert row["axes_correct"] and abs(row["offset_error_ms"]) < 3, row["estimates"]
