@@ -41,6 +41,7 @@ Usage::
     python benchmarks/calibration.py --cases 6 --max-size 768
     python benchmarks/calibration.py --sessions      # each photo's windows as one session
     python benchmarks/calibration.py --burst         # each case and the next frame of a burst
+    python benchmarks/calibration.py --attribute     # + where the PSNR gap comes from
 
 With ``--sessions`` the windows of each source photo are one session's photos: one set of
 errors is injected into all their captures (a session's seeds differ from the single-photo
@@ -114,13 +115,15 @@ def inject(capture, rng: np.random.Generator):
     return corrupt(capture, errors), errors
 
 
-def run_case(case, rng, *, say, method=None, n_patches=None, no_errors=False) -> dict:
+def run_case(case, rng, *, say, method=None, n_patches=None, no_errors=False,
+             attribute=False) -> dict:
     """Calibrate one case's photo alone, from its capture with errors injected."""
     return run_session([case], rng, say=say, method=method, n_patches=n_patches,
-                       no_errors=no_errors)[0]
+                       no_errors=no_errors, attribute=attribute)[0]
 
 
-def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False) -> list[dict]:
+def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False,
+                attribute=False) -> list[dict]:
     """Calibrate the photos of one session together: every case's capture gets the same
     injected errors (one gyro, one camera; none with ``no_errors``), and ``calibrate`` sees
     all the photos at once. One row per photo (``seconds`` is the whole session's
@@ -136,8 +139,17 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
         return [{"case": case.name, "blur_px": case.meta.get("blur_px"), "injected": errors,
                  "failed": str(exc), "seconds": time.perf_counter() - t0} for case in cases]
     secs = time.perf_counter() - t0
-    return [evaluate(case, bad, got, errors, res, secs, say=say, method=method)
+    rows = [evaluate(case, bad, got, errors, res, secs, say=say, method=method)
             for case, bad, got in zip(cases, bads, res.captures)]
+    if attribute:
+        attribute_gap(cases, bads, rows, n_patches=n_patches, method=method)
+        for row in rows:
+            say(f"  {row['case']:24s} PSNR gap {row['psnr_gap_db']:+.2f} dB; with one "
+                "parameter known: " + ", ".join(
+                    f"{k} {v:+.2f}" for k, v in row["gap_if_known_db"].items() if v is not None)
+                + "; only one estimated: " + ", ".join(
+                    f"{k} {v:+.2f}" for k, v in row["gap_if_only_db"].items() if v is not None))
+    return rows
 
 
 def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
@@ -186,6 +198,45 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         f"PSNR {p_cal:5.2f} vs {p_true:5.2f} ({p_cal - p_true:+.2f} dB; registered "
         f"{r_cal - r_true:+.2f}; aligned {a_cal - p_true:+.2f}; corrupted {p_bad:5.2f})  {secs:5.1f} s")
     return row
+
+
+#: the capture's field each calibrated parameter lives in (bias in the camera frame)
+PARAMETER_FIELDS = {"offset": "time_offset", "bias": "bias", "readout": "readout_time",
+                    "focal": "camera", "axes": "axes"}
+
+
+def attribute_gap(cases, bads, rows, *, n_patches=None, method=None) -> None:
+    """Which parameters the PSNR gap comes from, two ways, per parameter of
+    :data:`PARAMETER_FIELDS`: the photos calibrated again from their corrupted captures
+
+    * with that one parameter set right and fixed (``calibrate(..., fix=...)``, as a user
+      who knows it would): the row's ``gap_if_known_db``;
+    * with all the others set right and fixed, that one alone estimated: how well the photo
+      pins it down by itself, the row's ``gap_if_only_db``;
+
+    each the PSNR (dB) of the photo deblurred with the result minus the true capture's. The
+    whole calibration's gap is the row's ``psnr_gap_db``."""
+    for key, fixed_of in (("gap_if_known_db", lambda name: {name}),
+                          ("gap_if_only_db", lambda name: set(PARAMETER_FIELDS) - {name})):
+        for row in rows:
+            row[key] = {}
+        for name in PARAMETER_FIELDS:
+            fix = fixed_of(name)
+            right = {PARAMETER_FIELDS[f]: None for f in fix}
+            known = [bad.replace(**{f: getattr(case.capture, f) for f in right})
+                     for case, bad in zip(cases, bads)]
+            try:
+                res = calibrate([case.blurred for case in cases], known, fix=fix,
+                                n_patches=n_patches)
+            except InputError:
+                for row in rows:
+                    row[key][name] = None
+                continue
+            for case, got, row in zip(cases, res.captures, rows):
+                with _common.quiet():
+                    out = deblur(case.blurred, got, method=method)
+                row[key][name] = (psnr(case.sharp, out, default_border(case.sharp.shape))
+                                  - row["psnr_true"])
 
 
 def stated_sd(est: dict) -> dict:
@@ -367,7 +418,21 @@ def summarise(all_rows: list[dict]) -> dict:
         "bias_abs_error_median": float(np.median(np.abs([r["bias_error"] for r in rows]))),
         "uncertainty_coverage": coverage(rows),
         "offset_ambiguity": ambiguity(rows),
+        **({key: per_parameter(rows, key) for key in ("gap_if_known_db", "gap_if_only_db")}
+           if all("gap_if_known_db" in r for r in rows) else {}),
     }
+
+
+def per_parameter(rows: list[dict], key: str) -> dict:
+    """Per parameter, over the photos, the PSNR gap of :func:`attribute_gap`'s ``key``:
+    mean, worst, and how many photos are within 0.5 dB of the true capture's result."""
+    out = {}
+    for name in PARAMETER_FIELDS:
+        g = np.array([r[key][name] for r in rows if r[key].get(name) is not None])
+        out[name] = ({"n": int(g.size), "mean": float(g.mean()), "min": float(g.min()),
+                      "within_0.5dB": int((g >= TARGETS["psnr_gap_db"]).sum())}
+                     if g.size else {"n": 0})
+    return out
 
 
 def ambiguity(rows: list[dict]) -> dict:
@@ -416,6 +481,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-errors", action="store_true",
                     help="inject nothing: calibrate the true captures (how far calibration "
                          "moves a right capture; the PSNR gap is what that costs)")
+    ap.add_argument("--attribute", action="store_true",
+                    help="also calibrate each photo (session) again with one parameter "
+                         "(offset, bias, readout, focal, axes) known, and with only that one "
+                         "unknown: where the PSNR gap comes from (10 more calibrations)")
     ap.add_argument("--out", type=Path, default=None,
                     help="JSON report (default: results/calibration.json, or "
                          "results/calibration_sessions.json with --sessions)")
@@ -462,7 +531,8 @@ def main(argv: list[str] | None = None) -> int:
             # a burst gets its case's single-photo errors (a paired comparison)
             rng = np.random.default_rng([args.seed, 6 if args.burst else 7, k])
             got = run_session(group, rng, say=say, method=args.method,
-                              n_patches=args.patches, no_errors=args.no_errors)
+                              n_patches=args.patches, no_errors=args.no_errors,
+                              attribute=args.attribute)
             rows += got
             session_secs.append(got[0]["seconds"])
     else:
@@ -470,7 +540,8 @@ def main(argv: list[str] | None = None) -> int:
         for k, case in enumerate(cases):
             rng = np.random.default_rng([args.seed, 6, k])
             rows.append(run_case(case, rng, say=say, method=args.method,
-                                 n_patches=args.patches, no_errors=args.no_errors))
+                                 n_patches=args.patches, no_errors=args.no_errors,
+                                 attribute=args.attribute))
     summary = summarise(rows)
     if args.sessions or args.burst:
         summary["sessions"] = len(sessions)
@@ -517,6 +588,15 @@ def report(s: dict, say) -> None:
         say(f"offset ambiguity warnings: {amb['flagged']} photo(s), {amb['misses_flagged']} of "
             f"the {amb['misses']} offset miss(es) among them; a reported rival within 3 ms of "
             f"the truth in {amb['rival_within_3ms']}")
+    for key, what in (("gap_if_known_db", "with one parameter known (set right and fixed, "
+                                          "the rest calibrated)"),
+                      ("gap_if_only_db", "with only one parameter estimated (the rest right "
+                                         "and fixed)")):
+        if key in s:
+            say(f"PSNR gap {what}: " + "; ".join(
+                f"{k} mean {v['mean']:+.2f} dB, worst {v['min']:+.2f}, "
+                f"{v['within_0.5dB']}/{v['n']} within 0.5 dB"
+                for k, v in s[key].items() if v.get("n")))
     if "timing_12mp" in s:
         t = s["timing_12mp"]
         say(f"12 MP: {t['seconds']:.1f} s for {t['width']}x{t['height']}")
