@@ -9,7 +9,7 @@ from gyrodeblur.capture import Capture
 from gyrodeblur.deblur import deblur, deblur_blind
 from gyrodeblur.errors import InputError
 from gyrodeblur.gyrolog import GyroLog
-from gyrodeblur.images import check_image
+from gyrodeblur.images import check_image, check_psf
 from gyrodeblur.metrics import psnr, ssim
 from gyrodeblur.simulate import simulate_blur
 from gyrodeblur.sparse import sparse_deconvolve
@@ -140,3 +140,25 @@ def test_review_findings_stay_fixed(image):
         ssim(image[:9, :9], image[:9, :9])
     with pytest.raises(InputError, match="max_gap"):
         cap.replace(max_gap=None)
+
+
+def test_psfs_are_checked_and_normalised_the_same_way_by_every_deconvolution():
+    """One PSF check for Wiener, the sparse method and blind's initial kernel: odd sides,
+    finite, a positive sum; the result sums to 1 (a PSF given unnormalised deconvolves as
+    the normalised one would)."""
+    from gyrodeblur.blind import blind_deconvolve
+
+    k = check_psf(np.full((1, 5), 2.0))
+    assert k.dtype == np.float32 and k.sum() == pytest.approx(1.0) and k[0, 0] == 0.2
+    assert check_psf([[1, 3, -1]], dtype=np.float64).tolist() == [[1 / 3, 1.0, -1 / 3]]
+    img = np.random.default_rng(0).random((32, 32)).astype(np.float32)
+    bad = {"odd sides": np.ones((4, 5)), "NaN or infinite": np.array([[1.0, np.nan, 1.0]]),
+           "positive sum": np.array([[1.0, -2.0, 0.0]]), "not an array": [[1, "a", 2]]}
+    for msg, psf in bad.items():
+        for deconvolve in (wiener_deconvolve, sparse_deconvolve):
+            with pytest.raises(InputError, match=f"PSF .*{msg}|PSF is {msg}"):
+                deconvolve(img, psf)
+    with pytest.raises(InputError, match="init_psf must be a 2-D array with odd sides"):
+        blind_deconvolve(img, kernel_size=5, init_psf=np.ones((2, 2)))
+    ref = wiener_deconvolve(img, np.full((1, 5), 0.2))
+    np.testing.assert_allclose(wiener_deconvolve(img, np.full((1, 5), 7.0)), ref, atol=1e-6)

@@ -28,6 +28,7 @@ from scipy import ndimage, signal
 
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
+from .images import check_psf
 
 __all__ = ["estimate_kernel", "blind_deconvolve"]
 
@@ -273,14 +274,11 @@ def _check_kernel_size(kernel_size, shape: tuple[int, int]) -> None:
 
 
 def _check_psf(psf: np.ndarray) -> np.ndarray:
-    k = np.asarray(psf, dtype=np.float32)
-    if k.ndim != 2 or k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
-        raise ValueError(f"init_psf must be a 2-D odd-sized array, got shape {k.shape}")
-    if not np.all(np.isfinite(k)):
-        raise ValueError("init_psf contains NaN or infinite values")
-    k = np.clip(k, 0, None)
+    """The initial kernel: a checked PSF (:func:`~gyrodeblur.images.check_psf`) without
+    its negative entries (the kernel estimate is non-negative)."""
+    k = np.clip(check_psf(psf, "init_psf"), 0, None)
     if k.sum() <= 0:
-        raise ValueError("init_psf has no positive mass")
+        raise InputError(None, "init_psf has no positive mass")
     return k / k.sum()
 
 

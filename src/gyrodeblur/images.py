@@ -1,4 +1,4 @@
-"""Image arrays as the library's functions take them, checked once at the door.
+"""Image arrays (and PSFs) as the library's functions take them, checked once at the door.
 
 Inside the library an image is a float array of shape ``(H, W)`` or ``(H, W, C)`` (channels
 last, ``C`` from 1 to 4), with values in [0, 1] (8- and 16-bit integers live only in files,
@@ -14,7 +14,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_image", "MAX_CHANNELS", "PHOTO_MAX"]
+__all__ = ["check_image", "check_psf", "MAX_CHANNELS", "PHOTO_MAX"]
 
 #: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
 MAX_CHANNELS = 4
@@ -83,3 +83,23 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
             raise InputError(None, f"{what} has values up to {top:.4g}; expected [0, 1] "
                                    "(divide 8-bit values by 255, 16-bit ones by 65535)")
     return arr
+
+
+def check_psf(psf, what: str = "PSF", *, dtype=np.float32) -> np.ndarray:
+    """``psf`` normalised to sum 1, as ``dtype``, or :class:`InputError` saying what is
+    wrong: it must be a 2-D array with odd sides (its centre sample is the pixel it belongs
+    to), finite, with a positive sum. Negative entries are kept (a PSF estimated or
+    resampled elsewhere may ring a little below zero)."""
+    try:
+        k = np.asarray(psf, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(None, f"{what} is not an array of numbers ({exc})") from None
+    if k.ndim != 2 or k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
+        raise InputError(None, f"{what} must be a 2-D array with odd sides, got shape "
+                               f"{k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise InputError(None, f"{what} has NaN or infinite values")
+    total = float(k.sum())
+    if total <= 0:
+        raise InputError(None, f"{what} must have a positive sum, got {total:.4g}")
+    return (k / total).astype(dtype)

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad
-from .images import check_image
+from .images import check_image, check_psf
 from .noise import estimate_noise_sigma
 from .packedfft import pack_spectrum, packed_irfft2, packed_multiply, packed_rfft2
 
@@ -227,17 +227,11 @@ def sparse_deconvolve(
     ((64, 64), dtype('float32'))
     """
     g = check_image(image)
-    h = np.asarray(psf, dtype=np.float64)
-    if h.ndim != 2 or h.shape[0] % 2 == 0 or h.shape[1] % 2 == 0:
-        raise ValueError(f"psf must be a 2-D odd-sized array, got shape {h.shape}")
-    total = h.sum()
-    if not np.isfinite(total) or total <= 0:
-        raise ValueError(f"psf must have a positive finite sum, got {total}")
+    h = check_psf(psf)
     if not 0 < exponent <= 1:
         raise ValueError(f"exponent must be in (0, 1], got {exponent}")
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations}")
-    h = (h / total).astype(np.float32)
     if workers is not None:
         warnings.warn("sparse_deconvolve(workers=...) is ignored: its FFTs are OpenCV's, "
                       "which threads them itself (cv2.setNumThreads)", DeprecationWarning,

@@ -33,7 +33,7 @@ import scipy.fft as sfft
 
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
-from .images import check_image
+from .images import check_image, check_psf
 
 __all__ = [
     "wiener_deconvolve",
@@ -91,10 +91,9 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     Raises
     ------
     InputError
-        ``phi`` is not a positive finite number (source ``"--phi"``).
-    ValueError
-        ``image`` is not 2-D or 3-D, or ``psf`` is not a 2-D odd-sized array with a
-        positive finite sum.
+        ``phi`` is not a positive finite number (source ``"--phi"``); ``image`` fails
+        :func:`~gyrodeblur.images.check_image`, or ``psf``
+        :func:`~gyrodeblur.images.check_psf` (2-D, odd sides, finite, positive sum).
 
     Notes
     -----
@@ -126,7 +125,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     (dtype('float32'), (32, 48), True)
     """
     image = _as_image(image)
-    psf = _as_psf(psf)
+    psf = check_psf(psf)
     phi = _check_phi(phi)
     height, width = image.shape[:2]
     shape = wiener_fft_shape(image.shape, psf.shape, taper=taper)
@@ -264,16 +263,6 @@ def normalize_range(result: np.ndarray, reference: np.ndarray,
 
 def _as_image(image: np.ndarray) -> np.ndarray:
     return check_image(image)
-
-
-def _as_psf(psf: np.ndarray) -> np.ndarray:
-    psf = np.asarray(psf, dtype=np.float32)
-    if psf.ndim != 2 or psf.shape[0] % 2 == 0 or psf.shape[1] % 2 == 0:
-        raise ValueError(f"PSF must be a 2-D array with odd sides, got shape {psf.shape}")
-    total = float(psf.sum(dtype=np.float64))
-    if not np.isfinite(total) or total <= 0:
-        raise ValueError(f"PSF must have a positive finite sum, got {total}")
-    return psf / np.float32(total)
 
 
 def _check_phi(phi: float) -> float:
