@@ -152,6 +152,17 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
     return rows
 
 
+def capture_errors(got, cap) -> dict:
+    """The calibrated capture ``got``'s errors against the true ``cap``: offset and
+    readout in ms, focal length in %, bias in rad/s (camera frame), the mapping found."""
+    return {"offset_error_ms": (got.time_offset - cap.time_offset) * 1e3,
+            "readout_error_ms": (got.readout_time - cap.readout_time) * 1e3,
+            "focal_error_pct": (got.camera.fx / cap.camera.fx - 1) * 100,
+            "bias_error": (got.bias - cap.bias).tolist(),
+            "axes_found": axes_to_letters(got.axes),
+            "axes_correct": bool(np.allclose(got.axes, cap.axes))}
+
+
 def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
     """One photo's row: the calibrated capture ``got`` against the truth, and the PSNR of
     the photo deblurred with the true, the calibrated and the corrupted (``bad``) capture."""
@@ -170,13 +181,8 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         "blur_px": case.meta.get("blur_px"),
         "exposure_ms": cap.exposure_time * 1e3,
         "injected": injected,
-        "offset_error_ms": (got.time_offset - cap.time_offset) * 1e3,
-        "readout_error_ms": (got.readout_time - cap.readout_time) * 1e3,
-        "focal_error_pct": (got.camera.fx / cap.camera.fx - 1) * 100,
-        "bias_error": (got.bias - cap.bias).tolist(),
+        **capture_errors(got, cap),
         "axes_true": axes_to_letters(cap.axes),
-        "axes_found": axes_to_letters(got.axes),
-        "axes_correct": bool(np.allclose(got.axes, cap.axes)),
         "psnr_true": p_true, "psnr_calibrated": p_cal, "psnr_corrupted": p_bad,
         "psnr_gap_db": p_cal - p_true,
         "registered_psnr_true": r_true, "registered_psnr_calibrated": r_cal,
@@ -203,6 +209,9 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
 #: the capture's field each calibrated parameter lives in (bias in the camera frame)
 PARAMETER_FIELDS = {"offset": "time_offset", "bias": "bias", "readout": "readout_time",
                     "focal": "camera", "axes": "axes"}
+#: how :func:`capture_errors` names each parameter's error(s)
+ERROR_PREFIX = {"offset": "offset", "bias": "bias", "readout": "readout", "focal": "focal",
+                "axes": "axes_"}
 
 
 def attribute_gap(cases, bads, rows, *, n_patches=None, method=None) -> None:
@@ -212,7 +221,8 @@ def attribute_gap(cases, bads, rows, *, n_patches=None, method=None) -> None:
     * with that one parameter set right and fixed (``calibrate(..., fix=...)``, as a user
       who knows it would): the row's ``gap_if_known_db``;
     * with all the others set right and fixed, that one alone estimated: how well the photo
-      pins it down by itself, the row's ``gap_if_only_db``;
+      pins it down by itself, the row's ``gap_if_only_db`` (and the parameter's error then,
+      ``errors_if_only``: the criterion's own error, the search's noise aside);
 
     each the PSNR (dB) of the photo deblurred with the result minus the true capture's. The
     whole calibration's gap is the row's ``psnr_gap_db``."""
@@ -237,6 +247,10 @@ def attribute_gap(cases, bads, rows, *, n_patches=None, method=None) -> None:
                     out = deblur(case.blurred, got, method=method)
                 row[key][name] = (psnr(case.sharp, out, default_border(case.sharp.shape))
                                   - row["psnr_true"])
+                if key == "gap_if_only_db":       # the criterion's own error on that one
+                    row.setdefault("errors_if_only", {})[name] = {
+                        k: v for k, v in capture_errors(got, case.capture).items()
+                        if k.startswith(ERROR_PREFIX[name])}
 
 
 def stated_sd(est: dict) -> dict:
@@ -376,14 +390,9 @@ def time_12mp(case, rng, *, say, megapixels: float = 12.0) -> dict:
     t0 = time.perf_counter()
     res = calibrate([big], bad.scaled_to(W, H))
     secs = time.perf_counter() - t0
-    got = res.capture
-    cap = case.capture
     row = {"case": case.name, "width": W, "height": H, "megapixels": W * H / 1e6,
            "seconds": secs, "injected": injected,
-           "offset_error_ms": (got.time_offset - cap.time_offset) * 1e3,
-           "axes_correct": bool(np.allclose(got.axes, cap.axes)),
-           "focal_error_pct": (got.camera.fx / cap.camera.scaled_to(W, H).fx - 1) * 100,
-           "notes": res.notes}
+           **capture_errors(res.capture, case.capture.scaled_to(W, H)), "notes": res.notes}
     say(f"  12 MP timing: {case.name} upscaled to {W}x{H} ({W * H / 1e6:.1f} MP): "
         f"calibrate {secs:.1f} s (offset err {row['offset_error_ms']:+.2f} ms, axes "
         f"{'ok' if row['axes_correct'] else 'WRONG'})")
