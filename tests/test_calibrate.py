@@ -409,6 +409,25 @@ def test_keep_margin_grows_with_gyro_noise():
     assert _keep_margin(0.021) == pytest.approx(3 * _KEEP_MARGIN)
 
 
+def test_keep_margin_shrinks_with_fewer_free_coordinates(case):
+    """With all six continuous coordinates free the margin is 10 nats; with fewer, the
+    same odds of moving a right capture by chance (twice the gain ~ chi-square with
+    ``n_free`` degrees of freedom): 4.48 for one, 7.05 for three; the noise scaling on
+    top. A calibration with only the offset free uses the one-coordinate margin."""
+    from scipy.stats import chi2
+
+    from gyrodeblur.calibrate import _KEEP_MARGIN, _keep_margin
+    margins = [_keep_margin(float("nan"), k) for k in range(1, 7)]
+    assert margins[-1] == _KEEP_MARGIN and np.all(np.diff(margins) > 0)
+    assert margins[0] == pytest.approx(4.48, abs=0.01) and margins[2] == pytest.approx(7.05, abs=0.01)
+    odds = [chi2.sf(2 * m, k) for k, m in enumerate(margins, 1)]
+    assert np.allclose(odds, odds[-1], rtol=1e-6)
+    assert _keep_margin(0.021, 1) == pytest.approx(3 * margins[0])
+    _, true, blurred = case
+    res = calibrate([blurred], true, fix=set(PARAMETERS) - {"offset"})
+    assert any("kept the given parameters" in n and "(< 4.48)" in n for n in res.notes), res.notes
+
+
 def test_noisy_gyro_keeps_a_correct_capture_but_still_fixes_an_offset(case):
     sharp, true, blurred = case
     noisy = _noisy(true, 0.03)

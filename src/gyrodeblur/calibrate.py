@@ -92,7 +92,12 @@ them in order and decides what to keep (5) and what to report.
    per sample, gains of 3-17 with no better PSFs); so the margin grows with the log's
    white-noise level (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
    0.007 rad/s: ``margin = 10 max(1, noise / 0.007)`` (in proportion, not with the
-   variance: that kept real 5 ms offset errors under 0.02 rad/s noise).
+   variance: that kept real 5 ms offset errors under 0.02 rad/s noise). The margin of 10
+   is for all six continuous coordinates free (offset, readout, focal, bias); with some
+   fixed it shrinks to the same odds of moving a right capture (twice the gain is about
+   chi-square with as many degrees of freedom as are free): 4.5 with one free, 7.0 with
+   three. On the benchmark with one parameter free and the rest right (session 13), 10
+   kept readout errors of up to 8 ms that the photo itself preferred to correct.
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
 objective (priors included). The axis mapping's confidence is the objective gap to the
@@ -192,6 +197,7 @@ _MAX_PATCHES = 18          # ... or this many shared out (rounded up to >= 3 per
 #: With the given axis mapping, the given parameters are kept unless the best found lowers
 #: the (tempered) objective by at least this much: a correct capture on a photo with little
 #: blur is left alone rather than moved along directions the photo cannot tell apart.
+#: (With all six continuous coordinates free; fewer free, see :func:`_keep_margin`.)
 _KEEP_MARGIN = 10.0
 #: ... and a different mapping is taken only when it lowers it by at least this much (odds of
 #: about 7 to 1 for the mapping the user gave). Until session 8 any gain would do: a right
@@ -317,7 +323,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if fit.idx or len(cand) > 1:
         f_given, x0 = fit.given_objective(c0.axes)
         noise = _gyro_noise_level(captures)
-        margin = _keep_margin(noise)
+        margin = _keep_margin(noise, len(fit.idx))
         if not np.allclose(M, c0.axes):
             margin *= _KEEP_MAPPING_NATS / _KEEP_MARGIN
         if np.isfinite(noise) and margin > _KEEP_MARGIN:
@@ -328,7 +334,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             found = c0.time_offset + search.theta_of(x, M, fit.ubar).offset
             msg = (f"kept the given parameters{from_log}: the best found "
                    f"({axes_to_letters(M) or 'given'}, time offset {found * 1e3:+.1f} ms) "
-                   f"improves the objective by only {f_given - fx:.1f} (< {margin:g})")
+                   f"improves the objective by only {f_given - fx:.1f} (< {margin:.3g})")
             x, M, fx = x0, c0.axes, f_given
             _, _, Fm, sc = fit.refine(M, x, 0)
             kept = True
@@ -446,12 +452,21 @@ def _gyro_noise_level(captures) -> float:
     return max(levels) if levels else float("nan")
 
 
-def _keep_margin(noise: float) -> float:
+def _keep_margin(noise: float, n_free: int = 6) -> float:
     """Objective gain needed to leave the given parameters (same mapping), for a gyro
-    with white noise ``noise`` rad/s per sample (``nan``: unknown, the base margin)."""
+    with white noise ``noise`` rad/s per sample (``nan``: unknown, the base margin) and
+    ``n_free`` free coordinates (offset, readout, focal, three bias components; fewer when
+    some are fixed). :data:`_KEEP_MARGIN` is the margin with all six free; with fewer, the
+    same false-alarm odds under a right capture (twice the gain ~ chi-square with
+    ``n_free`` degrees of freedom): 4.5 nats for one free coordinate, 7.0 for three."""
+    from scipy.stats import chi2
+
+    base = _KEEP_MARGIN
+    if 0 < n_free < 6:
+        base = float(chi2.isf(chi2.sf(2 * _KEEP_MARGIN, 6), n_free)) / 2
     if not np.isfinite(noise):
-        return _KEEP_MARGIN
-    return _KEEP_MARGIN * max(1.0, noise / _TYPICAL_GYRO_NOISE)
+        return base
+    return base * max(1.0, noise / _TYPICAL_GYRO_NOISE)
 
 
 def _uncertainties(x, idx, F, scores, ubar) -> dict:
