@@ -58,6 +58,7 @@ Writes ``benchmarks/results/calibration.json`` (``--out``).
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -305,6 +306,15 @@ def with_long_logs(cases, seconds: float, gyro=None) -> list:
     return out
 
 
+def dataset_gyro(folder) -> str | None:
+    """The gyro log a built dataset folder was made from (``None``: the default log, or
+    no such folder)."""
+    index = Path(folder) / "dataset.json" if folder else None
+    if index is None or not index.exists():
+        return None
+    return json.loads(index.read_text(encoding="utf-8")).get("options", {}).get("gyro")
+
+
 def group_sessions(cases, *, say=None, min_apart: float = 2.0) -> list[list]:
     """The cases grouped by source photo (its shake windows), in order: each group stands
     for the photos of one session (one camera and gyro, several exposures).
@@ -524,7 +534,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.cases:
         cases = cases[:args.cases]
     if args.log_seconds is not None:
-        cases = with_long_logs(cases, args.log_seconds, args.gyro)
+        cases = with_long_logs(cases, args.log_seconds, args.gyro or dataset_gyro(args.dataset))
     rows, session_secs = [], []
     injected = ("nothing injected" if args.no_errors
                 else f"errors injected with seed {args.seed}")

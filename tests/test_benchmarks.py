@@ -298,9 +298,54 @@ def test_calibration_runs_on_other_photos_and_another_gyro_log(tmp_path):
     args = ["--photos", str(photos), "--cases", "1", "--windows", "1", "--max-size", "320",
             "--out", str(out)]
     cal = _load("calibration")
-    with pytest.raises(Exception, match="missing.gcsv"):
+    from gyrodeblur.errors import InputError
+
+    with pytest.raises(InputError, match="missing.gcsv"):
         cal.main(args[:-2] + ["--gyro", str(tmp_path / "missing.gcsv"), "--out", str(out)])
     assert cal.main(args + ["--gyro", str(tmp_path / "shake.gcsv")]) == 0
     row, = json.loads(out.read_text())["cases"]
     assert row["case"] == "astro_w0" and row["blur_px"] > 2
     assert row["axes_correct"] and abs(row["offset_error_ms"]) < 3, row["estimates"]
+
+
+def test_attribute_gap_calibrates_with_one_parameter_known_and_with_one_unknown(monkeypatch):
+    """--attribute's wiring, with calibrate and the deblurring stubbed: for each parameter,
+    one calibration from the corrupted captures with that parameter set right and fixed,
+    and one with all the others set right and fixed; the gaps are the stub PSNRs minus the
+    true capture's, per photo of the session."""
+    from types import SimpleNamespace
+
+    from conftest import constant_rate_capture
+    from gyrodeblur.axes import parse_axes
+
+    cal = _load("calibration")
+    true = [constant_rate_capture((0.1, 0.2, 0.0)), constant_rate_capture((0.0, 0.3, 0.1))]
+    bad = [c.replace(time_offset=0.01, bias=np.array([0.02, 0.0, 0.0]), readout_time=0.02,
+                     camera=c.camera.with_focal_scale(1.1), axes=parse_axes("YXz"))
+           for c in true]
+    seen = []
+
+    def fake_calibrate(images, caps, *, fix, n_patches=None):
+        seen.append((set(fix), caps))
+        return SimpleNamespace(captures=caps)
+
+    monkeypatch.setattr(cal, "calibrate", fake_calibrate)
+    monkeypatch.setattr(cal, "deblur", lambda img, cap, method=None: cap)
+    monkeypatch.setattr(cal, "psnr", lambda sharp, cap, border: 30.0 + 100 * cap.time_offset)
+    cases = [SimpleNamespace(blurred=np.zeros((8, 8)), sharp=np.zeros((240, 320)), capture=c)
+             for c in true]
+    rows = [{"psnr_true": 30.0}, {"psnr_true": 30.0}]
+    cal.attribute_gap(cases, bad, rows)
+    assert len(seen) == 10
+    for fix, caps in seen:
+        for cap, t, b in zip(caps, true, bad):
+            for name, field in cal.PARAMETER_FIELDS.items():
+                want = t if name in fix else b
+                assert np.all(np.asarray(getattr(cap, field) == getattr(want, field))), (fix, name)
+    assert {frozenset(f) for f, _ in seen[:5]} == {frozenset([n]) for n in cal.PARAMETER_FIELDS}
+    for row in rows:        # the offset is wrong (+10 ms: +1 dB here) unless known
+        assert row["gap_if_known_db"] == pytest.approx(
+            {"offset": 0.0, "bias": 1.0, "readout": 1.0, "focal": 1.0, "axes": 1.0})
+        assert row["gap_if_only_db"] == pytest.approx(
+            {"offset": 1.0, "bias": 0.0, "readout": 0.0, "focal": 0.0, "axes": 0.0})
+        assert row["errors_if_only"]["offset"] == {"offset_error_ms": pytest.approx(10.0)}

@@ -117,7 +117,8 @@ def estimate_kernel(
     ------
     InputError
         ``kernel_size`` is not odd, below 3 or not smaller than half the image
-        (source ``"--kernel-size"``).
+        (source ``"--kernel-size"``); ``init_psf`` fails
+        :func:`~gyrodeblur.images.check_psf`.
 
     Notes
     -----
@@ -274,11 +275,9 @@ def _check_kernel_size(kernel_size, shape: tuple[int, int]) -> None:
 
 
 def _check_psf(psf: np.ndarray) -> np.ndarray:
-    """The initial kernel: a checked PSF (:func:`~gyrodeblur.images.check_psf`) without
-    its negative entries (the kernel estimate is non-negative)."""
+    """The initial kernel: a checked PSF (:func:`~gyrodeblur.images.check_psf`: its sum is
+    positive) without its negative entries (the kernel estimate is non-negative)."""
     k = np.clip(check_psf(psf, "init_psf"), 0, None)
-    if k.sum() <= 0:
-        raise InputError(None, "init_psf has no positive mass")
     return k / k.sum()
 
 

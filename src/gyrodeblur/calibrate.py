@@ -323,10 +323,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if fit.idx or len(cand) > 1:
         f_given, x0 = fit.given_objective(c0.axes)
         noise = _gyro_noise_level(captures)
-        margin = _keep_margin(noise, len(fit.idx))
-        if not np.allclose(M, c0.axes):
-            margin *= _KEEP_MAPPING_NATS / _KEEP_MARGIN
-        if np.isfinite(noise) and margin > _KEEP_MARGIN:
+        if np.allclose(M, c0.axes):
+            margin = _keep_margin(noise, len(fit.idx))
+        else:           # another mapping: the odds of 7 to 1, however many are free
+            margin = _keep_margin(noise) * _KEEP_MAPPING_NATS / _KEEP_MARGIN
+        if np.isfinite(noise) and noise > _TYPICAL_GYRO_NOISE:
             note(f"gyro noise {noise:.4f} rad/s per sample: the given parameters are "
                  f"kept unless the objective improves by {margin:.0f}", "  ")
         if f_given - fx < margin:
@@ -459,11 +460,11 @@ def _keep_margin(noise: float, n_free: int = 6) -> float:
     some are fixed). :data:`_KEEP_MARGIN` is the margin with all six free; with fewer, the
     same false-alarm odds under a right capture (twice the gain ~ chi-square with
     ``n_free`` degrees of freedom): 4.5 nats for one free coordinate, 7.0 for three."""
-    from scipy.stats import chi2
+    from scipy.special import gammaincc, gammainccinv
 
     base = _KEEP_MARGIN
-    if 0 < n_free < 6:
-        base = float(chi2.isf(chi2.sf(2 * _KEEP_MARGIN, 6), n_free)) / 2
+    if 0 < n_free < 6:       # half the chi-square(n_free) quantile at chi-square(6)'s odds
+        base = float(gammainccinv(n_free / 2, gammaincc(3, _KEEP_MARGIN)))
     if not np.isfinite(noise):
         return base
     return base * max(1.0, noise / _TYPICAL_GYRO_NOISE)

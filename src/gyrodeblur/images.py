@@ -86,20 +86,43 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
 
 
 def check_psf(psf, what: str = "PSF", *, dtype=np.float32) -> np.ndarray:
-    """``psf`` normalised to sum 1, as ``dtype``, or :class:`InputError` saying what is
-    wrong: it must be a 2-D array with odd sides (its centre sample is the pixel it belongs
-    to), finite, with a positive sum. Negative entries are kept (a PSF estimated or
-    resampled elsewhere may ring a little below zero)."""
+    """``psf`` normalised to sum 1, or :class:`InputError` saying what is wrong.
+
+    Parameters
+    ----------
+    psf : array_like, shape (kh, kw)
+        Real weights; both sides odd (the centre sample is the pixel the PSF belongs to).
+        Negative entries are kept: a PSF estimated or resampled elsewhere may ring a
+        little below zero.
+    what : str
+        How the messages name the argument (e.g. ``"init_psf"``).
+    dtype : numpy dtype
+        Floating-point type of the result (normalised in float64 first).
+
+    Returns
+    -------
+    ndarray of ``dtype``, shape (kh, kw), summing to 1.
+
+    Raises
+    ------
+    InputError
+        Not an array of real numbers, not 2-D with odd sides, NaN or infinite entries, or
+        a sum that is not positive and finite.
+    """
     try:
-        k = np.asarray(psf, dtype=np.float64)
+        k = np.asarray(psf)
+        if k.dtype.kind == "c":
+            raise TypeError("complex values")
+        k = k.astype(np.float64)
     except (TypeError, ValueError) as exc:
-        raise InputError(None, f"{what} is not an array of numbers ({exc})") from None
+        raise InputError(None, f"{what} is not an array of real numbers ({exc})") from None
     if k.ndim != 2 or k.shape[0] % 2 == 0 or k.shape[1] % 2 == 0:
         raise InputError(None, f"{what} must be a 2-D array with odd sides, got shape "
                                f"{k.shape}")
     if not np.all(np.isfinite(k)):
         raise InputError(None, f"{what} has NaN or infinite values")
-    total = float(k.sum())
-    if total <= 0:
-        raise InputError(None, f"{what} must have a positive sum, got {total:.4g}")
+    with np.errstate(over="ignore"):
+        total = float(k.sum())
+    if not np.isfinite(total) or total <= 0:
+        raise InputError(None, f"{what} must have a positive finite sum, got {total:.4g}")
     return (k / total).astype(dtype)

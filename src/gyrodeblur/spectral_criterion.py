@@ -48,6 +48,8 @@ _FMAX = 0.42               # cycles/px: frequencies kept (splat aliasing beyond)
 _FMIN_BINS = 2.5           # frequencies below this many bins are dropped (window leakage)
 _ENVELOPE_ITERS = 3        # Fisher-scoring steps of an envelope fitted per evaluation ...
 _ENVELOPE_ITERS_HELD = 6   # ... and of one fitted to be held
+_ENVELOPE_MAX_STEP = 3.0   # largest change of log envelope / log noise floor per step
+                           # (normal steps: up to about 2.3)
 
 
 @dataclass
@@ -328,11 +330,13 @@ class PatchSpectra:
         """Envelopes ``(B, N)`` for model spectra ``S`` (B a multiple of the patches):
         the weighted least-squares start, then a fixed number of damped Fisher-scoring
         steps of the Whittle likelihood of ``P ~ E S + s`` on the binned spectra (fixed,
-        so that the envelope is a smooth function of ``S``). A step that would raise a
-        patch's likelihood cost is halved, twice at most, and otherwise not taken: near the
-        zeros of a long blur's ``|H|^2`` an undamped step could throw the envelope 20
-        decades off, and that patch's cost thousands of nats up, at isolated parameter
-        values (a focal length 3 % off but not 2.5 or 3.5 %), which trapped the search."""
+        so that the envelope is a smooth function of ``S``). Each step is shrunk, where
+        needed, so that it changes the envelope and the noise floor ``s`` by at most a
+        factor ``e^3`` (:data:`_ENVELOPE_MAX_STEP`; a continuous cap, so the envelope stays
+        a continuous function of ``S``; normal steps stay under it): a floor driven towards zero loses its Fisher
+        information, and an uncapped step then threw it 30 e-folds up, and that patch's
+        cost thousands of nats up, at isolated parameter values (a focal length 3 % off
+        but not 2.5 or 3.5 %), which trapped the search."""
         iters = _ENVELOPE_ITERS if iters is None else iters
         npt = len(self.points)
         reps = S.shape[0] // npt
@@ -347,29 +351,18 @@ class PatchSpectra:
             ls = np.log(np.maximum(np.tile(self._noise, reps), 1e-30))
             th = np.concatenate([c, ls[:, None]], 1)
             eye = np.eye(k + 1)
-
-            def model(t):
-                m1 = np.exp(np.clip(t[:, :k] @ Phi.T, -60, 60)) * Sb
-                sn = np.exp(np.clip(t[:, -1], -80, 10))[:, None]
-                M = m1 + sn
-                return m1, sn, M, (cnt * (np.log(M) + Pb / M)).sum(1)
-
-            m1, sn, M, cost = model(th)
             for _ in range(iters):
+                m1 = np.exp(np.clip(th[:, :k] @ Phi.T, -60, 60)) * Sb
+                sn = np.exp(np.clip(th[:, -1], -80, 10))[:, None]
+                M = m1 + sn
                 Z = np.concatenate([(m1 / M)[:, :, None] * Phi[None], (sn / M)[:, :, None]], 2)
                 Zt = np.transpose(Z, (0, 2, 1))
                 g = np.matmul(Zt, (cnt * (1 - Pb / M))[:, :, None])[..., 0]
                 F = np.matmul(Zt * cnt[:, None, :], Z)
                 F = F + 0.1 * F * eye + 1e-6 * eye
                 step = np.linalg.solve(F, g[..., None])[..., 0]
-                for _ in range(3):
-                    m1n, snn, Mn, cn = model(th - step)
-                    ok = cn <= cost                         # False for NaN too
-                    th[ok] -= step[ok]
-                    m1[ok], sn[ok], M[ok], cost[ok] = m1n[ok], snn[ok], Mn[ok], cn[ok]
-                    if ok.all():
-                        break
-                    step = np.where(ok[:, None], 0.0, 0.5 * step)
+                change = np.maximum(np.abs(step[:, :k] @ Phi.T).max(1), np.abs(step[:, -1]))
+                th = th - step * (_ENVELOPE_MAX_STEP / np.maximum(change, _ENVELOPE_MAX_STEP))[:, None]
             c = th[:, :k]
         return np.exp(np.clip(c @ self.Phi.T, -60, 60))
 
