@@ -48,7 +48,7 @@ _FMAX = 0.42               # cycles/px: frequencies kept (splat aliasing beyond)
 _FMIN_BINS = 2.5           # frequencies below this many bins are dropped (window leakage)
 _ENVELOPE_ITERS = 3        # Fisher-scoring steps of an envelope fitted per evaluation ...
 _ENVELOPE_ITERS_HELD = 6   # ... and of one fitted to be held
-_ENVELOPE_MAX_STEP = 3.0   # largest change of log envelope / log noise floor per step
+_FLOOR_MAX_STEP = 3.0      # largest change of the log noise floor per envelope-fit step
                            # (normal steps: up to about 2.3)
 
 
@@ -330,13 +330,13 @@ class PatchSpectra:
         """Envelopes ``(B, N)`` for model spectra ``S`` (B a multiple of the patches):
         the weighted least-squares start, then a fixed number of damped Fisher-scoring
         steps of the Whittle likelihood of ``P ~ E S + s`` on the binned spectra (fixed,
-        so that the envelope is a smooth function of ``S``). Each step is shrunk, where
-        needed, so that it changes the envelope and the noise floor ``s`` by at most a
-        factor ``e^3`` (:data:`_ENVELOPE_MAX_STEP`; a continuous cap, so the envelope stays
-        a continuous function of ``S``; normal steps stay under it): a floor driven towards zero loses its Fisher
-        information, and an uncapped step then threw it 30 e-folds up, and that patch's
-        cost thousands of nats up, at isolated parameter values (a focal length 3 % off
-        but not 2.5 or 3.5 %), which trapped the search."""
+        so that the envelope is a smooth function of ``S``). A step that would change the
+        log noise floor ``s`` by more than :data:`_FLOOR_MAX_STEP` is shrunk to that (the
+        whole step, in proportion: a continuous cap, so the envelope stays a continuous
+        function of ``S``; normal steps stay under it): a floor driven towards zero loses
+        its Fisher information, and an uncapped step then threw it 30 e-folds up, and that
+        patch's cost thousands of nats up, at isolated parameter values (a focal length 3 %
+        off but not 2.5 or 3.5 %), which trapped the search."""
         iters = _ENVELOPE_ITERS if iters is None else iters
         npt = len(self.points)
         reps = S.shape[0] // npt
@@ -361,8 +361,8 @@ class PatchSpectra:
                 F = np.matmul(Zt * cnt[:, None, :], Z)
                 F = F + 0.1 * F * eye + 1e-6 * eye
                 step = np.linalg.solve(F, g[..., None])[..., 0]
-                change = np.maximum(np.abs(step[:, :k] @ Phi.T).max(1), np.abs(step[:, -1]))
-                th = th - step * (_ENVELOPE_MAX_STEP / np.maximum(change, _ENVELOPE_MAX_STEP))[:, None]
+                floor = np.abs(step[:, -1])
+                th = th - step * (_FLOOR_MAX_STEP / np.maximum(floor, _FLOOR_MAX_STEP))[:, None]
             c = th[:, :k]
         return np.exp(np.clip(c @ self.Phi.T, -60, 60))
 
