@@ -233,7 +233,7 @@ def attribute_gap(cases, bads, rows, *, n_patches=None, method=None) -> None:
             row[key] = {}
         for name in PARAMETER_FIELDS:
             fix = fixed_of(name)
-            right = {PARAMETER_FIELDS[f]: None for f in fix}
+            right = [PARAMETER_FIELDS[f] for f in fix]           # the capture fields set right
             known = [bad.replace(**{f: getattr(case.capture, f) for f in right})
                      for case, bad in zip(cases, bads)]
             try:
