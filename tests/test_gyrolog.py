@@ -54,6 +54,57 @@ def test_csv_units_from_suffix(tmp_path, trace):
     assert np.allclose(log.t, trace.t, atol=1e-8)
 
 
+def _csv_text(header, t, columns):
+    rows = "\n".join(",".join(repr(float(v)) if not isinstance(v, int) else str(v) for v in vals)
+                     for vals in zip(t, *columns))
+    return header + "\n" + rows + "\n"
+
+
+def test_csv_rate_columns_found_by_name_in_any_order(tmp_path, trace):
+    """Sensor Logger writes ``time,seconds_elapsed,z,y,x``: read by position, the x rate
+    would be the elapsed seconds. The names say which column is which axis."""
+    t_ns = [int(round(a * 1e9)) for a in trace.t]
+    wx, wy, wz = trace.omega.T
+    p = tmp_path / "Gyroscope.csv"
+    p.write_text(_csv_text("time,seconds_elapsed,z,y,x", t_ns,
+                           [trace.t - trace.t[0], wz, wy, wx]))
+    log = read_csv_log(p, time_unit="ns")
+    assert np.allclose(log.t, trace.t, atol=1e-8)
+    assert np.allclose(log.omega, trace.omega, atol=1e-12)
+
+    # an IMU log with the accelerometer first: the gyro's columns, by name
+    p2 = tmp_path / "imu.csv"
+    p2.write_text(_csv_text("t_s,acc_x,acc_y,acc_z,gyroX,gyroY,gyroZ", trace.t,
+                            [wx + 9, wy + 9, wz + 9, wx, wy, wz]))
+    assert np.allclose(read_gyro_log(p2).omega, trace.omega, atol=1e-12)
+
+
+def test_csv_units_in_brackets(tmp_path, trace):
+    p = tmp_path / "g.csv"
+    deg = np.degrees(trace.omega).T
+    p.write_text(_csv_text("t (ms),gx [deg/s],gy [deg/s],gz [deg/s]", trace.t * 1e3, deg))
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t, atol=1e-9)
+    assert np.allclose(log.omega, trace.omega, atol=1e-9)
+
+
+@pytest.mark.parametrize("header,match", [
+    ("t_s,x,y,z,wx,wy,wz", "columns x, wx could each be the x rate"),
+    ("t_s,seconds_elapsed,c1,c2", "'seconds_elapsed' would be read as the x rate"),
+    ("t_s,y,x,q", "'y' would be read as the x rate"),
+])
+def test_csv_rate_columns_the_names_contradict_are_refused(tmp_path, trace, header, match):
+    p = tmp_path / "odd.csv"
+    n = len(header.split(",")) - 1
+    p.write_text(_csv_text(header, trace.t, [trace.omega[:, 0]] * n))
+    with pytest.raises(InputError, match=match) as e:
+        read_gyro_log(p, "csv")
+    assert "odd.csv" in str(e.value) and "gyro.rate_columns" in str(e.value)
+    # naming the columns settles it
+    log = read_csv_log(p, rate_columns=header.split(",")[-3:])
+    assert log.omega.shape == (len(trace.t), 3)
+
+
 def test_shared_handheld_log_loads(shared_data):
     log = read_gyro_log(shared_data / "gyro" / "handheld_phone_210hz.csv", "csv", time_unit="ns")
     assert len(log) > 30000

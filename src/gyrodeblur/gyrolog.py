@@ -20,8 +20,10 @@ Formats
     (milliseconds) is kept in :attr:`GyroLog.meta`.
 ``csv``
     A CSV file with a header: a time column and three rate columns. Column names and
-    units are options (:func:`read_csv_log`); units are guessed from suffixes such as
-    ``t_ns`` or ``wx_rad_s`` / ``gx_deg_s`` when not given.
+    units are options (:func:`read_csv_log`). Without them the rate columns are those
+    whose names say their axis (``x``, ``gx``, ``gyro_x``, ``rotationRateX``, in any
+    order: Sensor Logger's ``time,seconds_elapsed,z,y,x``), and units are read from
+    suffixes such as ``t_ns`` or ``wx_rad_s`` / ``gx_deg_s``, or brackets (``t (ms)``).
 ``android``
     Android sensor-event dumps, one event per line, ``type timestamp_ns x y z``; only
     type 4 (``TYPE_GYROSCOPE``, rad/s, device axes) is kept.
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -314,9 +317,13 @@ def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: i
 
 
 def _unit_from_name(name: str, units: dict) -> str | None:
+    """The unit of ``units`` a column's name ends with (``t_ns``, ``wx_deg_s``) or states in
+    brackets (``t (ns)``, ``gx [deg/s]``), or ``None``."""
     low = name.lower().replace("/", "_")
+    bracketed = re.search(r"[(\[]\s*([a-z_]+)\s*[)\]]\s*$", low)
     for unit in sorted(units, key=len, reverse=True):
-        if low.endswith("_" + unit.replace("/", "_")):
+        key = unit.replace("/", "_")
+        if low.endswith("_" + key) or (bracketed and bracketed.group(1) == key):
             return unit
     return None
 
@@ -332,7 +339,10 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     time_column : str or int, optional
         Name or index of the time column; default: the first column.
     rate_columns : three names or indices, optional
-        Default: the three columns after the time column, taken as x, y, z.
+        Default: the columns whose names say which rate they hold (``x``, ``wx``,
+        ``gyro_x``, ``rotationRateX``, ... with or without a unit suffix), in x, y, z order
+        whatever their order in the file; else the three columns after the time column,
+        taken as x, y, z (refused when a name there says otherwise).
     time_unit : {"s", "ms", "us", "ns"}, optional
         Default: from the column name's suffix (``t_ns`` -> ns), else an error.
     rate_unit : {"rad/s", "deg/s"}, optional
@@ -365,10 +375,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
 
     ti = 0 if time_column is None else col(time_column)
     if rate_columns is None:
-        ri = [ti + 1, ti + 2, ti + 3]
-        if ri[-1] >= len(header):
-            raise InputError(path, f"need a time column and three rate columns, header has "
-                                   f"{len(header)} columns")
+        ri = _default_rate_columns(path, header, ti)
     else:
         if len(rate_columns) != 3:
             raise InputError(path, "rate_columns must name exactly three columns")
@@ -386,6 +393,61 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=2, sep=delimiter)
     return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
                    {"time_unit": tu, "rate_unit": ru})
+
+
+#: What may come before a rate column's axis letter (lower case, letters only): ``x``,
+#: ``wx``, ``gx``, ``gyro_x``, ``gyroX``, ``omega_x``, ``rotationRateX``,
+#: ``angular_velocity_x`` (an accelerometer's ``ax`` or ``acc_x`` is none of them).
+_RATE_PREFIXES = frozenset({"", "w", "g", "gyr", "gyro", "gyroscope", "omega", "rot",
+                            "rotation", "rotationrate", "rate", "angularvelocity", "angvel"})
+
+
+def _rate_axis(name: str) -> str | None:
+    """The axis (``"x"``, ``"y"`` or ``"z"``) a column's name says it holds the rate of, or
+    ``None``. A rate-unit suffix (``_rad_s``, ``_deg_s``) or a bracketed unit is ignored."""
+    low = re.sub(r"[(\[].*?[)\]]", "", name.lower()).strip().replace("/", "_")
+    for unit in RATE_UNITS:
+        suffix = "_" + unit.replace("/", "_")
+        if low.endswith(suffix):
+            low = low[:-len(suffix)]
+    key = re.sub(r"[^a-z]", "", low)
+    if key and key[-1] in "xyz" and key[:-1] in _RATE_PREFIXES:
+        return key[-1]
+    return None
+
+
+def _looks_like_time(name: str) -> bool:
+    """Whether a column's name says it holds times (``t``, ``time``, ``timestamp``,
+    ``seconds_elapsed``, ``t_ns``)."""
+    low = name.lower()
+    return (low in ("t", "ts") or _unit_from_name(low, TIME_UNITS) is not None
+            or any(w in low for w in ("time", "stamp", "elapsed", "second")))
+
+
+def _default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
+    """The x, y, z rate columns of a CSV header when none are given: by name when the names
+    say which axis each column holds, whatever their order (Sensor Logger writes
+    ``time,seconds_elapsed,z,y,x``); else the three columns after the time column, unless a
+    name there contradicts that (an axis out of place, or a time)."""
+    named = {a: [i for i, h in enumerate(header) if i != ti and _rate_axis(h) == a]
+             for a in "xyz"}
+    where = "; name them in the capture's gyro.rate_columns"
+    for a, cols in named.items():
+        if len(cols) > 1:
+            raise InputError(path, f"columns {', '.join(header[i] for i in cols)} could each "
+                                   f"be the {a} rate{where}")
+    if all(named.values()):
+        return [named[a][0] for a in "xyz"]
+    ri = [ti + 1, ti + 2, ti + 3]
+    if ri[-1] >= len(header):
+        raise InputError(path, f"need a time column and three rate columns, header has "
+                               f"{len(header)} columns")
+    for a, i in zip("xyz", ri):
+        said = _rate_axis(header[i])
+        if (said is not None and said != a) or (said is None and _looks_like_time(header[i])):
+            raise InputError(path, f"column {header[i]!r} would be read as the {a} rate, "
+                                   f"which its name contradicts{where}")
+    return ri
 
 
 def _is_number(s: str) -> bool:
