@@ -8,6 +8,7 @@ sharp image by the recorded rotation), never by convolving the PSFs the calibrat
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -308,6 +309,23 @@ def test_cli_calibrate_writes_a_loadable_capture(cli_dir, case, capsys):
     np.testing.assert_allclose(cap.bias, [0.02, -0.02, 0.0])   # fixed: as given
     doc = json.loads(out.read_text())
     assert doc["gyro"]["orientation"] == TRUE_AXES
+
+
+def test_cli_calibrate_with_gyro_from_the_working_directory(cli_dir, monkeypatch):
+    """``--gyro`` is read relative to the working directory, not to the capture's folder:
+    the corrected capture must point at the log that was read."""
+    d = cli_dir
+    (d / "sub").mkdir(exist_ok=True)
+    doc = json.loads((d / "cap.json").read_text())
+    doc["gyro"]["path"] = "not-here.gcsv"
+    (d / "sub" / "cap.json").write_text(json.dumps(doc))
+    monkeypatch.chdir(d)
+    out = d / "out" / "from_cwd.json"
+    assert main(["calibrate", "blurred.png", "--capture", "sub/cap.json", "--gyro", "gyro.gcsv",
+                 "--fix", "bias,readout,focal,axes", "-o", str(out)]) == 0
+    written = json.loads(out.read_text())["gyro"]["path"]
+    assert os.path.normpath(os.path.join(d / "out", written)) == str(d / "gyro.gcsv")
+    load_capture(out)                            # loads from anywhere
 
 
 def test_cli_bad_fix_name_exits_2(cli_dir, capsys):

@@ -103,15 +103,12 @@ def calibrate_command(args, say, load_capture) -> None:
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
         say(line)
-    src = caps[0].source
+    # the log as it was opened (relative to the capture's folder, or to the working
+    # directory when --gyro named it), written relative to the output's folder
     gyro_rel = caps[0].gyro_spec.get("path")
-    if gyro_rel is not None and os.path.isabs(gyro_rel):
-        pass                                     # an absolute path stays as it is
-    elif src and src != "capture" and gyro_rel is not None:
-        gyro_abs = os.path.join(os.path.dirname(os.path.abspath(src)), gyro_rel)
-        gyro_rel = os.path.relpath(gyro_abs, os.path.dirname(os.path.abspath(args.output)))
-    elif gyro_rel is not None and not os.path.isabs(gyro_rel):
-        gyro_rel = os.path.relpath(os.path.abspath(gyro_rel),
+    opened = caps[0].log.source
+    if gyro_rel is not None and not os.path.isabs(gyro_rel) and opened:
+        gyro_rel = os.path.relpath(os.path.abspath(opened),
                                    os.path.dirname(os.path.abspath(args.output)))
     tmp = args.output + ".part"
     try:
