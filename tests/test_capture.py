@@ -67,6 +67,22 @@ def test_exif_hints_fill_gaps(capture_files):
     assert len(said) == 2 and all("EXIF" in s for s in said)
 
 
+def test_readout_time_from_the_gcsv_header(capture_files):
+    """Gyroflow's gcsv header states the frame readout time (ms): without one in the
+    capture, it is used (and said), rather than a global shutter."""
+    d, doc = capture_files
+    g = d / "gyro.gcsv"
+    g.write_text(g.read_text().replace("tscale,", "frame_readout_time,15.2\ntscale,", 1))
+    said = []
+    assert load_capture(d / "cap.json").readout_time == 0.02           # the capture's wins
+    del doc["readout_time"]
+    (d / "cap.json").write_text(json.dumps(doc))
+    cap = load_capture(d / "cap.json", report=said.append)
+    assert cap.readout_time == pytest.approx(0.0152)
+    assert any("frame_readout_time" in s for s in said)
+    assert load_capture(d / "cap.json", overrides={"readout_time": 0.0}).readout_time == 0
+
+
 def test_bias_auto(tmp_path):
     t = np.arange(0, 2, 0.005)
     w = np.tile([0.02, -0.01, 0.005], (t.size, 1))

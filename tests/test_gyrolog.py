@@ -79,6 +79,37 @@ def test_csv_rate_columns_found_by_name_in_any_order(tmp_path, trace):
     assert np.allclose(read_gyro_log(p2).omega, trace.omega, atol=1e-12)
 
 
+def test_csv_axis_first_names_and_unnamed_extra_columns(tmp_path, trace):
+    wx, wy, wz = trace.omega.T
+    p = tmp_path / "imu.csv"
+    p.write_text(_csv_text("t_s,x_acc,y_acc,z_acc,x_gyro,y_gyro,z_gyro", trace.t,
+                           [wx + 9, wy + 9, wz + 9, wx, wy, wz]))
+    assert np.allclose(read_gyro_log(p).omega, trace.omega, atol=1e-12)
+    # six unnamed columns: which three are the gyro's would be a guess
+    p.write_text(_csv_text("t_s,c1,c2,c3,c4,c5,c6", trace.t, [wx, wy, wz, wx, wy, wz]))
+    with pytest.raises(InputError, match="do not say which three hold"):
+        read_gyro_log(p)
+
+
+def test_csv_semicolons_comments_quotes_and_byte_order_mark(tmp_path, trace):
+    rows = "\n".join(f'"{a!r}";"{b!r}";"{c!r}";"{d!r}"' for a, (b, c, d) in
+                     zip(trace.t.tolist(), trace.omega.tolist()))
+    p = tmp_path / "g.csv"
+    p.write_text("\ufeff# exported by some app\n\n\"t_s\";\"wx\";\"wy\";\"wz\"\n" + rows + "\n",
+                 encoding="utf-8")
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t) and np.allclose(log.omega, trace.omega)
+    # line numbers in messages count the comment lines
+    p.write_text("# comment\nt_s;wx;wy;wz\n0;0;0;0\n0.01;0;x;0\n")
+    with pytest.raises(InputError, match="line 4: not a number"):
+        read_gyro_log(p)
+    # a gcsv with a byte-order mark
+    g = tmp_path / "g.gcsv"
+    write_gcsv(g, trace, tscale=1e-6, gscale=1e-6)
+    g.write_text("\ufeff" + g.read_text(), encoding="utf-8")
+    assert np.allclose(read_gyro_log(g).omega, trace.omega, atol=1e-6)
+
+
 def test_csv_units_in_brackets(tmp_path, trace):
     p = tmp_path / "g.csv"
     deg = np.degrees(trace.omega).T

@@ -18,7 +18,8 @@ JSON schema (stable; other tools write it)::
 Optional keys in ``gyro``: ``bias`` (``[bx, by, bz]`` rad/s in the camera frame, or
 ``"auto"``), ``max_gap`` (s, default 0.05) and, for ``csv``, ``time_unit``, ``rate_unit``,
 ``time_column``, ``rate_columns``. Row ``y`` starts exposing at
-``exposure_start + readout_time * y / height``.
+``exposure_start + readout_time * y / height``; without a ``readout_time``, a gcsv log's
+``frame_readout_time`` header (ms) gives it, else it is 0 (a global shutter).
 """
 
 from __future__ import annotations
@@ -312,7 +313,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     if path is not None:
         src = os.fspath(path)
         try:
-            with open(src, encoding="utf-8") as fh:
+            with open(src, encoding="utf-8-sig") as fh:
                 data = json.load(fh)
         except FileNotFoundError:
             raise InputError(src, "capture description not found") from None
@@ -399,6 +400,11 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     exposure_start = _get(data, "exposure_start", src)
     exposure_time = _get(data, "exposure_time", src)
     readout = _get(data, "readout_time", src, required=False)
+    if readout is None and "frame_readout_time" in log.meta:
+        # Gyroflow's gcsv header states it (milliseconds) for the camera that wrote the log
+        readout = _get(log.meta, "frame_readout_time", gpath) * 1e-3
+        if report:
+            report(f"readout_time = {readout:.6g} s (from the gcsv header's frame_readout_time)")
     readout = 0.0 if readout is None else readout
     bias_spec = gyro_d.get("bias")
     if isinstance(bias_spec, str):

@@ -147,7 +147,8 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
         j = i0 + int(np.argmax(gaps))
         raise InputError(src, f"gap of {gaps.max() * 1e3:.1f} ms in the gyro log at "
                               f"{log.t[j]:.6f} s, inside the {what} (limit "
-                              f"{max_gap * 1e3:.0f} ms)")
+                              f"{max_gap * 1e3:.0f} ms; gyro.max_gap or --max-gap raises "
+                              f"it, at the cost of interpolating across the gap)")
 
 
 def rate_noise(log: GyroLog) -> float:
@@ -236,17 +237,17 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
 def _guess_format(path: str) -> str:
     if path.lower().endswith(".gcsv"):
         return "gcsv"
-    first = _read_lines(path)[:1]
+    first = [ln for ln in _read_lines(path) if ln.strip() and not ln.lstrip().startswith("#")][:1]
     if first and first[0].strip().upper() in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
         return "gcsv"
-    if first and len(first[0].split()) == 5 and "," not in first[0]:
+    if first and len(first[0].split()) == 5 and all(_is_number(v) for v in first[0].split()):
         return "android"
     return "csv"
 
 
 def _read_lines(path: str) -> list[str]:
     try:
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding="utf-8-sig") as fh:      # a byte-order mark is not text
             return fh.read().splitlines()
     except UnicodeDecodeError:
         raise InputError(path, "not a text file") from None
@@ -308,7 +309,7 @@ def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: i
             raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
                                    f"got {len(parts)}")
         try:
-            out.append([float(p) for p in parts[:ncol]])
+            out.append([float(p.strip().strip('"')) for p in parts[:ncol]])
         except ValueError:
             raise InputError(path, f"line {first_line + k}: not a number in {line!r}") from None
     if not out:
@@ -330,7 +331,7 @@ def _unit_from_name(name: str, units: dict) -> str | None:
 
 def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = None,
                  rate_columns: tuple | None = None, time_unit: str | None = None,
-                 rate_unit: str | None = None, delimiter: str = ",") -> GyroLog:
+                 rate_unit: str | None = None, delimiter: str | None = None) -> GyroLog:
     """Read a plain CSV gyro log with a header line.
 
     Parameters
@@ -347,7 +348,9 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         Default: from the column name's suffix (``t_ns`` -> ns), else an error.
     rate_unit : {"rad/s", "deg/s"}, optional
         Default: from the rate columns' suffix (``wx_deg_s`` -> deg/s), else rad/s.
-    delimiter : str
+    delimiter : str, optional
+        Default: the first of comma, semicolon and tab that the header line holds. Leading
+        lines that start with ``#`` are comments; numbers may be quoted.
 
     Examples
     --------
@@ -356,8 +359,14 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     """
     path = os.fspath(path)
     lines = _read_lines(path)
+    skip = 0                      # leading comment lines ("# recorded by ...") and blanks
+    while skip < len(lines) and (not lines[skip].strip() or lines[skip].lstrip().startswith("#")):
+        skip += 1
+    lines = lines[skip:]
     if not lines:
         raise InputError(path, "empty file")
+    if delimiter is None:         # the first of these the header line holds
+        delimiter = next((d for d in (",", ";", "\t") if d in lines[0]), ",")
     header = next(csv.reader([lines[0]], delimiter=delimiter))
     header = [h.strip() for h in header]
     if all(_is_number(h) for h in header):
@@ -390,7 +399,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     if ru not in RATE_UNITS:
         raise InputError(path, f"unknown rate unit {ru!r} (known: rad/s, deg/s)")
     ncol = max([ti] + ri) + 1
-    rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=2, sep=delimiter)
+    rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=skip + 2, sep=delimiter)
     return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
                    {"time_unit": tu, "rate_unit": ru})
 
@@ -400,6 +409,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
 #: ``angular_velocity_x`` (an accelerometer's ``ax`` or ``acc_x`` is none of them).
 _RATE_PREFIXES = frozenset({"", "w", "g", "gyr", "gyro", "gyroscope", "omega", "rot",
                             "rotation", "rotationrate", "rate", "angularvelocity", "angvel"})
+#: What may follow the axis letter instead: ``x_gyro``, ``xGyro``, ``x_rate``.
+_RATE_SUFFIXES = frozenset({"gyr", "gyro", "gyroscope", "omega", "rate", "rot"})
 
 
 def _rate_axis(name: str) -> str | None:
@@ -413,6 +424,8 @@ def _rate_axis(name: str) -> str | None:
     key = re.sub(r"[^a-z]", "", low)
     if key and key[-1] in "xyz" and key[:-1] in _RATE_PREFIXES:
         return key[-1]
+    if len(key) > 1 and key[0] in "xyz" and key[1:] in _RATE_SUFFIXES:
+        return key[0]
     return None
 
 
@@ -428,7 +441,8 @@ def _default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
     """The x, y, z rate columns of a CSV header when none are given: by name when the names
     say which axis each column holds, whatever their order (Sensor Logger writes
     ``time,seconds_elapsed,z,y,x``); else the three columns after the time column, unless a
-    name there contradicts that (an axis out of place, or a time)."""
+    name there contradicts that (an axis out of place, or a time) or the file has other
+    columns too (which three would be a guess)."""
     named = {a: [i for i, h in enumerate(header) if i != ti and _rate_axis(h) == a]
              for a in "xyz"}
     where = "; name them in the capture's gyro.rate_columns"
@@ -441,7 +455,10 @@ def _default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
     ri = [ti + 1, ti + 2, ti + 3]
     if ri[-1] >= len(header):
         raise InputError(path, f"need a time column and three rate columns, header has "
-                               f"{len(header)} columns")
+                               f"{len(header)} columns ({', '.join(header)})")
+    if len(header) > 4:        # which three? (an IMU log's accelerometer must not be taken)
+        raise InputError(path, f"the column names ({', '.join(header)}) do not say which "
+                               f"three hold the gyro's x, y and z rates{where}")
     for a, i in zip("xyz", ri):
         said = _rate_axis(header[i])
         if (said is not None and said != a) or (said is None and _looks_like_time(header[i])):
@@ -469,7 +486,7 @@ def read_android_events(path: str | os.PathLike) -> GyroLog:
     rows = []
     for k, line in enumerate(lines, start=1):
         parts = line.split()
-        if not parts:
+        if not parts or parts[0].startswith("#"):
             continue
         if len(parts) != 5:
             raise InputError(path, f"line {k}: expected 'type timestamp_ns x y z'")
