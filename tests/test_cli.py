@@ -56,6 +56,35 @@ def test_psf_commands(capture_dir):
     assert np.load(d / "f.npy").shape[0] == 12
 
 
+def test_alpha_is_passed_through_and_leaves_the_colours_alone(capture_dir, capsys):
+    """An RGBA photo: the colour channels come out as without an alpha channel, and the
+    alpha channel exactly as it went in (it is a mask, not light)."""
+    d = capture_dir
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "blurred.png"), "--snr-db", "40", "--seed", "1"]) == 0
+    rgb = read_photo(d / "blurred.png").pixels
+    alpha = np.ones(rgb.shape[:2], np.float32)
+    alpha[40:120, 60:200] = 0.5
+    alpha[:, :20] = 0.0
+    write_photo(d / "rgba.png", np.dstack([rgb, alpha]), bit_depth=8)
+    for src, out in (("blurred.png", "out_rgb.png"), ("rgba.png", "out_rgba.png")):
+        assert main(["deblur", str(d / src), "--capture", str(d / "cap.json"),
+                     "-o", str(d / out), "--grid", "2x2"]) == 0
+    plain, with_alpha = read_photo(d / "out_rgb.png").pixels, read_photo(d / "out_rgba.png").pixels
+    assert with_alpha.shape[2] == 4
+    np.testing.assert_array_equal(with_alpha[..., :3], plain)
+    np.testing.assert_array_equal(with_alpha[..., 3], read_photo(d / "rgba.png").pixels[..., 3])
+    # a JPEG cannot hold it: refused before any work, as is a folder given as the output
+    capsys.readouterr()
+    assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "out.jpg")]) == 2
+    err = capsys.readouterr().err
+    assert "alpha channel" in err and "deblurred" not in err
+    assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+
+
 def _run_error(argv, capsys):
     rc = main(argv)
     err = capsys.readouterr().err.strip().splitlines()

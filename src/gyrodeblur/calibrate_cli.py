@@ -10,6 +10,7 @@ import numpy as np
 
 from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix
 from .errors import InputError
+from .images import split_alpha
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command"]
 
@@ -97,7 +98,7 @@ def calibrate_command(args, say, load_capture) -> None:
         caps.append(load_capture(a, ph, say))
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)
-    res = calibrate([p.pixels for p in photos], caps, fix=fix, say=say,
+    res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
                     downscale=args.downscale)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")

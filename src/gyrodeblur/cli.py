@@ -15,6 +15,7 @@ import warnings
 import numpy as np
 
 from .errors import InputError
+from .images import join_alpha, split_alpha
 from .tiling import DEFAULT_OVERLAP
 
 #: Kernel size (px) of ``deblur --blind`` when ``--kernel-size`` is not given.
@@ -172,6 +173,7 @@ def _check_output(path: str, like, overwrite: bool, image: bool = True) -> None:
     check_destination(path, like, overwrite, image=image)
 
 
+
 # ----------------------------------------------------------------------------- commands
 
 def cmd_psf(args, say) -> None:
@@ -240,10 +242,12 @@ def cmd_simulate(args, say) -> None:
     cap = _load_capture(args, photo, say)
     curve = get_transfer_curve(args.transfer)
     t0 = time.perf_counter()
-    blurred = curve.encode(simulate_blur(curve.decode(photo.pixels), cap, snr_db=args.snr_db,
+    colour, alpha = split_alpha(photo.pixels)
+    blurred = curve.encode(simulate_blur(curve.decode(colour), cap, snr_db=args.snr_db,
                                          seed=args.seed))
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
+    blurred = join_alpha(blurred, alpha)
     write_photo(args.output, blurred, like=photo, bit_depth=args.bit_depth,
                 overwrite=args.overwrite)
     h, w = photo.pixels.shape[:2]
@@ -284,6 +288,7 @@ def cmd_deblur(args, say) -> None:
     grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
     progress = _Progress("deblurring", args.quiet)
     h, w = photo.pixels.shape[:2]
+    colour, alpha = split_alpha(photo.pixels)
     t0 = time.perf_counter()
     if args.blind:
         from .deblur import deblur_blind
@@ -292,7 +297,7 @@ def cmd_deblur(args, say) -> None:
                                        "--blind give RxC (default 1x1, one kernel)")
         blind_grid = (1, 1) if grid is None else grid
         kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
-        restored, field = deblur_blind(photo.pixels, kernel_size, grid=blind_grid,
+        restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
                                        overlap=overlap, method=args.method,
                                        transfer=args.transfer, progress=progress, **options)
         mode_txt = "blind"
@@ -306,11 +311,11 @@ def cmd_deblur(args, say) -> None:
         if args.refine:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates
-            res = calibrate([photo.pixels], cap, fix=fix, say=say, downscale=args.downscale)
+            res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
-        restored, report = deblur(photo.pixels, cap, mode=args.mode, grid=grid,
+        restored, report = deblur(colour, cap, mode=args.mode, grid=grid,
                                   overlap=overlap, method=args.method,
                                   transfer=args.transfer, progress=progress,
                                   return_report=True, **options)
@@ -318,7 +323,7 @@ def cmd_deblur(args, say) -> None:
         mode_txt = args.mode
         grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
     progress.close()
-    write_photo(args.output, restored, like=photo, overwrite=args.overwrite)
+    write_photo(args.output, join_alpha(restored, alpha), like=photo, overwrite=args.overwrite)
     if args.save_psf:
         _write_picture(args.save_psf, field_image(field, w, h), args.overwrite)
     e = field.extents

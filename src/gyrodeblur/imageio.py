@@ -704,11 +704,18 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     ------
     InputError
         Unknown extension, missing folder, ``path`` is a folder, the input photo or
-        another input, or it exists and ``overwrite`` is false.
+        another input, it exists and ``overwrite`` is false, or it is a JPEG and ``like``
+        has an alpha channel.
     """
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise InputError(path, "is a folder; name the output file")
     if image:
-        _format_of(path)
+        fmt = _format_of(path)
+        if fmt == "JPEG" and like is not None and like.pixels.ndim == 3 \
+                and like.pixels.shape[2] == 4:
+            raise InputError(path, "JPEG cannot store the photo's alpha channel; write .png "
+                                   "or .tif")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise InputError(path, f"folder {folder} does not exist")
@@ -717,8 +724,6 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     for other in inputs:
         if other is not None and _same_file(path, os.fspath(other)):
             raise InputError(path, "is one of the command's inputs; choose another output file")
-    if os.path.isdir(path):
-        raise InputError(path, "is a folder")
     if os.path.lexists(path) and not overwrite:
         raise InputError(path, "exists; pass --overwrite to replace it")
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_image", "check_psf", "MAX_CHANNELS", "PHOTO_MAX"]
+__all__ = ["check_image", "check_psf", "split_alpha", "join_alpha", "MAX_CHANNELS", "PHOTO_MAX"]
 
 #: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
 MAX_CHANNELS = 4
@@ -126,3 +126,19 @@ def check_psf(psf, what: str = "PSF", *, dtype=np.float32) -> np.ndarray:
     if not np.isfinite(total) or total <= 0:
         raise InputError(None, f"{what} must have a positive finite sum, got {total:.4g}")
     return (k / total).astype(dtype)
+
+
+def split_alpha(pixels: np.ndarray):
+    """``(colour, alpha)``: an RGBA photo's colour channels and its alpha channel
+    (``None`` without one). Alpha is a mask, not light: it is neither blurred nor
+    deblurred, and must not take part in what the colour channels' result depends on."""
+    if pixels.ndim == 3 and pixels.shape[2] == 4:
+        return pixels[..., :3], pixels[..., 3:]
+    return pixels, None
+
+
+def join_alpha(colour: np.ndarray, alpha) -> np.ndarray:
+    """``colour`` with ``alpha`` (from :func:`split_alpha`) put back, untouched."""
+    if alpha is None:
+        return colour
+    return np.concatenate([colour, alpha.astype(colour.dtype, copy=False)], axis=2)
