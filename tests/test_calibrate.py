@@ -120,6 +120,18 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
     assert res.offset_rivals == [] and not any("ambiguous" in note for note in res.notes)
 
 
+def test_estimates_on_an_epoch_clock_print_the_change():
+    """A time offset between epoch clocks (seconds of them) hides a few ms of correction in
+    its digits: the line says the change too."""
+    est = {"offset": (250295.23, 250295.2347, 0.0006), "readout": (0.03, 0.031, 0.001),
+           "focal": (1.0, 1.01, 0.02), "bias": (np.zeros(3), np.zeros(3), None),
+           "axes": ("XYZ", "XYZ", None)}
+    line = format_estimates(est)[0]
+    assert "a change of +4.70 ms" in line
+    est["offset"] = (0.01, 0.0147, 0.0006)
+    assert "change" not in format_estimates(est)[0]
+
+
 def test_a_compressed_jpeg_is_calibrated_on_the_band_it_kept(case):
     """JPEG quantisation empties the top of the spectrum; calibrate notices the 8 px blocks,
     says so, leaves those frequencies out, and still recovers the injected errors."""

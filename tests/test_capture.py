@@ -51,8 +51,10 @@ def test_scaled_to_photo(capture_files):
     half = cap.scaled_to(512, 382)
     assert half.camera.fx == pytest.approx(409.6)
     assert half.camera.cx == pytest.approx(255.5)
-    with pytest.raises(InputError, match="aspect ratio"):
+    with pytest.raises(InputError, match="aspect ratio differs$"):
         cap.scaled_to(512, 512, source="photo.jpg")
+    with pytest.raises(InputError, match="turned by 90 degrees"):     # a portrait export
+        cap.scaled_to(382, 512, source="photo.jpg")
 
 
 def test_exif_hints_fill_gaps(capture_files):

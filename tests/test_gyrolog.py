@@ -42,7 +42,18 @@ def test_csv_units_and_columns(tmp_path, trace):
     log = read_csv_log(p, time_unit="ms", rate_unit="deg/s")
     assert np.allclose(log.t, trace.t, atol=1e-9)
     assert np.allclose(log.omega, trace.omega, atol=1e-9)
-    with pytest.raises(InputError, match="time unit"):
+    assert "time_unit_from" not in log.meta
+    # no unit in the name: a 5 ms interval at 200 Hz can only be ms
+    guessed = read_csv_log(p, rate_unit="deg/s")
+    assert guessed.meta["time_unit"] == "ms" and "interval, 5 ms" in guessed.meta["time_unit_from"]
+    assert np.allclose(guessed.t, trace.t, atol=1e-9)
+    for scale, unit in ((1.0, "s"), (1e6, "us"), (1e9, "ns")):
+        rows = "\n".join(f"{float(a * scale)!r},0,0,0" for a in trace.t)
+        p.write_text("time,gx,gy,gz\n" + rows + "\n")
+        assert read_csv_log(p).meta["time_unit"] == unit
+    # an interval of 150 fits no gyro in any unit (6.7 Hz in us, 6.7 kHz in ms)
+    p.write_text("time,gx,gy,gz\n" + "\n".join(f"{150 * k},0,0,0" for k in range(10)) + "\n")
+    with pytest.raises(InputError, match="time unit of column 'time' unknown"):
         read_csv_log(p)
 
 

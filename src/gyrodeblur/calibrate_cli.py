@@ -19,7 +19,9 @@ def format_estimates(est: dict) -> list[str]:
     """Human-readable lines: each parameter before -> after (+- uncertainty, or fixed)."""
     lines = []
     b, a, u = est["offset"]
-    lines.append(f"  time offset  {b * 1e3:+8.2f} ms -> {a * 1e3:+8.2f} ms  ({_pm(u, 1e3, 'ms')})")
+    change = f", a change of {(a - b) * 1e3:+.2f} ms" if abs(b) >= 1.0 else ""   # clock epochs
+    lines.append(f"  time offset  {b * 1e3:+8.2f} ms -> {a * 1e3:+8.2f} ms  "
+                 f"({_pm(u, 1e3, 'ms')}{change})")
     b, a, u = est["readout"]
     lines.append(f"  readout      {b * 1e3:8.2f} ms -> {a * 1e3:8.2f} ms  ({_pm(u, 1e3, 'ms')})")
     b, a, u = est["focal"]

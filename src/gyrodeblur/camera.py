@@ -93,8 +93,13 @@ class Camera:
                                      "numbers of pixels, each at least 2")
         sx, sy = width / self.width, height / self.height
         if abs(sx / sy - 1) > tolerance:
+            turned = abs((width / self.height) / (height / self.width) - 1) <= tolerance
+            hint = (" (turned by 90 degrees? the rows must be the sensor's readout rows: "
+                    "deblur the photo as the camera stored it, or turn it back first)"
+                    if turned else "")
             raise InputError(source, f"photo is {width}x{height} but the capture's camera is "
-                                     f"{self.width}x{self.height}: the aspect ratio differs")
+                                     f"{self.width}x{self.height}: the aspect ratio differs"
+                                     + hint)
         return Camera(self.fx * sx, self.fy * sy, sx * (self.cx + 0.5) - 0.5,
                       sy * (self.cy + 0.5) - 0.5, width, height)
 

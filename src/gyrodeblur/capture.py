@@ -395,6 +395,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             raise InputError(src, f"gyro.rate_columns must list three columns, got {rc!r}")
         csv_opts["rate_columns"] = tuple(rc)
     log = read_gyro_log(gpath, fmt, **(csv_opts if fmt in (None, "csv") else {}))
+    if "time_unit_from" in log.meta and report:
+        report(f"gyro log times read in {log.meta['time_unit']} (from "
+               f"{log.meta['time_unit_from']}; give --time-unit if that is wrong)")
     axes = parse_axes(gyro_d.get("orientation", "XYZ"), source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     exposure_start = _get(data, "exposure_start", src)

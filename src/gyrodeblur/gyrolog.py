@@ -345,7 +345,9 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         whatever their order in the file; else the three columns after the time column,
         taken as x, y, z (refused when a name there says otherwise).
     time_unit : {"s", "ms", "us", "ns"}, optional
-        Default: from the column name's suffix (``t_ns`` -> ns), else an error.
+        Default: from the column name's suffix (``t_ns`` -> ns), else the unit in which the
+        median sample interval is that of a 10 Hz to 5 kHz gyro (Sensor Logger's ``time``
+        in ns: 5e6 at 200 Hz; recorded in ``meta["time_unit_from"]``), else an error.
     rate_unit : {"rad/s", "deg/s"}, optional
         Default: from the rate columns' suffix (``wx_deg_s`` -> deg/s), else rad/s.
     delimiter : str, optional
@@ -390,18 +392,43 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             raise InputError(path, "rate_columns must name exactly three columns")
         ri = [col(c) for c in rate_columns]
     tu = time_unit or _unit_from_name(header[ti], TIME_UNITS)
-    if tu is None:
-        raise InputError(path, f"time unit of column {header[ti]!r} unknown; give it "
-                               "(--time-unit s|ms|us|ns)")
-    if tu not in TIME_UNITS:
+    if tu is not None and tu not in TIME_UNITS:
         raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
     ru = rate_unit or _unit_from_name(header[ri[0]], RATE_UNITS) or "rad/s"
     if ru not in RATE_UNITS:
         raise InputError(path, f"unknown rate unit {ru!r} (known: rad/s, deg/s)")
     ncol = max([ti] + ri) + 1
     rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=skip + 2, sep=delimiter)
+    meta = {}
+    if tu is None:
+        tu, interval = _unit_from_interval(rows[:, ti])
+        if tu is None:
+            raise InputError(path, f"time unit of column {header[ti]!r} unknown (its median "
+                                   f"sample interval, {interval:.6g}, fits no gyro rate from "
+                                   f"{_RATES_HZ[0]:g} Hz to {_RATES_HZ[1]:g} kHz in any unit); "
+                                   "give it (--time-unit s|ms|us|ns)")
+        meta["time_unit_from"] = f"the median sample interval, {interval:.6g} {tu}"
     return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
-                   {"time_unit": tu, "rate_unit": ru})
+                   {"time_unit": tu, "rate_unit": ru, **meta})
+
+
+#: Gyro sample rates (Hz, then kHz) a time column without a unit is read for.
+_RATES_HZ = (10.0, 5.0)
+
+
+def _unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
+    """The time unit in which the median interval between increasing timestamps ``t`` is
+    that of a gyro sampled at 10 Hz to 5 kHz, and that interval. The units' ranges do not
+    overlap (each is 500 wide, the units 1000 apart), so the answer is unique or ``None``."""
+    d = np.diff(np.asarray(t, np.float64))
+    d = d[d > 0]
+    if d.size == 0:
+        return None, float("nan")
+    m = float(np.median(d))
+    for unit, per_second in (("s", 1.0), ("ms", 1e3), ("us", 1e6), ("ns", 1e9)):
+        if per_second / (_RATES_HZ[1] * 1e3) <= m <= per_second / _RATES_HZ[0]:
+            return unit, m
+    return None, m
 
 
 #: What may come before a rate column's axis letter (lower case, letters only): ``x``,
