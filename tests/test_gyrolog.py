@@ -111,7 +111,7 @@ def test_csv_semicolons_comments_quotes_and_byte_order_mark(tmp_path, trace):
     log = read_gyro_log(p)
     assert np.allclose(log.t, trace.t) and np.allclose(log.omega, trace.omega)
     # line numbers in messages count the comment lines
-    p.write_text("# comment\nt_s;wx;wy;wz\n0;0;0;0\n0.01;0;x;0\n")
+    p.write_text("# comment\nt_s;wx;wy;wz\n0;0;0;0\n0.01;0;x;0\n0.02;0;0;0\n")
     with pytest.raises(InputError, match="line 4: not a number"):
         read_gyro_log(p)
     # a gcsv with a byte-order mark
@@ -119,6 +119,23 @@ def test_csv_semicolons_comments_quotes_and_byte_order_mark(tmp_path, trace):
     write_gcsv(g, trace, tscale=1e-6, gscale=1e-6)
     g.write_text("\ufeff" + g.read_text(), encoding="utf-8")
     assert np.allclose(read_gyro_log(g).omega, trace.omega, atol=1e-6)
+
+
+def test_repeated_lines_and_a_cut_last_line_are_dropped(tmp_path, trace):
+    """A sample written twice, or a last line cut short when the logger stopped, is not
+    data; a repeated timestamp with other rates, or a bad line before the last, is refused."""
+    lines = [f"{a!r},{b!r},{c!r},{d!r}" for a, (b, c, d) in
+             zip(trace.t.tolist(), trace.omega.tolist())]
+    p = tmp_path / "g.csv"
+    p.write_text("t_s,wx,wy,wz\n" + "\n".join(lines[:10] + lines[9:] + ["1010.5,0.1"]) + "\n")
+    log = read_gyro_log(p)
+    assert np.array_equal(log.t, trace.t) and np.allclose(log.omega, trace.omega)
+    p.write_text("t_s,wx,wy,wz\n" + "\n".join(lines[:10] + [lines[9].rsplit(",", 1)[0] + ",0.5"] + lines[10:]) + "\n")
+    with pytest.raises(InputError, match="not increasing"):
+        read_gyro_log(p)
+    p.write_text("t_s,wx,wy,wz\n" + "\n".join(lines[:10] + ["1010.5,0.1"] + lines[10:]) + "\n")
+    with pytest.raises(InputError, match="line 12: expected 4 values"):
+        read_gyro_log(p)
 
 
 def test_csv_units_in_brackets(tmp_path, trace):

@@ -301,20 +301,36 @@ def read_gcsv(path: str | os.PathLike) -> GyroLog:
 def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: int,
                         sep: str | None) -> np.ndarray:
     out = []
+    last = max((k for k, line in enumerate(lines) if line.strip()), default=-1)
     for k, line in enumerate(lines):
         if not line.strip():
             continue
         parts = line.split(sep) if sep else line.split()
-        if len(parts) < ncol:
-            raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
-                                   f"got {len(parts)}")
         try:
-            out.append([float(p.strip().strip('"')) for p in parts[:ncol]])
-        except ValueError:
-            raise InputError(path, f"line {first_line + k}: not a number in {line!r}") from None
+            if len(parts) < ncol:
+                raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
+                                       f"got {len(parts)}")
+            try:
+                out.append([float(p.strip().strip('"')) for p in parts[:ncol]])
+            except ValueError:
+                raise InputError(path, f"line {first_line + k}: not a number in "
+                                       f"{line!r}") from None
+        except InputError:
+            if k == last and out:      # a logger stopped in the middle of its last line
+                break
+            raise
     if not out:
         raise InputError(path, "no data rows")
-    return np.asarray(out, dtype=np.float64)
+    return _without_repeats(np.asarray(out, dtype=np.float64))
+
+
+def _without_repeats(rows: np.ndarray) -> np.ndarray:
+    """``rows`` without lines that repeat the line before exactly (some loggers write a
+    sample twice; a repeat says nothing new, and its equal timestamp would be refused)."""
+    if len(rows) < 2:
+        return rows
+    keep = np.r_[True, np.any(rows[1:] != rows[:-1], axis=1)]
+    return rows if keep.all() else rows[keep]
 
 
 def _unit_from_name(name: str, units: dict) -> str | None:
@@ -525,7 +541,7 @@ def read_android_events(path: str | os.PathLike) -> GyroLog:
             raise InputError(path, f"line {k}: not a number in {line!r}") from None
     if not rows:
         raise InputError(path, "no gyroscope events (type 4) in the file")
-    a = np.asarray(rows, dtype=np.float64)
+    a = _without_repeats(np.asarray(rows, dtype=np.float64))
     return GyroLog(a[:, 0] * 1e-9, a[:, 1:], path, {})
 
 
