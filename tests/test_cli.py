@@ -85,6 +85,27 @@ def test_alpha_is_passed_through_and_leaves_the_colours_alone(capture_dir, capsy
     assert "is a folder" in capsys.readouterr().err
 
 
+def test_a_photo_turned_from_the_sensor_layout_is_deblurred_as_the_sensor_read_it(capture_dir,
+                                                                                    capsys):
+    """A portrait export (pixels turned 90 degrees clockwise): with --photo-rotation 90 the
+    result is the sensor-layout photo's result, turned the same way."""
+    d = capture_dir
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "blurred.png"), "--seed", "1"]) == 0
+    landscape = read_photo(d / "blurred.png").pixels
+    write_photo(d / "portrait.png", np.rot90(landscape, -1), bit_depth=8)
+    assert main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "out_l.png"), "--grid", "2x2"]) == 0
+    capsys.readouterr()
+    assert main(["deblur", str(d / "portrait.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "out_p.png"), "--grid", "2x2"]) == 2      # rows are not rows
+    assert "--photo-rotation" in capsys.readouterr().err
+    assert main(["deblur", str(d / "portrait.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "out_p.png"), "--grid", "2x2", "--photo-rotation", "90"]) == 0
+    out = read_photo(d / "out_p.png").pixels
+    np.testing.assert_array_equal(out, np.rot90(read_photo(d / "out_l.png").pixels, -1))
+
+
 def _run_error(argv, capsys):
     rc = main(argv)
     err = capsys.readouterr().err.strip().splitlines()

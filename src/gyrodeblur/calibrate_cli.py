@@ -82,7 +82,9 @@ def calibrate_command(args, say, load_capture) -> None:
     from .imageio import check_destination, read_photo
 
     fix = fixed_parameters(args)
-    photos = [read_photo(p) for p in args.photos]
+    from .cli import _to_sensor_layout
+
+    photos = [_to_sensor_layout(read_photo(p), args.photo_rotation) for p in args.photos]
     check_destination(args.output, None, args.overwrite, image=False)
     given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
     paths = [c for entry in given for c in entry.split(",") if c] or given[:1]

@@ -95,7 +95,7 @@ class Camera:
         if abs(sx / sy - 1) > tolerance:
             turned = abs((width / self.height) / (height / self.width) - 1) <= tolerance
             hint = (" (turned by 90 degrees? the rows must be the sensor's readout rows: "
-                    "deblur the photo as the camera stored it, or turn it back first)"
+                    "give --photo-rotation 90 or 270, the degrees clockwise it was turned)"
                     if turned else "")
             raise InputError(source, f"photo is {width}x{height} but the capture's camera is "
                                      f"{self.width}x{self.height}: the aspect ratio differs"

@@ -174,6 +174,30 @@ def _check_output(path: str, like, overwrite: bool, image: bool = True) -> None:
 
 
 
+def _add_rotation_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--photo-rotation", type=int, choices=(0, 90, 180, 270), default=0,
+                   metavar="DEG",
+                   help="degrees clockwise the photo's pixels were turned from the sensor's "
+                        "layout (an export that applied a portrait orientation; 0, 90, 180 "
+                        "or 270): the photo is turned back for the work, so that its rows are "
+                        "the sensor's readout rows and the capture's camera fits, and the "
+                        "result is turned like the input")
+
+
+def _to_sensor_layout(photo, degrees: int):
+    """``photo`` with its pixels turned back ``degrees`` counter-clockwise (the layout the
+    sensor read out), or ``photo`` itself for 0."""
+    if not degrees:
+        return photo
+    from dataclasses import replace
+    return replace(photo, pixels=np.ascontiguousarray(np.rot90(photo.pixels, degrees // 90)))
+
+
+def _to_photo_layout(pixels: np.ndarray, degrees: int) -> np.ndarray:
+    """The inverse of :func:`_to_sensor_layout` for a result's pixels."""
+    return np.ascontiguousarray(np.rot90(pixels, -(degrees // 90))) if degrees else pixels
+
+
 # ----------------------------------------------------------------------------- commands
 
 def cmd_psf(args, say) -> None:
@@ -233,8 +257,9 @@ def cmd_simulate(args, say) -> None:
     from .simulate import quantize_8bit, simulate_blur
     from .tonecurve import get_transfer_curve
 
-    photo = read_photo(args.sharp)
-    _check_output(args.output, photo, args.overwrite)
+    given = read_photo(args.sharp)
+    _check_output(args.output, given, args.overwrite)
+    photo = _to_sensor_layout(given, args.photo_rotation)
     if args.snr_db is not None and not np.isfinite(args.snr_db):
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
     if args.seed is not None and args.seed < 0:
@@ -247,8 +272,8 @@ def cmd_simulate(args, say) -> None:
                                          seed=args.seed))
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
-    blurred = join_alpha(blurred, alpha)
-    write_photo(args.output, blurred, like=photo, bit_depth=args.bit_depth,
+    blurred = _to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
+    write_photo(args.output, blurred, like=given, bit_depth=args.bit_depth,
                 overwrite=args.overwrite)
     h, w = photo.pixels.shape[:2]
     snr = "no noise" if args.snr_db is None else f"SNR {args.snr_db:g} dB"
@@ -260,10 +285,11 @@ def cmd_deblur(args, say) -> None:
     from .imageio import read_photo, write_photo
     from .psfplot import field_image
 
-    photo = read_photo(args.photo)
-    _check_output(args.output, photo, args.overwrite)
+    given = read_photo(args.photo)
+    _check_output(args.output, given, args.overwrite)
+    photo = _to_sensor_layout(given, args.photo_rotation)
     if args.save_psf:
-        _check_output(args.save_psf, photo, args.overwrite)
+        _check_output(args.save_psf, given, args.overwrite)
         if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
             raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
     _ignored_options(args)
@@ -323,7 +349,8 @@ def cmd_deblur(args, say) -> None:
         mode_txt = args.mode
         grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
     progress.close()
-    write_photo(args.output, join_alpha(restored, alpha), like=photo, overwrite=args.overwrite)
+    write_photo(args.output, _to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
+                like=given, overwrite=args.overwrite)
     if args.save_psf:
         _write_picture(args.save_psf, field_image(field, w, h), args.overwrite)
     e = field.extents
@@ -383,6 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=None, help="noise seed")
     s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
     s.add_argument("--bit-depth", type=int, choices=(8, 16), help="output bit depth (default: the input's)")
+    _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s)
     s.set_defaults(func=cmd_simulate)
@@ -424,6 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--downscale", type=float, default=1.0, metavar="F",
                    help="with --refine: " + DOWNSCALE_HELP)
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
+    _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_capture_options(s)
@@ -446,6 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "axes (a value given with --time-offset, --bias, --readout-time, "
                         "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
+    _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s, required=True, per_photo=True)
     s.set_defaults(func=cmd_calibrate)
