@@ -44,6 +44,7 @@ the rotation Pillow applies to TIFFs undone.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import secrets
@@ -51,6 +52,7 @@ import struct
 import sys
 import warnings
 import zlib
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -379,9 +381,22 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
     return arr
 
 
+@contextmanager
+def _tifffile_quiet():
+    """tifffile logs what it cannot parse of a broken file on its own logger (several
+    lines of its internals); the failure reaches the user as one :class:`InputError`."""
+    logger = logging.getLogger("tifffile")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
 def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
     """First page of a TIFF with tifffile: (samples as (H, W) or (H, W, C), ICC)."""
-    with tifffile.TiffFile(path) as tif:
+    with _tifffile_quiet(), tifffile.TiffFile(path) as tif:
         if len(tif.pages) > 1:
             warnings.warn(f"{path}: only the first of its {len(tif.pages)} pages is read",
                           stacklevel=2)
