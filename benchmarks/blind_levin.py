@@ -31,8 +31,8 @@ Usage::
     python benchmarks/blind_levin.py              # 4 photos x 8 kernels
     python benchmarks/blind_levin.py --quick      # 1 photo x 8 kernels, smaller crop
 
-Writes ``benchmarks/results/blind_levin.json``, ``.md`` and ``.png`` (the cumulative
-distribution of error ratios, Levin et al.'s figure).
+Writes ``benchmarks/results/blind_levin.json`` (or ``--out``), ``.md`` and ``.png`` beside
+it (the cumulative distribution of error ratios, Levin et al.'s figure).
 """
 
 from __future__ import annotations
@@ -181,7 +181,7 @@ def plot(rows: list[dict], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(5, 3.5))
     ax.step(r, np.arange(1, r.size + 1) / r.size, where="post")
     ax.axvline(SUCCESS_RATIO, color="grey", lw=0.8, ls="--")
-    ax.set_xlim(1, max(5.0, float(r.max()) * 1.05))
+    ax.set_xlim(min(1.0, float(r.min()) * 0.95), max(5.0, float(r.max()) * 1.05))
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("error ratio SSD(blind) / SSD(true kernel)")
     ax.set_ylabel("fraction of cases")
@@ -204,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=None,
                     help="the shared data folder (default: ../shared/data)")
     ap.add_argument("--quick", action="store_true", help="1 photo, 256 px crops")
+    ap.add_argument("--out", type=Path, default=_common.RESULTS / "blind_levin.json",
+                    help="JSON report (the .md and .png are written beside it)")
     args = ap.parse_args(argv)
     if args.quick:
         args.photos, args.crop = 1, 256
@@ -238,11 +240,11 @@ def main(argv: list[str] | None = None) -> int:
               "margin": args.margin, "border": border, "summary": summarise(rows),
               "per_case": rows, "total_seconds": time.perf_counter() - t_start,
               "machine": _common.machine_info()}
-    out = _common.RESULTS / "blind_levin.json"
+    out = args.out
     _common.write_json(out, result)
     md = markdown(result)
-    (_common.RESULTS / "blind_levin.md").write_text(md, encoding="utf-8")
-    plot(rows, _common.RESULTS / "blind_levin.png")
+    out.with_suffix(".md").write_text(md, encoding="utf-8")
+    plot(rows, out.with_suffix(".png"))
     print("\n" + md)
     _common.say(f"wrote {out} (.md, .png) in {result['total_seconds']:.0f} s")
     return 0

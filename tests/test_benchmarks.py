@@ -53,6 +53,27 @@ def test_noise_sensitivity_quick(tmp_path):
     assert r["border_px"] > 0 and r["method"]
 
 
+def test_blind_levin_quick(tmp_path):
+    """The Levin-protocol benchmark: the true kernel through the default method restores
+    far better than the blurred input, a blind estimate lands in between on average, and
+    the report's pieces are written."""
+    _need_shared()
+    mod = _load("blind_levin")
+    k = mod.levin_kernels(SHARED_DATA / "kernels" / "levin2009.npz")["levin_4"]
+    yy, xx = np.indices(k.shape)
+    c = k.shape[0] // 2
+    assert k.shape[0] % 2 == 1 and abs(k.sum() - 1) < 1e-5
+    assert abs((yy * k).sum() - c) <= 0.5 and abs((xx * k).sum() - c) <= 0.5
+    out = tmp_path / "levin.json"
+    assert mod.main(["--quick", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    m = r["summary"]["mean"]
+    assert len(r["per_case"]) == 8 and out.with_suffix(".png").stat().st_size > 5_000
+    assert m["psnr_oracle"] > m["psnr_blurred"] + 5
+    assert m["psnr_blurred"] < m["psnr_blind"] < m["psnr_oracle"]
+    assert r["summary"]["error_ratio"]["median"] > 0.5
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_compare_methods_quick(tmp_path):
     _need_shared()
