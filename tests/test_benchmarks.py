@@ -71,7 +71,7 @@ def test_blind_levin_quick(tmp_path):
     assert len(r["per_case"]) == 8 and out.with_suffix(".png").stat().st_size > 5_000
     assert m["psnr_oracle"] > m["psnr_blurred"] + 5
     assert m["psnr_blurred"] < m["psnr_blind"] < m["psnr_oracle"]
-    assert r["summary"]["error_ratio"]["median"] > 0.5
+    assert m["kernel_similarity"] > 0.5            # the estimates resemble the kernels
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")

@@ -83,6 +83,11 @@ def test_readout_time_from_the_gcsv_header(capture_files):
     assert cap.readout_time == pytest.approx(0.0152)
     assert any("frame_readout_time" in s for s in said)
     assert load_capture(d / "cap.json", overrides={"readout_time": 0.0}).readout_time == 0
+    # read bottom to top (or along the rows): not this model's rows; said, not used
+    g.write_text(g.read_text().replace("tscale,", "frame_readout_direction,1\ntscale,", 1))
+    said.clear()
+    assert load_capture(d / "cap.json", report=said.append).readout_time == 0
+    assert any("frame_readout_direction 1" in s for s in said)
 
 
 def test_bias_auto(tmp_path):

@@ -75,11 +75,20 @@ def test_alpha_is_passed_through_and_leaves_the_colours_alone(capture_dir, capsy
     np.testing.assert_array_equal(with_alpha[..., :3], plain)
     np.testing.assert_array_equal(with_alpha[..., 3], read_photo(d / "rgba.png").pixels[..., 3])
     # a JPEG cannot hold it: refused before any work, as is a folder given as the output
+    import gyrodeblur.deblur as deblur_mod
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("deblurred before the output was checked")
+
     capsys.readouterr()
-    assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"),
-                 "-o", str(d / "out.jpg")]) == 2
-    err = capsys.readouterr().err
-    assert "alpha channel" in err and "deblurred" not in err
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(deblur_mod, "deblur", no_work)
+        assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / "out.jpg")]) == 2
+    assert "alpha channel" in capsys.readouterr().err
+    # the PSF drawing has no alpha: a JPEG is fine for it
+    assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"), "--grid",
+                 "2x2", "-o", str(d / "out2.png"), "--save-psf", str(d / "field.jpg")]) == 0
     assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"),
                  "-o", str(d)]) == 2
     assert "is a folder" in capsys.readouterr().err
@@ -104,6 +113,14 @@ def test_a_photo_turned_from_the_sensor_layout_is_deblurred_as_the_sensor_read_i
                  "-o", str(d / "out_p.png"), "--grid", "2x2", "--photo-rotation", "90"]) == 0
     out = read_photo(d / "out_p.png").pixels
     np.testing.assert_array_equal(out, np.rot90(read_photo(d / "out_l.png").pixels, -1))
+    # simulate turns the same way: the portrait sharp photo blurs as the landscape one
+    write_photo(d / "sharp_p.png", np.rot90(read_photo(d / "sharp.jpg").pixels, -1), bit_depth=8)
+    write_photo(d / "sharp_l.png", read_photo(d / "sharp.jpg").pixels, bit_depth=8)
+    for src, out_name, rot in (("sharp_l.png", "bl_l.png", "0"), ("sharp_p.png", "bl_p.png", "90")):
+        assert main(["simulate", str(d / src), "--capture", str(d / "cap.json"),
+                     "-o", str(d / out_name), "--photo-rotation", rot]) == 0
+    np.testing.assert_array_equal(read_photo(d / "bl_p.png").pixels,
+                                  np.rot90(read_photo(d / "bl_l.png").pixels, -1))
 
 
 def _run_error(argv, capsys):

@@ -138,6 +138,51 @@ def test_repeated_lines_and_a_cut_last_line_are_dropped(tmp_path, trace):
         read_gyro_log(p)
 
 
+@pytest.mark.parametrize("header", [
+    "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+    "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]",       # EuRoC / TUM-VI
+    "# t_ns,wx,wy,wz",                                            # numpy.savetxt(header=...)
+    "t_ns\troll_rad_s\tpitch_rad_s\tyaw_rad_s",                  # tabs; a rate's _s suffix
+    ",t_ns,wx,wy,wz",                                             # pandas' index first
+    '"time, ns";"gx (dps)";"gy (dps)";"gz (dps)"',               # a quoted comma
+])
+def test_csv_layouts_found_in_the_wild(tmp_path, trace, header):
+    t_ns = [int(round(a * 1e9)) for a in trace.t]
+    w = trace.omega.T
+    sep = ";" if ";" in header else "\t" if "\t" in header else ","
+    deg = "dps" in header
+    cols = [np.degrees(c) if deg else c for c in w]
+    extra = [np.arange(len(t_ns))] if header.startswith(",") else []
+    rows = []
+    for k, t in enumerate(t_ns):
+        vals = [str(extra[0][k])] if extra else []
+        vals += [str(t)] + [repr(float(c[k])) for c in cols]
+        if "a_RS_S_x" in header:
+            vals += ["9.8", "0.1", "0.2"]
+        rows.append(sep.join(vals))
+    p = tmp_path / "log.csv"
+    p.write_text(header + "\n" + "\n".join(rows) + "\n")
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t, atol=1e-8)
+    assert np.allclose(log.omega, trace.omega, atol=1e-9)
+
+
+def test_csv_units_that_cannot_be_told_are_refused(tmp_path, trace):
+    p = tmp_path / "g.csv"
+    p.write_text(_csv_text("t_s,gx (mrad/s),gy (mrad/s),gz (mrad/s)", trace.t, trace.omega.T))
+    with pytest.raises(InputError, match="neither rad/s nor deg/s"):
+        read_gyro_log(p)
+    # 10 kHz in ns fits no unit (rather than 10 Hz in us)
+    t = (np.arange(50) * 1e5).astype(np.int64)
+    p.write_text(_csv_text("time,gx,gy,gz", t.tolist(), [np.zeros(50)] * 3))
+    with pytest.raises(InputError, match="fits no gyro rate"):
+        read_gyro_log(p)
+    # a first column that is no time is not guessed at
+    p.write_text(_csv_text("idx,gx,gy,gz", list(range(50)), [np.zeros(50)] * 3))
+    with pytest.raises(InputError, match="does not say it holds times"):
+        read_gyro_log(p)
+
+
 def test_csv_units_in_brackets(tmp_path, trace):
     p = tmp_path / "g.csv"
     deg = np.degrees(trace.omega).T

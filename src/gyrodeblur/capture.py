@@ -403,7 +403,13 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     exposure_start = _get(data, "exposure_start", src)
     exposure_time = _get(data, "exposure_time", src)
     readout = _get(data, "readout_time", src, required=False)
-    if readout is None and "frame_readout_time" in log.meta:
+    direction = str(log.meta.get("frame_readout_direction", "0")).strip()
+    if readout is None and "frame_readout_time" in log.meta and direction != "0":
+        if report:             # 1: bottom to top, 2 and 3: along the rows
+            report(f"the gcsv header's frame_readout_time is not used: its "
+                   f"frame_readout_direction {direction} is not top to bottom (turn the photo "
+                   f"so that it is, --photo-rotation, and give readout_time)")
+    elif readout is None and "frame_readout_time" in log.meta:
         # Gyroflow's gcsv header states it (milliseconds) for the camera that wrote the log
         readout = _get(log.meta, "frame_readout_time", gpath) * 1e-3
         if report:

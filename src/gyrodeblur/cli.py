@@ -289,7 +289,9 @@ def cmd_deblur(args, say) -> None:
     _check_output(args.output, given, args.overwrite)
     photo = _to_sensor_layout(given, args.photo_rotation)
     if args.save_psf:
-        _check_output(args.save_psf, given, args.overwrite)
+        _check_output(args.save_psf, None, args.overwrite)      # a drawing: no alpha
+        if os.path.realpath(args.save_psf) == os.path.realpath(args.photo):
+            raise InputError(args.save_psf, "is the input photo; choose another file")
         if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
             raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
     _ignored_options(args)
@@ -352,7 +354,8 @@ def cmd_deblur(args, say) -> None:
     write_photo(args.output, _to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
                 like=given, overwrite=args.overwrite)
     if args.save_psf:
-        _write_picture(args.save_psf, field_image(field, w, h), args.overwrite)
+        _write_picture(args.save_psf, _to_photo_layout(field_image(field, w, h),
+                                                       args.photo_rotation), args.overwrite)
     e = field.extents
     say(f"deblurred {args.photo} -> {args.output}: {w}x{h}, mode {mode_txt}{grid_txt}, "
         f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")

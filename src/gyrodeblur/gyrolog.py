@@ -333,16 +333,32 @@ def _without_repeats(rows: np.ndarray) -> np.ndarray:
     return rows if keep.all() else rows[keep]
 
 
+#: Other spellings of the rate units, as column names state them (spaces removed).
+_RATE_ALIASES = {"dps": "deg/s", "°/s": "deg/s", "deg/sec": "deg/s", "degrees/s": "deg/s",
+                 "rad/sec": "rad/s", "rads^-1": "rad/s", "radians/s": "rad/s"}
+
+
 def _unit_from_name(name: str, units: dict) -> str | None:
-    """The unit of ``units`` a column's name ends with (``t_ns``, ``wx_deg_s``) or states in
-    brackets (``t (ns)``, ``gx [deg/s]``), or ``None``."""
+    """The unit of ``units`` a column's name ends with (``t_ns``, ``wx_deg_s``, ``gx_dps``)
+    or states in brackets (``t (ns)``, ``gx [deg/s]``, ``w_x [rad s^-1]``), or ``None``."""
+    stated = _bracketed(name)
+    if stated is not None:
+        stated = _RATE_ALIASES.get(stated, stated) if units is RATE_UNITS else stated
+        return stated if stated in units else None
     low = name.lower().replace("/", "_")
-    bracketed = re.search(r"[(\[]\s*([a-z_]+)\s*[)\]]\s*$", low)
+    if units is RATE_UNITS and low.endswith("_dps"):
+        return "deg/s"
     for unit in sorted(units, key=len, reverse=True):
-        key = unit.replace("/", "_")
-        if low.endswith("_" + key) or (bracketed and bracketed.group(1) == key):
+        if low.endswith("_" + unit.replace("/", "_")):
             return unit
     return None
+
+
+def _bracketed(name: str) -> str | None:
+    """What a column's name states in brackets at its end (lower case, spaces removed):
+    ``"gx [deg/s]"`` -> ``"deg/s"``; ``None`` without brackets."""
+    m = re.search(r"[(\[]([^()\[\]]*)[)\]]\s*$", name)
+    return None if m is None else re.sub(r"\s+", "", m.group(1).lower())
 
 
 def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = None,
@@ -354,21 +370,27 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     ----------
     path : path-like
     time_column : str or int, optional
-        Name or index of the time column; default: the first column.
+        Name or index of the time column. Default: the first column, unless its name is not
+        a time's and a later one's is (an index column first).
     rate_columns : three names or indices, optional
         Default: the columns whose names say which rate they hold (``x``, ``wx``,
         ``gyro_x``, ``rotationRateX``, ... with or without a unit suffix), in x, y, z order
         whatever their order in the file; else the three columns after the time column,
         taken as x, y, z (refused when a name there says otherwise).
     time_unit : {"s", "ms", "us", "ns"}, optional
-        Default: from the column name's suffix (``t_ns`` -> ns), else the unit in which the
-        median sample interval is that of a 10 Hz to 5 kHz gyro (Sensor Logger's ``time``
-        in ns: 5e6 at 200 Hz; recorded in ``meta["time_unit_from"]``), else an error.
+        Default: from the column name's suffix (``t_ns`` -> ns) or brackets, else, for a
+        column named as times (``time``, ``t``, ``timestamp``), the unit in which the median
+        sample interval is that of a 20 Hz to 2.5 kHz gyro (Sensor Logger's ``time`` in ns:
+        5e6 at 200 Hz; recorded in ``meta["time_unit_from"]``), else an error.
     rate_unit : {"rad/s", "deg/s"}, optional
-        Default: from the rate columns' suffix (``wx_deg_s`` -> deg/s), else rad/s.
+        Default: from the rate columns' suffix (``wx_deg_s``, ``gx_dps`` -> deg/s) or
+        brackets (``gx [deg/s]``, refused when they state another unit), else rad/s.
     delimiter : str, optional
-        Default: the first of comma, semicolon and tab that the header line holds. Leading
-        lines that start with ``#`` are comments; numbers may be quoted.
+        Default: of comma, semicolon and tab, the one that splits the header line into the
+        most fields. Leading lines that start with ``#`` are comments, the last of them the
+        column names when the first other line holds only numbers (EuRoC's
+        ``#timestamp [ns],w_RS_S_x [rad s^-1],...``, ``numpy.savetxt``'s ``# t,wx,wy,wz``);
+        numbers may be quoted.
 
     Examples
     --------
@@ -377,16 +399,23 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     """
     path = os.fspath(path)
     lines = _read_lines(path)
-    skip = 0                      # leading comment lines ("# recorded by ...") and blanks
+    skip, comment = 0, None       # leading comment lines ("# recorded by ...") and blanks
     while skip < len(lines) and (not lines[skip].strip() or lines[skip].lstrip().startswith("#")):
+        if lines[skip].strip():
+            comment = lines[skip].lstrip()[1:]
         skip += 1
     lines = lines[skip:]
     if not lines:
         raise InputError(path, "empty file")
-    if delimiter is None:         # the first of these the header line holds
-        delimiter = next((d for d in (",", ";", "\t") if d in lines[0]), ",")
-    header = next(csv.reader([lines[0]], delimiter=delimiter))
-    header = [h.strip() for h in header]
+    if delimiter is None:
+        delimiter = _sniff_delimiter(lines[0])
+    header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
+    if all(_is_number(h) for h in header) and comment is not None:
+        # the names on the last comment line ("#timestamp [ns],w_RS_S_x ..." as EuRoC
+        # writes, "# t_s,wx,wy,wz" as numpy.savetxt does)
+        named = [h.strip() for h in next(csv.reader([comment], delimiter=delimiter))]
+        if len(named) >= len(header) and not any(_is_number(h) for h in named):
+            header, lines, skip = named, [comment] + lines, skip - 1
     if all(_is_number(h) for h in header):
         raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
 
@@ -400,7 +429,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             raise InputError(path, f"no column named {c!r} (columns: {', '.join(header)})")
         return header.index(c)
 
-    ti = 0 if time_column is None else col(time_column)
+    ti = _default_time_column(header) if time_column is None else col(time_column)
     if rate_columns is None:
         ri = _default_rate_columns(path, header, ti)
     else:
@@ -410,12 +439,20 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     tu = time_unit or _unit_from_name(header[ti], TIME_UNITS)
     if tu is not None and tu not in TIME_UNITS:
         raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
-    ru = rate_unit or _unit_from_name(header[ri[0]], RATE_UNITS) or "rad/s"
+    ru = rate_unit or _unit_from_name(header[ri[0]], RATE_UNITS)
+    if ru is None and _bracketed(header[ri[0]]) is not None:
+        raise InputError(path, f"column {header[ri[0]]!r} states a unit that is neither "
+                               "rad/s nor deg/s; give it (--rate-unit rad/s|deg/s)")
+    ru = ru or "rad/s"
     if ru not in RATE_UNITS:
         raise InputError(path, f"unknown rate unit {ru!r} (known: rad/s, deg/s)")
     ncol = max([ti] + ri) + 1
     rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=skip + 2, sep=delimiter)
     meta = {}
+    if tu is None and not _looks_like_time(header[ti]):
+        raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
+                               "does not say it holds times; give the unit (--time-unit "
+                               "s|ms|us|ns) or name the column (gyro.time_column)")
     if tu is None:
         tu, interval = _unit_from_interval(rows[:, ti])
         if tu is None:
@@ -428,14 +465,26 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                    {"time_unit": tu, "rate_unit": ru, **meta})
 
 
-#: Gyro sample rates (Hz, then kHz) a time column without a unit is read for.
-_RATES_HZ = (10.0, 5.0)
+#: Gyro sample rates (Hz, then kHz) a time column without a unit is read for: a factor of
+#: two inside the rates whose intervals no two units share (10 Hz to 5 kHz), so a log a
+#: little outside them is refused rather than read in the wrong unit.
+_RATES_HZ = (20.0, 2.5)
+
+
+def _sniff_delimiter(line: str) -> str:
+    """Of comma, semicolon and tab, the one that splits the header ``line`` into the most
+    fields (quotes respected; comma on a tie)."""
+    counts = [(len(next(csv.reader([line], delimiter=d))), -k, d)
+              for k, d in enumerate((",", ";", "\t"))]
+    return max(counts)[2]
 
 
 def _unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
     """The time unit in which the median interval between increasing timestamps ``t`` is
-    that of a gyro sampled at 10 Hz to 5 kHz, and that interval. The units' ranges do not
-    overlap (each is 500 wide, the units 1000 apart), so the answer is unique or ``None``."""
+    that of a gyro sampled at 20 Hz to 2.5 kHz, and that interval. The units' ranges are
+    125 wide and 1000 apart, so no interval fits two units, and a log sampled up to twice
+    as fast or as slow as these rates fits none (rather than the wrong one); one yet
+    further outside could fit the wrong unit (a 25 kHz log in ns reads as 25 Hz in us)."""
     d = np.diff(np.asarray(t, np.float64))
     d = d[d > 0]
     if d.size == 0:
@@ -460,8 +509,7 @@ def _rate_axis(name: str) -> str | None:
     """The axis (``"x"``, ``"y"`` or ``"z"``) a column's name says it holds the rate of, or
     ``None``. A rate-unit suffix (``_rad_s``, ``_deg_s``) or a bracketed unit is ignored."""
     low = re.sub(r"[(\[].*?[)\]]", "", name.lower()).strip().replace("/", "_")
-    for unit in RATE_UNITS:
-        suffix = "_" + unit.replace("/", "_")
+    for suffix in ["_" + unit.replace("/", "_") for unit in RATE_UNITS] + ["_dps"]:
         if low.endswith(suffix):
             low = low[:-len(suffix)]
     key = re.sub(r"[^a-z]", "", low)
@@ -469,15 +517,28 @@ def _rate_axis(name: str) -> str | None:
         return key[-1]
     if len(key) > 1 and key[0] in "xyz" and key[1:] in _RATE_SUFFIXES:
         return key[0]
+    words = [w for w in re.split(r"[^a-z]+", low) if w]     # EuRoC's w_RS_S_x
+    if len(words) > 2 and words[0] in _RATE_PREFIXES and words[-1] in ("x", "y", "z"):
+        return words[-1]
     return None
 
 
 def _looks_like_time(name: str) -> bool:
     """Whether a column's name says it holds times (``t``, ``time``, ``timestamp``,
-    ``seconds_elapsed``, ``t_ns``)."""
+    ``seconds_elapsed``, ``t_ns``; not ``roll_rad_s``, whose ``_s`` is a rate's)."""
     low = name.lower()
+    if _unit_from_name(low, RATE_UNITS) is not None:
+        return False
     return (low in ("t", "ts") or _unit_from_name(low, TIME_UNITS) is not None
             or any(w in low for w in ("time", "stamp", "elapsed", "second")))
+
+
+def _default_time_column(header: list[str]) -> int:
+    """The first column, unless its name is not a time's and another's is (an index column
+    first, as pandas writes: ``,t_s,wx,wy,wz`` or ``sample,time,x,y,z``)."""
+    if _looks_like_time(header[0]):
+        return 0
+    return next((i for i, h in enumerate(header) if _looks_like_time(h)), 0)
 
 
 def _default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
