@@ -110,6 +110,10 @@ def test_csv_semicolons_comments_quotes_and_byte_order_mark(tmp_path, trace):
                  encoding="utf-8")
     log = read_gyro_log(p)
     assert np.allclose(log.t, trace.t) and np.allclose(log.omega, trace.omega)
+    # semicolons, as spreadsheets write them where the comma is the decimal mark
+    p.write_text("t_s;wx;wy;wz\n" + rows.replace('"', "").replace(".", ",") + "\n")
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t) and np.allclose(log.omega, trace.omega)
     # line numbers in messages count the comment lines
     p.write_text("# comment\nt_s;wx;wy;wz\n0;0;0;0\n0.01;0;x;0\n0.02;0;0;0\n")
     with pytest.raises(InputError, match="line 4: not a number"):

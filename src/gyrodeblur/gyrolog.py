@@ -311,7 +311,7 @@ def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: i
                 raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
                                        f"got {len(parts)}")
             try:
-                out.append([float(p.strip().strip('"')) for p in parts[:ncol]])
+                out.append([_number(p, decimal_comma=sep == ";") for p in parts[:ncol]])
             except ValueError:
                 raise InputError(path, f"line {first_line + k}: not a number in "
                                        f"{line!r}") from None
@@ -322,6 +322,16 @@ def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: i
     if not out:
         raise InputError(path, "no data rows")
     return _without_repeats(np.asarray(out, dtype=np.float64))
+
+
+def _number(text: str, decimal_comma: bool = False) -> float:
+    """A value of a log's line, quotes stripped; with ``decimal_comma`` (semicolon-separated
+    files, as spreadsheets write them where the comma is the decimal mark) ``-0,82`` is
+    -0.82."""
+    text = text.strip().strip('"')
+    if decimal_comma and "," in text and "." not in text:
+        text = text.replace(",", ".")
+    return float(text)
 
 
 def _without_repeats(rows: np.ndarray) -> np.ndarray:
