@@ -120,6 +120,29 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
     assert res.offset_rivals == [] and not any("ambiguous" in note for note in res.notes)
 
 
+def test_cli_calibrate_turns_each_photo_back(cli_dir, capsys):
+    """--photo-rotation per photo: a session with a portrait export of the same frame
+    calibrates exactly as the two frames in the sensor's layout."""
+    from gyrodeblur.imageio import read_photo, write_photo
+
+    d = cli_dir
+    write_photo(d / "turned.png", np.rot90(read_photo(d / "blurred.png").pixels, -1), bit_depth=8)
+    common = ["--capture", str(d / "cap.json"), "--fix", "bias,readout,focal,axes"]
+    assert main(["calibrate", str(d / "blurred.png"), str(d / "blurred.png"), *common,
+                 "-o", str(d / "out" / "same.json")]) == 0
+    assert main(["calibrate", str(d / "blurred.png"), str(d / "turned.png"), *common,
+                 "--photo-rotation", "0,90", "-o", str(d / "out" / "turned.json")]) == 0
+    assert (json.loads((d / "out" / "same.json").read_text())
+            == json.loads((d / "out" / "turned.json").read_text()))
+    capsys.readouterr()
+    assert main(["calibrate", str(d / "blurred.png"), str(d / "turned.png"), *common,
+                 "--photo-rotation", "0,90,90", "-o", str(d / "out" / "x.json")]) == 2
+    assert "3 rotations for 2 photos" in capsys.readouterr().err
+    with pytest.raises(SystemExit):                # argparse: not a quarter turn
+        main(["calibrate", str(d / "blurred.png"), *common, "--photo-rotation", "45",
+              "-o", str(d / "out" / "x.json")])
+
+
 def test_estimates_on_an_epoch_clock_print_the_change():
     """A time offset between epoch clocks (seconds of them) hides a few ms of correction in
     its digits: the line says the change too."""

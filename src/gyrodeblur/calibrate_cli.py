@@ -84,7 +84,12 @@ def calibrate_command(args, say, load_capture) -> None:
     fix = fixed_parameters(args)
     from .cli import _to_sensor_layout
 
-    photos = [_to_sensor_layout(read_photo(p), args.photo_rotation) for p in args.photos]
+    turns = args.photo_rotation if isinstance(args.photo_rotation, list) else [args.photo_rotation]
+    if len(turns) not in (1, len(args.photos)):
+        raise InputError("--photo-rotation", f"{len(turns)} rotations for {len(args.photos)} "
+                                             "photos: give one, or one per photo")
+    turns = turns * len(args.photos) if len(turns) == 1 else turns
+    photos = [_to_sensor_layout(read_photo(p), deg) for p, deg in zip(args.photos, turns)]
     check_destination(args.output, None, args.overwrite, image=False)
     given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
     paths = [c for entry in given for c in entry.split(",") if c] or given[:1]

@@ -174,14 +174,32 @@ def _check_output(path: str, like, overwrite: bool, image: bool = True) -> None:
 
 
 
-def _add_rotation_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--photo-rotation", type=int, choices=(0, 90, 180, 270), default=0,
+def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
+    what = ("degrees clockwise the photos' pixels were turned from the sensor's layout, one "
+            "for all or one per photo, comma-separated" if per_photo else
+            "degrees clockwise the photo's pixels were turned from the sensor's layout")
+    p.add_argument("--photo-rotation", type=_rotations if per_photo else _rotation, default=0,
                    metavar="DEG",
-                   help="degrees clockwise the photo's pixels were turned from the sensor's "
-                        "layout (an export that applied a portrait orientation; 0, 90, 180 "
+                   help=what + " (an export that applied a portrait orientation; 0, 90, 180 "
                         "or 270): the photo is turned back for the work, so that its rows are "
                         "the sensor's readout rows and the capture's camera fits, and the "
                         "result is turned like the input")
+
+
+def _rotation(text: str) -> int:
+    """One ``--photo-rotation`` value: 0, 90, 180 or 270 (degrees)."""
+    try:
+        deg = int(text)
+    except ValueError:
+        deg = None
+    if deg not in (0, 90, 180, 270):
+        raise argparse.ArgumentTypeError(f"must be 0, 90, 180 or 270, got {text!r}")
+    return deg
+
+
+def _rotations(text: str) -> list[int]:
+    """``--photo-rotation`` of several photos: one value, or one per photo."""
+    return [_rotation(t.strip()) for t in str(text).split(",")]
 
 
 def _to_sensor_layout(photo, degrees: int):
@@ -478,7 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "axes (a value given with --time-offset, --bias, --readout-time, "
                         "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
-    _add_rotation_option(s)
+    _add_rotation_option(s, per_photo=True)
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s, required=True, per_photo=True)
     s.set_defaults(func=cmd_calibrate)
