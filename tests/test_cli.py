@@ -113,6 +113,11 @@ def test_a_photo_turned_from_the_sensor_layout_is_deblurred_as_the_sensor_read_i
                  "-o", str(d / "out_p.png"), "--grid", "2x2", "--photo-rotation", "90"]) == 0
     out = read_photo(d / "out_p.png").pixels
     np.testing.assert_array_equal(out, np.rot90(read_photo(d / "out_l.png").pixels, -1))
+    # the option on a photo that was not turned: said so
+    capsys.readouterr()
+    assert main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "out_x.png"), "--photo-rotation", "270"]) == 2
+    assert "were not turned: leave the option out" in capsys.readouterr().err
     # simulate turns the same way: the portrait sharp photo blurs as the landscape one
     write_photo(d / "sharp_p.png", np.rot90(read_photo(d / "sharp.jpg").pixels, -1), bit_depth=8)
     write_photo(d / "sharp_l.png", read_photo(d / "sharp.jpg").pixels, bit_depth=8)

@@ -140,7 +140,15 @@ def _load_capture(args, photo=None, say=None):
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
                        report=say)
     if photo is not None:
-        cap = cap.scaled_to(size[0], size[1], source=photo.path)
+        try:
+            cap = cap.scaled_to(size[0], size[1], source=photo.path)
+        except InputError as exc:
+            turned = getattr(args, "photo_rotation", 0)
+            if turned and "turned by 90 degrees" in exc.problem:     # by the option itself
+                raise InputError(exc.source, exc.problem.split(" (turned")[0] + f", after "
+                                 f"--photo-rotation {turned}; as stored the photo fits, so "
+                                 f"its pixels were not turned: leave the option out") from None
+            raise
     return cap
 
 
@@ -295,7 +303,8 @@ def cmd_simulate(args, say) -> None:
                 overwrite=args.overwrite)
     h, w = photo.pixels.shape[:2]
     snr = "no noise" if args.snr_db is None else f"SNR {args.snr_db:g} dB"
-    say(f"simulated {args.sharp} -> {args.output}: {w}x{h}, {snr}, {time.perf_counter() - t0:.2f} s")
+    gh, gw = given.pixels.shape[:2]
+    say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
 
 
 def cmd_deblur(args, say) -> None:
@@ -375,7 +384,8 @@ def cmd_deblur(args, say) -> None:
         _write_picture(args.save_psf, _to_photo_layout(field_image(field, w, h),
                                                        args.photo_rotation), args.overwrite)
     e = field.extents
-    say(f"deblurred {args.photo} -> {args.output}: {w}x{h}, mode {mode_txt}{grid_txt}, "
+    gh, gw = given.pixels.shape[:2]
+    say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
         f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")
 
 
