@@ -181,7 +181,6 @@ def _check_output(path: str, like, overwrite: bool, image: bool = True) -> None:
     check_destination(path, like, overwrite, image=image)
 
 
-
 def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
     what = ("degrees clockwise the photos' pixels were turned from the sensor's layout, one "
             "for all or one per photo, comma-separated" if per_photo else
@@ -301,7 +300,6 @@ def cmd_simulate(args, say) -> None:
     blurred = _to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
     write_photo(args.output, blurred, like=given, bit_depth=args.bit_depth,
                 overwrite=args.overwrite)
-    h, w = photo.pixels.shape[:2]
     snr = "no noise" if args.snr_db is None else f"SNR {args.snr_db:g} dB"
     gh, gw = given.pixels.shape[:2]
     say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
