@@ -176,9 +176,9 @@ def _write_picture(path: str, rgb_uint8: np.ndarray, overwrite: bool) -> None:
     write_photo(path, rgb_uint8.astype(np.float32) / 255.0, overwrite=overwrite)
 
 
-def _check_output(path: str, like, overwrite: bool, image: bool = True) -> None:
+def _check_output(path: str, like, overwrite: bool, image: bool = True, inputs=()) -> None:
     from .imageio import check_destination
-    check_destination(path, like, overwrite, image=image)
+    check_destination(path, like, overwrite, image=image, inputs=inputs)
 
 
 def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
@@ -314,9 +314,8 @@ def cmd_deblur(args, say) -> None:
     _check_output(args.output, given, args.overwrite)
     photo = _to_sensor_layout(given, args.photo_rotation)
     if args.save_psf:
-        _check_output(args.save_psf, None, args.overwrite)      # a drawing: no alpha
-        if os.path.realpath(args.save_psf) == os.path.realpath(args.photo):
-            raise InputError(args.save_psf, "is the input photo; choose another file")
+        _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
+                      inputs=[args.photo])
         if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
             raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
     _ignored_options(args)

@@ -343,6 +343,8 @@ def _without_repeats(rows: np.ndarray) -> np.ndarray:
     return rows if keep.all() else rows[keep]
 
 
+#: Endings of a column name that state its rate unit (``wx_rad_s``, ``gx_deg_s``, ``gx_dps``).
+_RATE_UNIT_ENDINGS = {"_rad_s": "rad/s", "_deg_s": "deg/s", "_dps": "deg/s"}
 #: Other spellings of the rate units, as column names state them (spaces removed).
 _RATE_ALIASES = {"dps": "deg/s", "°/s": "deg/s", "deg/sec": "deg/s", "degrees/s": "deg/s",
                  "rad/sec": "rad/s", "rads^-1": "rad/s", "radians/s": "rad/s"}
@@ -356,8 +358,8 @@ def _unit_from_name(name: str, units: dict) -> str | None:
         stated = _RATE_ALIASES.get(stated, stated) if units is RATE_UNITS else stated
         return stated if stated in units else None
     low = name.lower().replace("/", "_")
-    if units is RATE_UNITS and low.endswith("_dps"):
-        return "deg/s"
+    if units is RATE_UNITS:
+        return next((u for end, u in _RATE_UNIT_ENDINGS.items() if low.endswith(end)), None)
     for unit in sorted(units, key=len, reverse=True):
         if low.endswith("_" + unit.replace("/", "_")):
             return unit
@@ -519,9 +521,9 @@ def _rate_axis(name: str) -> str | None:
     """The axis (``"x"``, ``"y"`` or ``"z"``) a column's name says it holds the rate of, or
     ``None``. A rate-unit suffix (``_rad_s``, ``_deg_s``) or a bracketed unit is ignored."""
     low = re.sub(r"[(\[].*?[)\]]", "", name.lower()).strip().replace("/", "_")
-    for suffix in ["_" + unit.replace("/", "_") for unit in RATE_UNITS] + ["_dps"]:
-        if low.endswith(suffix):
-            low = low[:-len(suffix)]
+    for ending in _RATE_UNIT_ENDINGS:
+        if low.endswith(ending):
+            low = low[:-len(ending)]
     key = re.sub(r"[^a-z]", "", low)
     if key and key[-1] in "xyz" and key[:-1] in _RATE_PREFIXES:
         return key[-1]
