@@ -9,7 +9,7 @@ from gyrodeblur.capture import Capture
 from gyrodeblur.deblur import deblur, deblur_blind
 from gyrodeblur.errors import InputError
 from gyrodeblur.gyrolog import GyroLog
-from gyrodeblur.images import check_image, check_psf
+from gyrodeblur.images import check_image, check_psf, to_photo_layout, to_sensor_layout
 from gyrodeblur.metrics import psnr, ssim
 from gyrodeblur.simulate import simulate_blur
 from gyrodeblur.sparse import sparse_deconvolve
@@ -166,3 +166,13 @@ def test_psfs_are_checked_and_normalised_the_same_way_by_every_deconvolution():
         check_psf(np.full((1, 3), 1e308))                      # an overflowing sum
     ref = wiener_deconvolve(img, np.full((1, 5), 0.2))
     np.testing.assert_allclose(wiener_deconvolve(img, np.full((1, 5), 7.0)), ref, atol=1e-6)
+
+
+@pytest.mark.parametrize("degrees", [0, 90, 180, 270])
+def test_sensor_layout_undoes_a_clockwise_export_turn_and_back(degrees):
+    sensor = np.arange(2 * 3 * 4, dtype=np.float32).reshape(2, 3, 4)   # rows, cols, RGBA
+    exported = np.rot90(sensor, -(degrees // 90))         # an export turning clockwise
+    back = to_sensor_layout(exported, degrees)
+    np.testing.assert_array_equal(back, sensor)
+    np.testing.assert_array_equal(to_photo_layout(back, degrees), exported)
+    assert back.flags.c_contiguous

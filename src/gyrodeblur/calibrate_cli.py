@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import replace
 
 import numpy as np
 
 from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix
 from .errors import InputError
-from .images import split_alpha
+from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command"]
 
@@ -82,15 +83,16 @@ def calibrate_command(args, say, load_capture) -> None:
     from .imageio import check_destination, read_photo
 
     fix = fixed_parameters(args)
-    from .cli import _to_sensor_layout
 
     turns = args.photo_rotation if isinstance(args.photo_rotation, list) else [args.photo_rotation]
     if len(turns) not in (1, len(args.photos)):
         raise InputError("--photo-rotation", f"{len(turns)} rotations for {len(args.photos)} "
                                              "photos: give one, or one per photo")
     turns = turns * len(args.photos) if len(turns) == 1 else turns
-    photos = [_to_sensor_layout(read_photo(p), deg) for p, deg in zip(args.photos, turns)]
-    check_destination(args.output, None, args.overwrite, image=False)
+    # before reading anything; the inputs are checked once the captures name their logs
+    check_destination(args.output, None, args.overwrite, image=False, inputs=args.photos)
+    photos = [read_photo(p) for p in args.photos]
+    photos = [replace(ph, pixels=to_sensor_layout(ph.pixels, deg)) for ph, deg in zip(photos, turns)]
     given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
     paths = [c for entry in given for c in entry.split(",") if c] or given[:1]
     if len(paths) not in (1, len(photos)):

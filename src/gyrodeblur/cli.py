@@ -11,11 +11,12 @@ import os
 import sys
 import time
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
 from .errors import InputError
-from .images import join_alpha, split_alpha
+from .images import join_alpha, split_alpha, to_photo_layout, to_sensor_layout
 from .tiling import DEFAULT_OVERLAP
 
 #: Kernel size (px) of ``deblur --blind`` when ``--kernel-size`` is not given.
@@ -209,20 +210,6 @@ def _rotations(text: str) -> list[int]:
     return [_rotation(t.strip()) for t in str(text).split(",")]
 
 
-def _to_sensor_layout(photo, degrees: int):
-    """``photo`` with its pixels turned back ``degrees`` counter-clockwise (the layout the
-    sensor read out), or ``photo`` itself for 0."""
-    if not degrees:
-        return photo
-    from dataclasses import replace
-    return replace(photo, pixels=np.ascontiguousarray(np.rot90(photo.pixels, degrees // 90)))
-
-
-def _to_photo_layout(pixels: np.ndarray, degrees: int) -> np.ndarray:
-    """The inverse of :func:`_to_sensor_layout` for a result's pixels."""
-    return np.ascontiguousarray(np.rot90(pixels, -(degrees // 90))) if degrees else pixels
-
-
 # ----------------------------------------------------------------------------- commands
 
 def cmd_psf(args, say) -> None:
@@ -284,7 +271,7 @@ def cmd_simulate(args, say) -> None:
 
     given = read_photo(args.sharp)
     _check_output(args.output, given, args.overwrite)
-    photo = _to_sensor_layout(given, args.photo_rotation)
+    photo = replace(given, pixels=to_sensor_layout(given.pixels, args.photo_rotation))
     if args.snr_db is not None and not np.isfinite(args.snr_db):
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
     if args.seed is not None and args.seed < 0:
@@ -297,7 +284,7 @@ def cmd_simulate(args, say) -> None:
                                          seed=args.seed))
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
-    blurred = _to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
+    blurred = to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
     write_photo(args.output, blurred, like=given, bit_depth=args.bit_depth,
                 overwrite=args.overwrite)
     snr = "no noise" if args.snr_db is None else f"SNR {args.snr_db:g} dB"
@@ -312,7 +299,7 @@ def cmd_deblur(args, say) -> None:
 
     given = read_photo(args.photo)
     _check_output(args.output, given, args.overwrite)
-    photo = _to_sensor_layout(given, args.photo_rotation)
+    photo = replace(given, pixels=to_sensor_layout(given.pixels, args.photo_rotation))
     if args.save_psf:
         _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
                       inputs=[args.photo])
@@ -375,10 +362,10 @@ def cmd_deblur(args, say) -> None:
         mode_txt = args.mode
         grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
     progress.close()
-    write_photo(args.output, _to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
+    write_photo(args.output, to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
                 like=given, overwrite=args.overwrite)
     if args.save_psf:
-        _write_picture(args.save_psf, _to_photo_layout(field_image(field, w, h),
+        _write_picture(args.save_psf, to_photo_layout(field_image(field, w, h),
                                                        args.photo_rotation), args.overwrite)
     e = field.extents
     gh, gw = given.pixels.shape[:2]

@@ -14,7 +14,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_image", "check_psf", "split_alpha", "join_alpha", "MAX_CHANNELS", "PHOTO_MAX"]
+__all__ = ["check_image", "check_psf", "split_alpha", "join_alpha", "to_sensor_layout",
+           "to_photo_layout", "MAX_CHANNELS", "PHOTO_MAX"]
 
 #: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
 MAX_CHANNELS = 4
@@ -142,3 +143,17 @@ def join_alpha(colour: np.ndarray, alpha) -> np.ndarray:
     if alpha is None:
         return colour
     return np.concatenate([colour, alpha.astype(colour.dtype, copy=False)], axis=2)
+
+
+def to_sensor_layout(pixels: np.ndarray, degrees: int) -> np.ndarray:
+    """A photo's pixels turned back ``degrees`` counter-clockwise, to the layout the
+    sensor read out (rows = readout rows), for a photo an export turned ``degrees``
+    clockwise (0, 90, 180 or 270); ``pixels`` itself for 0."""
+    if not degrees:
+        return pixels
+    return np.ascontiguousarray(np.rot90(pixels, degrees // 90))
+
+
+def to_photo_layout(pixels: np.ndarray, degrees: int) -> np.ndarray:
+    """The inverse of :func:`to_sensor_layout`: a result turned like the input photo."""
+    return np.ascontiguousarray(np.rot90(pixels, -(degrees // 90))) if degrees else pixels
