@@ -6,6 +6,7 @@ import pytest
 from gyrodeblur.errors import InputError
 from gyrodeblur.gyrolog import (GyroLog, check_coverage, read_android_events, read_csv_log,
                                 read_gcsv, read_gyro_log, write_gcsv)
+from gyrodeblur.log_columns import looks_like_time, rate_axis, time_unit_from_interval
 
 
 @pytest.fixture
@@ -342,3 +343,23 @@ def test_median_rate_finds_a_bias_under_hand_motion_with_an_honest_error():
     # under two whole blocks: nothing
     m, se, secs = median_rate(GyroLog(t[:300], shake[:300]))
     assert secs == 0.0 and np.all(np.isnan(m)) and np.all(np.isnan(se))
+
+
+@pytest.mark.parametrize("name, axis", [
+    ("x", "x"), ("gyro_y", "y"), ("rotationRateZ", "z"), ("w_RS_S_x", "x"), ("x_gyro", "x"),
+    ("gx [deg/s]", "x"), ("wz_rad_s", "z"), ("ax", None), ("acc_x", None), ("time", None)])
+def test_rate_axis_reads_the_axis_from_loggers_column_names(name, axis):
+    assert rate_axis(name) == axis
+
+
+@pytest.mark.parametrize("name, is_time", [
+    ("t", True), ("timestamp", True), ("seconds_elapsed", True), ("t_ns", True),
+    ("roll_rad_s", False), ("x", False), ("sample", False)])
+def test_looks_like_time_tells_times_from_rates(name, is_time):
+    assert looks_like_time(name) is is_time
+
+
+def test_time_unit_from_interval_refuses_rates_outside_a_gyros():
+    t = np.arange(100) * 5e6                       # 200 Hz in ns
+    assert time_unit_from_interval(t)[0] == "ns"
+    assert time_unit_from_interval(np.arange(100) * 0.1)[0] is None   # 10 Hz in s: refused

@@ -4,7 +4,8 @@ Every supported format is converted here, once, to one representation: a
 :class:`GyroLog` of timestamps in seconds (float64, on the gyro's own clock) and angular
 velocity in rad/s along the log's own three axes. Mapping those axes to the camera frame
 (x right, y down, z forward) is the job of :mod:`gyrodeblur.axes`; aligning the clocks is
-the capture description's ``time_offset``.
+the capture description's ``time_offset``. What a CSV log's columns hold, when the caller
+does not say, is worked out by :mod:`gyrodeblur.log_columns`.
 
 Formats
 -------
@@ -33,12 +34,15 @@ from __future__ import annotations
 
 import csv
 import os
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .errors import InputError
+from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
+                          default_rate_columns, default_time_column, is_number,
+                          looks_like_time, parse_number, sniff_delimiter,
+                          time_unit_from_interval, unit_from_name)
 
 __all__ = [
     "GyroLog",
@@ -56,10 +60,6 @@ __all__ = [
 ]
 
 FORMATS = ("gcsv", "csv", "android")
-#: Seconds per unit of time.
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
-#: rad/s per unit of angular rate.
-RATE_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
 #: A median rate above this (rad/s) almost surely means deg/s read as rad/s.
 IMPLAUSIBLE_MEDIAN_RATE = 35.0
 
@@ -240,7 +240,7 @@ def _guess_format(path: str) -> str:
     first = [ln for ln in _read_lines(path) if ln.strip() and not ln.lstrip().startswith("#")][:1]
     if first and first[0].strip().upper() in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
         return "gcsv"
-    if first and len(first[0].split()) == 5 and all(_is_number(v) for v in first[0].split()):
+    if first and len(first[0].split()) == 5 and all(is_number(v) for v in first[0].split()):
         return "android"
     return "csv"
 
@@ -311,7 +311,7 @@ def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: i
                 raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
                                        f"got {len(parts)}")
             try:
-                out.append([_number(p, decimal_comma=sep == ";") for p in parts[:ncol]])
+                out.append([parse_number(p, decimal_comma=sep == ";") for p in parts[:ncol]])
             except ValueError:
                 raise InputError(path, f"line {first_line + k}: not a number in "
                                        f"{line!r}") from None
@@ -324,16 +324,6 @@ def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: i
     return _without_repeats(np.asarray(out, dtype=np.float64))
 
 
-def _number(text: str, decimal_comma: bool = False) -> float:
-    """A value of a log's line, quotes stripped; with ``decimal_comma`` (semicolon-separated
-    files, as spreadsheets write them where the comma is the decimal mark) ``-0,82`` is
-    -0.82."""
-    text = text.strip().strip('"')
-    if decimal_comma and "," in text and "." not in text:
-        text = text.replace(",", ".")
-    return float(text)
-
-
 def _without_repeats(rows: np.ndarray) -> np.ndarray:
     """``rows`` without lines that repeat the line before exactly (some loggers write a
     sample twice; a repeat says nothing new, and its equal timestamp would be refused)."""
@@ -341,36 +331,6 @@ def _without_repeats(rows: np.ndarray) -> np.ndarray:
         return rows
     keep = np.r_[True, np.any(rows[1:] != rows[:-1], axis=1)]
     return rows if keep.all() else rows[keep]
-
-
-#: Endings of a column name that state its rate unit (``wx_rad_s``, ``gx_deg_s``, ``gx_dps``).
-_RATE_UNIT_ENDINGS = {"_rad_s": "rad/s", "_deg_s": "deg/s", "_dps": "deg/s"}
-#: Other spellings of the rate units, as column names state them (spaces removed).
-_RATE_ALIASES = {"dps": "deg/s", "°/s": "deg/s", "deg/sec": "deg/s", "degrees/s": "deg/s",
-                 "rad/sec": "rad/s", "rads^-1": "rad/s", "radians/s": "rad/s"}
-
-
-def _unit_from_name(name: str, units: dict) -> str | None:
-    """The unit of ``units`` a column's name ends with (``t_ns``, ``wx_deg_s``, ``gx_dps``)
-    or states in brackets (``t (ns)``, ``gx [deg/s]``, ``w_x [rad s^-1]``), or ``None``."""
-    stated = _bracketed(name)
-    if stated is not None:
-        stated = _RATE_ALIASES.get(stated, stated) if units is RATE_UNITS else stated
-        return stated if stated in units else None
-    low = name.lower().replace("/", "_")
-    if units is RATE_UNITS:
-        return next((u for end, u in _RATE_UNIT_ENDINGS.items() if low.endswith(end)), None)
-    for unit in sorted(units, key=len, reverse=True):
-        if low.endswith("_" + unit.replace("/", "_")):
-            return unit
-    return None
-
-
-def _bracketed(name: str) -> str | None:
-    """What a column's name states in brackets at its end (lower case, spaces removed):
-    ``"gx [deg/s]"`` -> ``"deg/s"``; ``None`` without brackets."""
-    m = re.search(r"[(\[]([^()\[\]]*)[)\]]\s*$", name)
-    return None if m is None else re.sub(r"\s+", "", m.group(1).lower())
 
 
 def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = None,
@@ -420,15 +380,15 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     if not lines:
         raise InputError(path, "empty file")
     if delimiter is None:
-        delimiter = _sniff_delimiter(lines[0])
+        delimiter = sniff_delimiter(lines[0])
     header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
-    if all(_is_number(h) for h in header) and comment is not None:
+    if all(is_number(h) for h in header) and comment is not None:
         # the names on the last comment line ("#timestamp [ns],w_RS_S_x ..." as EuRoC
         # writes, "# t_s,wx,wy,wz" as numpy.savetxt does)
         named = [h.strip() for h in next(csv.reader([comment], delimiter=delimiter))]
-        if len(named) >= len(header) and not any(_is_number(h) for h in named):
+        if len(named) >= len(header) and not any(is_number(h) for h in named):
             header, lines, skip = named, [comment] + lines, skip - 1
-    if all(_is_number(h) for h in header):
+    if all(is_number(h) for h in header):
         raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
 
     def col(c) -> int:
@@ -441,18 +401,18 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             raise InputError(path, f"no column named {c!r} (columns: {', '.join(header)})")
         return header.index(c)
 
-    ti = _default_time_column(header) if time_column is None else col(time_column)
+    ti = default_time_column(header) if time_column is None else col(time_column)
     if rate_columns is None:
-        ri = _default_rate_columns(path, header, ti)
+        ri = default_rate_columns(path, header, ti)
     else:
         if len(rate_columns) != 3:
             raise InputError(path, "rate_columns must name exactly three columns")
         ri = [col(c) for c in rate_columns]
-    tu = time_unit or _unit_from_name(header[ti], TIME_UNITS)
+    tu = time_unit or unit_from_name(header[ti], TIME_UNITS)
     if tu is not None and tu not in TIME_UNITS:
         raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
-    ru = rate_unit or _unit_from_name(header[ri[0]], RATE_UNITS)
-    if ru is None and _bracketed(header[ri[0]]) is not None:
+    ru = rate_unit or unit_from_name(header[ri[0]], RATE_UNITS)
+    if ru is None and bracketed_unit(header[ri[0]]) is not None:
         raise InputError(path, f"column {header[ri[0]]!r} states a unit that is neither "
                                "rad/s nor deg/s; give it (--rate-unit rad/s|deg/s)")
     ru = ru or "rad/s"
@@ -461,134 +421,21 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     ncol = max([ti] + ri) + 1
     rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=skip + 2, sep=delimiter)
     meta = {}
-    if tu is None and not _looks_like_time(header[ti]):
+    if tu is None and not looks_like_time(header[ti]):
         raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
                                "does not say it holds times; give the unit (--time-unit "
                                "s|ms|us|ns) or name the column (gyro.time_column)")
     if tu is None:
-        tu, interval = _unit_from_interval(rows[:, ti])
+        tu, interval = time_unit_from_interval(rows[:, ti])
         if tu is None:
             raise InputError(path, f"time unit of column {header[ti]!r} unknown (its median "
                                    f"sample interval, {interval:.6g}, fits no gyro rate from "
-                                   f"{_RATES_HZ[0]:g} Hz to {_RATES_HZ[1]:g} kHz in any unit); "
+                                   f"{GUESSED_RATE_RANGE[0]:g} Hz to "
+                                   f"{GUESSED_RATE_RANGE[1] / 1e3:g} kHz in any unit); "
                                    "give it (--time-unit s|ms|us|ns)")
         meta["time_unit_from"] = f"the median sample interval, {interval:.6g} {tu}"
     return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
                    {"time_unit": tu, "rate_unit": ru, **meta})
-
-
-#: Gyro sample rates (Hz, then kHz) a time column without a unit is read for: a factor of
-#: two inside the rates whose intervals no two units share (10 Hz to 5 kHz), so a log a
-#: little outside them is refused rather than read in the wrong unit.
-_RATES_HZ = (20.0, 2.5)
-
-
-def _sniff_delimiter(line: str) -> str:
-    """Of comma, semicolon and tab, the one that splits the header ``line`` into the most
-    fields (quotes respected; comma on a tie)."""
-    counts = [(len(next(csv.reader([line], delimiter=d))), -k, d)
-              for k, d in enumerate((",", ";", "\t"))]
-    return max(counts)[2]
-
-
-def _unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
-    """The time unit in which the median interval between increasing timestamps ``t`` is
-    that of a gyro sampled at 20 Hz to 2.5 kHz, and that interval. The units' ranges are
-    125 wide and 1000 apart, so no interval fits two units, and a log sampled up to twice
-    as fast or as slow as these rates fits none (rather than the wrong one); one yet
-    further outside could fit the wrong unit (a 25 kHz log in ns reads as 25 Hz in us)."""
-    d = np.diff(np.asarray(t, np.float64))
-    d = d[d > 0]
-    if d.size == 0:
-        return None, float("nan")
-    m = float(np.median(d))
-    for unit, per_second in (("s", 1.0), ("ms", 1e3), ("us", 1e6), ("ns", 1e9)):
-        if per_second / (_RATES_HZ[1] * 1e3) <= m <= per_second / _RATES_HZ[0]:
-            return unit, m
-    return None, m
-
-
-#: What may come before a rate column's axis letter (lower case, letters only): ``x``,
-#: ``wx``, ``gx``, ``gyro_x``, ``gyroX``, ``omega_x``, ``rotationRateX``,
-#: ``angular_velocity_x`` (an accelerometer's ``ax`` or ``acc_x`` is none of them).
-_RATE_PREFIXES = frozenset({"", "w", "g", "gyr", "gyro", "gyroscope", "omega", "rot",
-                            "rotation", "rotationrate", "rate", "angularvelocity", "angvel"})
-#: What may follow the axis letter instead: ``x_gyro``, ``xGyro``, ``x_rate``.
-_RATE_SUFFIXES = frozenset({"gyr", "gyro", "gyroscope", "omega", "rate", "rot"})
-
-
-def _rate_axis(name: str) -> str | None:
-    """The axis (``"x"``, ``"y"`` or ``"z"``) a column's name says it holds the rate of, or
-    ``None``. A rate-unit suffix (``_rad_s``, ``_deg_s``) or a bracketed unit is ignored."""
-    low = re.sub(r"[(\[].*?[)\]]", "", name.lower()).strip().replace("/", "_")
-    for ending in _RATE_UNIT_ENDINGS:
-        if low.endswith(ending):
-            low = low[:-len(ending)]
-    key = re.sub(r"[^a-z]", "", low)
-    if key and key[-1] in "xyz" and key[:-1] in _RATE_PREFIXES:
-        return key[-1]
-    if len(key) > 1 and key[0] in "xyz" and key[1:] in _RATE_SUFFIXES:
-        return key[0]
-    words = [w for w in re.split(r"[^a-z]+", low) if w]     # EuRoC's w_RS_S_x
-    if len(words) > 2 and words[0] in _RATE_PREFIXES and words[-1] in ("x", "y", "z"):
-        return words[-1]
-    return None
-
-
-def _looks_like_time(name: str) -> bool:
-    """Whether a column's name says it holds times (``t``, ``time``, ``timestamp``,
-    ``seconds_elapsed``, ``t_ns``; not ``roll_rad_s``, whose ``_s`` is a rate's)."""
-    low = name.lower()
-    if _unit_from_name(low, RATE_UNITS) is not None:
-        return False
-    return (low in ("t", "ts") or _unit_from_name(low, TIME_UNITS) is not None
-            or any(w in low for w in ("time", "stamp", "elapsed", "second")))
-
-
-def _default_time_column(header: list[str]) -> int:
-    """The first column, unless its name is not a time's and another's is (an index column
-    first, as pandas writes: ``,t_s,wx,wy,wz`` or ``sample,time,x,y,z``)."""
-    if _looks_like_time(header[0]):
-        return 0
-    return next((i for i, h in enumerate(header) if _looks_like_time(h)), 0)
-
-
-def _default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
-    """The x, y, z rate columns of a CSV header when none are given: by name when the names
-    say which axis each column holds, whatever their order (Sensor Logger writes
-    ``time,seconds_elapsed,z,y,x``); else the three columns after the time column, unless a
-    name there contradicts that (an axis out of place, or a time) or the file has other
-    columns too (which three would be a guess)."""
-    named = {a: [i for i, h in enumerate(header) if i != ti and _rate_axis(h) == a]
-             for a in "xyz"}
-    where = "; name them in the capture's gyro.rate_columns"
-    for a, cols in named.items():
-        if len(cols) > 1:
-            raise InputError(path, f"columns {', '.join(header[i] for i in cols)} could each "
-                                   f"be the {a} rate{where}")
-    if all(named.values()):
-        return [named[a][0] for a in "xyz"]
-    ri = [ti + 1, ti + 2, ti + 3]
-    if ri[-1] >= len(header):
-        raise InputError(path, f"need a time column and three rate columns, header has "
-                               f"{len(header)} columns ({', '.join(header)})")
-    if len(header) > 4:        # which three? (an IMU log's accelerometer must not be taken)
-        raise InputError(path, f"the column names ({', '.join(header)}) do not say which "
-                               f"three hold the gyro's x, y and z rates{where}")
-    for a, i in zip("xyz", ri):
-        said = _rate_axis(header[i])
-        if (said is not None and said != a) or (said is None and _looks_like_time(header[i])):
-            raise InputError(path, f"column {header[i]!r} would be read as the {a} rate, "
-                                   f"which its name contradicts{where}")
-    return ri
-
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False
 
 
 def read_android_events(path: str | os.PathLike) -> GyroLog:

@@ -1,0 +1,183 @@
+"""What the columns of a text gyro log hold: which is the time and which the x, y and z
+rates, in which units, split by which delimiter.
+
+Used by :func:`gyrodeblur.gyrolog.read_csv_log` when the caller does not say. Names are
+read as loggers write them (``t_ns``, ``wx_rad_s``, ``gx [deg/s]``, ``rotationRateX``,
+EuRoC's ``w_RS_S_x``, Sensor Logger's ``time,seconds_elapsed,z,y,x``); a time column without
+a unit is read in the unit that gives a gyro's sample interval; where the names leave the
+answer open, the caller gets an :class:`~gyrodeblur.errors.InputError` naming the file, not
+a guess.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["TIME_UNITS", "RATE_UNITS", "RATE_UNIT_ENDINGS", "RATE_ALIASES",
+           "GUESSED_RATE_RANGE", "parse_number", "is_number", "unit_from_name",
+           "bracketed_unit", "sniff_delimiter", "time_unit_from_interval", "rate_axis",
+           "looks_like_time", "default_time_column", "default_rate_columns"]
+
+#: Seconds per unit of time.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: rad/s per unit of angular rate.
+RATE_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
+
+
+def parse_number(text: str, decimal_comma: bool = False) -> float:
+    """A value of a log's line, quotes stripped; with ``decimal_comma`` (semicolon-separated
+    files, as spreadsheets write them where the comma is the decimal mark) ``-0,82`` is
+    -0.82."""
+    text = text.strip().strip('"')
+    if decimal_comma and "," in text and "." not in text:
+        text = text.replace(",", ".")
+    return float(text)
+
+
+#: Endings of a column name that state its rate unit (``wx_rad_s``, ``gx_deg_s``, ``gx_dps``).
+RATE_UNIT_ENDINGS = {"_rad_s": "rad/s", "_deg_s": "deg/s", "_dps": "deg/s"}
+#: Other spellings of the rate units, as column names state them (spaces removed).
+RATE_ALIASES = {"dps": "deg/s", "°/s": "deg/s", "deg/sec": "deg/s", "degrees/s": "deg/s",
+                "rad/sec": "rad/s", "rads^-1": "rad/s", "radians/s": "rad/s"}
+
+
+def unit_from_name(name: str, units: dict) -> str | None:
+    """The unit of ``units`` a column's name ends with (``t_ns``, ``wx_deg_s``, ``gx_dps``)
+    or states in brackets (``t (ns)``, ``gx [deg/s]``, ``w_x [rad s^-1]``), or ``None``."""
+    stated = bracketed_unit(name)
+    if stated is not None:
+        stated = RATE_ALIASES.get(stated, stated) if units is RATE_UNITS else stated
+        return stated if stated in units else None
+    low = name.lower().replace("/", "_")
+    if units is RATE_UNITS:
+        return next((u for end, u in RATE_UNIT_ENDINGS.items() if low.endswith(end)), None)
+    for unit in sorted(units, key=len, reverse=True):
+        if low.endswith("_" + unit.replace("/", "_")):
+            return unit
+    return None
+
+
+def bracketed_unit(name: str) -> str | None:
+    """What a column's name states in brackets at its end (lower case, spaces removed):
+    ``"gx [deg/s]"`` -> ``"deg/s"``; ``None`` without brackets."""
+    m = re.search(r"[(\[]([^()\[\]]*)[)\]]\s*$", name)
+    return None if m is None else re.sub(r"\s+", "", m.group(1).lower())
+
+
+#: Gyro sample rates (Hz, lowest and highest) a time column without a unit is read for: a factor of
+#: two inside the rates whose intervals no two units share (10 Hz to 5 kHz), so a log a
+#: little outside them is refused rather than read in the wrong unit.
+GUESSED_RATE_RANGE = (20.0, 2500.0)
+
+
+def sniff_delimiter(line: str) -> str:
+    """Of comma, semicolon and tab, the one that splits the header ``line`` into the most
+    fields (quotes respected; comma on a tie)."""
+    counts = [(len(next(csv.reader([line], delimiter=d))), -k, d)
+              for k, d in enumerate((",", ";", "\t"))]
+    return max(counts)[2]
+
+
+def time_unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
+    """The time unit in which the median interval between increasing timestamps ``t`` is
+    that of a gyro sampled at 20 Hz to 2.5 kHz, and that interval. The units' ranges are
+    125 wide and 1000 apart, so no interval fits two units, and a log sampled up to twice
+    as fast or as slow as these rates fits none (rather than the wrong one); one yet
+    further outside could fit the wrong unit (a 25 kHz log in ns reads as 25 Hz in us)."""
+    d = np.diff(np.asarray(t, np.float64))
+    d = d[d > 0]
+    if d.size == 0:
+        return None, float("nan")
+    m = float(np.median(d))
+    for unit, per_second in (("s", 1.0), ("ms", 1e3), ("us", 1e6), ("ns", 1e9)):
+        if per_second / GUESSED_RATE_RANGE[1] <= m <= per_second / GUESSED_RATE_RANGE[0]:
+            return unit, m
+    return None, m
+
+
+#: What may come before a rate column's axis letter (lower case, letters only): ``x``,
+#: ``wx``, ``gx``, ``gyro_x``, ``gyroX``, ``omega_x``, ``rotationRateX``,
+#: ``angular_velocity_x`` (an accelerometer's ``ax`` or ``acc_x`` is none of them).
+_RATE_PREFIXES = frozenset({"", "w", "g", "gyr", "gyro", "gyroscope", "omega", "rot",
+                            "rotation", "rotationrate", "rate", "angularvelocity", "angvel"})
+#: What may follow the axis letter instead: ``x_gyro``, ``xGyro``, ``x_rate``.
+_RATE_SUFFIXES = frozenset({"gyr", "gyro", "gyroscope", "omega", "rate", "rot"})
+
+
+def rate_axis(name: str) -> str | None:
+    """The axis (``"x"``, ``"y"`` or ``"z"``) a column's name says it holds the rate of, or
+    ``None``. A rate-unit suffix (``_rad_s``, ``_deg_s``) or a bracketed unit is ignored."""
+    low = re.sub(r"[(\[].*?[)\]]", "", name.lower()).strip().replace("/", "_")
+    for ending in RATE_UNIT_ENDINGS:
+        if low.endswith(ending):
+            low = low[:-len(ending)]
+    key = re.sub(r"[^a-z]", "", low)
+    if key and key[-1] in "xyz" and key[:-1] in _RATE_PREFIXES:
+        return key[-1]
+    if len(key) > 1 and key[0] in "xyz" and key[1:] in _RATE_SUFFIXES:
+        return key[0]
+    words = [w for w in re.split(r"[^a-z]+", low) if w]     # EuRoC's w_RS_S_x
+    if len(words) > 2 and words[0] in _RATE_PREFIXES and words[-1] in ("x", "y", "z"):
+        return words[-1]
+    return None
+
+
+def looks_like_time(name: str) -> bool:
+    """Whether a column's name says it holds times (``t``, ``time``, ``timestamp``,
+    ``seconds_elapsed``, ``t_ns``; not ``roll_rad_s``, whose ``_s`` is a rate's)."""
+    low = name.lower()
+    if unit_from_name(low, RATE_UNITS) is not None:
+        return False
+    return (low in ("t", "ts") or unit_from_name(low, TIME_UNITS) is not None
+            or any(w in low for w in ("time", "stamp", "elapsed", "second")))
+
+
+def default_time_column(header: list[str]) -> int:
+    """The first column, unless its name is not a time's and another's is (an index column
+    first, as pandas writes: ``,t_s,wx,wy,wz`` or ``sample,time,x,y,z``)."""
+    if looks_like_time(header[0]):
+        return 0
+    return next((i for i, h in enumerate(header) if looks_like_time(h)), 0)
+
+
+def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
+    """The x, y, z rate columns of a CSV header when none are given: by name when the names
+    say which axis each column holds, whatever their order (Sensor Logger writes
+    ``time,seconds_elapsed,z,y,x``); else the three columns after the time column, unless a
+    name there contradicts that (an axis out of place, or a time) or the file has other
+    columns too (which three would be a guess)."""
+    named = {a: [i for i, h in enumerate(header) if i != ti and rate_axis(h) == a]
+             for a in "xyz"}
+    where = "; name them in the capture's gyro.rate_columns"
+    for a, cols in named.items():
+        if len(cols) > 1:
+            raise InputError(path, f"columns {', '.join(header[i] for i in cols)} could each "
+                                   f"be the {a} rate{where}")
+    if all(named.values()):
+        return [named[a][0] for a in "xyz"]
+    ri = [ti + 1, ti + 2, ti + 3]
+    if ri[-1] >= len(header):
+        raise InputError(path, f"need a time column and three rate columns, header has "
+                               f"{len(header)} columns ({', '.join(header)})")
+    if len(header) > 4:        # which three? (an IMU log's accelerometer must not be taken)
+        raise InputError(path, f"the column names ({', '.join(header)}) do not say which "
+                               f"three hold the gyro's x, y and z rates{where}")
+    for a, i in zip("xyz", ri):
+        said = rate_axis(header[i])
+        if (said is not None and said != a) or (said is None and looks_like_time(header[i])):
+            raise InputError(path, f"column {header[i]!r} would be read as the {a} rate, "
+                                   f"which its name contradicts{where}")
+    return ri
+
+
+def is_number(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
