@@ -1,4 +1,5 @@
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -145,3 +146,91 @@ def test_unknown_keys_are_warned_of_and_notes_are_not(capture_files):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_capture(d / "cap.json")                   # a clean file: no warning
+
+
+@pytest.mark.parametrize("fx, match", [
+    (4.2, "in mm or 35 mm-equivalent"),          # a phone's focal length in mm
+    (26.0, "in mm or 35 mm-equivalent"),         # ... and its 35 mm equivalent
+])
+def test_a_focal_length_not_in_pixels_is_refused(capture_files, fx, match):
+    """Either would make a wide-angle blur at the corners, not one longer than the frame,
+    so only this check catches it."""
+    d, doc = capture_files
+    doc["camera"].update(fx=fx, fy=fx)
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=match) as exc:
+        load_capture(d / "cap.json")
+    assert "cap.json" in str(exc.value)
+    Camera(0.16 * 1024, 0.16 * 1024, 511.5, 381.5, 1024, 764)     # a 145-degree view is fine
+
+
+def test_a_principal_point_outside_the_frame_is_refused_and_off_centre_warned(capture_files):
+    d, doc = capture_files
+    doc["camera"].update(cx=5000.0, cy=-3000.0)
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="principal point cx=5000 px lies outside"):
+        load_capture(d / "cap.json")
+    # intrinsics of the full frame without its size, for a half-size photo: the principal
+    # point lands at the photo's corner; said, since nothing else would
+    del doc["camera"]["width"], doc["camera"]["height"]
+    doc["camera"].update(cx=511.5, cy=381.5)
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="far from the centre.*give camera.width"):
+        load_capture(d / "cap.json", image_size=(512, 382))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_capture(d / "cap.json", image_size=(1024, 764))         # the right size: quiet
+
+
+def test_a_key_given_twice_is_refused(capture_files):
+    d, _ = capture_files
+    text = (d / "cap.json").read_text().replace('"readout_time": 0.02',
+                                                '"readout_time": 0.02, "readout_time": 0')
+    (d / "cap.json").write_text(text)
+    with pytest.raises(InputError, match="cap.json: key 'readout_time' appears twice"):
+        load_capture(d / "cap.json")
+
+
+def test_json_true_is_not_a_bias(capture_files):
+    d, doc = capture_files
+    doc["gyro"]["bias"] = [True, False, False]
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="bias must be three finite numbers"):
+        load_capture(d / "cap.json")
+
+
+def test_csv_options_on_another_format_are_warned_of(capture_files):
+    d, doc = capture_files
+    doc["gyro"].update(time_unit="ms", rate_unit="deg/s")
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="gyro.gcsv: rate_unit, time_unit apply to CSV logs "
+                                         "only; this log is gcsv: ignored"):
+        cap = load_capture(d / "cap.json")
+    assert np.allclose(cap.log.omega[0], [0.01, 0.3, -0.02])
+
+
+def test_null_means_not_given(capture_files):
+    d, doc = capture_files
+    doc["exposure_time"] = None
+    doc["camera"].update(cy=None, fy=None)
+    doc["gyro"]["orientation"] = None
+    (d / "cap.json").write_text(json.dumps(doc))
+    cap = load_capture(d / "cap.json", exif_hints={"exposure_time": 0.02})
+    assert cap.exposure_time == 0.02 and cap.camera.cy == 381.5 and cap.camera.fy == 819.2
+    assert np.array_equal(cap.axes, np.eye(3))
+
+
+def test_gyro_paths_home_folders_and_deep_nesting(capture_files, monkeypatch):
+    d, doc = capture_files
+    monkeypatch.setenv("HOME", str(d))
+    doc["gyro"]["path"] = "~/gyro.gcsv"
+    (d / "cap.json").write_text(json.dumps(doc))
+    assert load_capture(d / "cap.json").log.source == str(d / "gyro.gcsv")
+    (d / "logs").mkdir()
+    doc["gyro"]["path"] = "logs"
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="logs: is a folder, not a gyro log"):
+        load_capture(d / "cap.json")
+    (d / "deep.json").write_text("[" * 100000 + "]" * 100000)
+    with pytest.raises(InputError, match="deep.json: not valid JSON"):
+        load_capture(d / "deep.json")

@@ -239,7 +239,7 @@ def _edited_capture(d, name, edit):
 @pytest.mark.parametrize("edit,match", [
     (lambda doc: doc.update(camera=[1, 2]), "'camera' must be a JSON object"),
     (lambda doc: doc.update(gyro="gyro.gcsv"), "'gyro' must be a JSON object"),
-    (lambda doc: doc["gyro"].update(path=None), "gyro.path must be a file path"),
+    (lambda doc: doc["gyro"].update(path=None), "missing gyro.path"),
     (lambda doc: doc["gyro"].update(path=5), "gyro.path must be a file path"),
     (lambda doc: doc["gyro"].update(max_gap="abc"), "'max_gap' must be a number"),
     (lambda doc: doc["gyro"].update(max_gap=-1), "max_gap must be a positive number"),
@@ -265,14 +265,14 @@ def test_bad_capture_fields_are_named_not_tracebacks(capture_dir, capsys, edit, 
 
 
 def test_a_blur_longer_than_the_frame_is_refused_before_any_work(capture_dir, capsys):
-    """A focal length of 1 px puts the frame's edge nearly 90 degrees off axis: the blur there
-    would span thousands of pixels. Every command refuses it (instead of exhausting memory,
-    or time in simulate) and names what to check."""
+    """A focal length 100x too long (for another resolution) makes the fixture's 0.015 rad
+    of shake a blur of about 300 px, longer than its 256 px frame. Every command refuses it
+    (instead of exhausting memory, or time in simulate) and names what to check."""
     d = capture_dir
     cap = str(d / "cap.json")
-    for argv in (["psf", "--capture", cap, "--fx", "1", "--at", "0,0", "-o", str(d / "p.npy")],
-                 ["deblur", str(d / "sharp.jpg"), "--capture", cap, "--fx", "1", "-o", str(d / "o.png")],
-                 ["simulate", str(d / "sharp.jpg"), "--capture", cap, "--fx", "1", "-o", str(d / "s.png")]):
+    for argv in (["psf", "--capture", cap, "--fx", "2e4", "--at", "0,0", "-o", str(d / "p.npy")],
+                 ["deblur", str(d / "sharp.jpg"), "--capture", cap, "--fx", "2e4", "-o", str(d / "o.png")],
+                 ["simulate", str(d / "sharp.jpg"), "--capture", cap, "--fx", "2e4", "-o", str(d / "s.png")]):
         msg = _run_error(argv, capsys)
         assert "cap.json" in msg and "more than the" in msg and "focal length" in msg
     assert not any((d / n).exists() for n in ("p.npy", "o.png", "s.png"))
@@ -328,3 +328,27 @@ def test_a_too_small_photo_is_named(capture_dir, capsys):
     write_photo(d / "tiny.png", np.full((8, 8, 3), 0.5, np.float32))
     msg = _run_error(["deblur", str(d / "tiny.png"), "--blind", "-o", str(d / "o.png")], capsys)
     assert "tiny.png: the image has only 8 rows" in msg
+
+
+def test_a_scaled_camera_is_said_and_a_crop_is_flagged(capture_dir, capsys):
+    """The capture's camera is 256x192. A half-size photo is a resize (128x96); a photo
+    two columns short is more likely a crop, whose intrinsics scaling would get wrong."""
+    d = capture_dir
+    full = read_photo(d / "sharp.jpg").pixels
+    write_photo(d / "half.png", full[::2, ::2])
+    write_photo(d / "crop.png", full[:, 1:-1])
+    said = {}
+    for name in ("half.png", "crop.png", "sharp.jpg"):
+        assert main(["simulate", str(d / name), "--capture", str(d / "cap.json"),
+                     "-o", str(d / ("s_" + name.replace(".jpg", ".png")))]) == 0
+        said[name] = capsys.readouterr().out
+    assert "scaled to the photo's 128x96" in said["half.png"] and "crop" not in said["half.png"]
+    assert "scaled to the photo's 254x192; the aspect ratios differ by 0.78%: a cropped" \
+        in said["crop.png"]
+    assert "intrinsics are scaled" not in said["sharp.jpg"]
+
+
+def test_a_camera_error_from_an_option_names_the_option(capture_dir, capsys):
+    msg = _run_error(["psf", "--capture", str(capture_dir / "cap.json"), "--fx", "3.9",
+                      "--at", "0,0", "-o", str(capture_dir / "p.npy")], capsys)
+    assert "cap.json with --fx: camera: focal length fx=3.9" in msg and "in mm or 35 mm" in msg

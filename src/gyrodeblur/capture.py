@@ -43,6 +43,9 @@ __all__ = ["Capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
 BIAS_GUARD = 0.05
+#: A principal point further than this fraction of the size from the image centre gets a
+#: warning (intrinsics for another resolution, or a crop).
+_FAR_PRINCIPAL_POINT = 0.25
 #: Seconds of gyro log integrated on each side of the exposure window.
 ORIENTATION_MARGIN = 0.25
 
@@ -110,6 +113,8 @@ class Capture:
             raise InputError(src, f"readout_time must be >= 0, got {self.readout_time}")
         object.__setattr__(self, "axes", parse_axes(self.axes, source=src))
         try:
+            if any(isinstance(b, (bool, np.bool_)) for b in np.ravel(np.asarray(self.bias, object))):
+                raise TypeError             # JSON true/false is not a rate
             bias = np.array(self.bias, dtype=np.float64).reshape(-1)     # a copy
         except (TypeError, ValueError):
             bias = np.full(1, np.nan)
@@ -271,6 +276,24 @@ def _warn_unknown_keys(data: dict, source: str) -> None:
                           stacklevel=3)
 
 
+def _no_repeated_keys(source: str):
+    """A ``json.load`` hook refusing a key given twice in one object (the last would win
+    silently: ``"readout_time": 0.03, ..., "readout_time": 0`` a global shutter)."""
+    def hook(pairs):
+        seen = set()
+        for k, _ in pairs:
+            if k in seen:
+                raise InputError(source, f"key {k!r} appears twice in one object")
+            seen.add(k)
+        return dict(pairs)
+    return hook
+
+
+def _given(d: dict) -> dict:
+    """``d`` without the keys whose value is ``null``: null means "not given" everywhere."""
+    return {k: v for k, v in d.items() if v is not None}
+
+
 def _section(data: dict, key: str, source: str) -> dict:
     """``data[key]`` (a JSON object, or absent/null: empty) as a new dict."""
     v = data.get(key)
@@ -278,7 +301,7 @@ def _section(data: dict, key: str, source: str) -> dict:
         return {}
     if not isinstance(v, dict):
         raise InputError(source, f"{key!r} must be a JSON object, got {v!r}")
-    return dict(v)
+    return _given(v)
 
 
 def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | None = None,
@@ -314,9 +337,11 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         src = os.fspath(path)
         try:
             with open(src, encoding="utf-8-sig") as fh:
-                data = json.load(fh)
+                data = json.load(fh, object_pairs_hook=_no_repeated_keys(src))
         except FileNotFoundError:
             raise InputError(src, "capture description not found") from None
+        except RecursionError:
+            raise InputError(src, "not valid JSON (nested too deeply)") from None
         except json.JSONDecodeError as exc:
             raise InputError(src, f"not valid JSON ({exc.msg} at line {exc.lineno})") from None
         except (OSError, UnicodeDecodeError) as exc:
@@ -324,6 +349,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         if not isinstance(data, dict):
             raise InputError(src, "the capture description must be a JSON object")
         _warn_unknown_keys(data, src)
+        data = _given(data)
         base = os.path.dirname(os.path.abspath(src))
     if overrides is not None and not isinstance(overrides, dict):
         raise TypeError(f"overrides must be a dict, got {type(overrides).__name__}")
@@ -380,13 +406,21 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     try:
         camera = Camera(*intrinsics, width, height)
     except InputError as exc:             # name the file (or the options) it came from
-        raise InputError(src, f"{exc.source}: {exc.problem}") from None
+        opts = [f"--{k}" for k in ("fx", "fy", "cx", "cy") if k in ov]
+        where = f"{src} with {', '.join(opts)}" if opts and path is not None else src
+        raise InputError(where, f"{exc.source}: {exc.problem}") from None
+    off = max(abs(camera.cx - (width - 1) / 2) / width, abs(camera.cy - (height - 1) / 2) / height)
+    if off > _FAR_PRINCIPAL_POINT:
+        warnings.warn(f"{src}: the principal point ({camera.cx:g}, {camera.cy:g}) px is far from "
+                      f"the centre of the {width}x{height} image; if camera.fx, cx and cy are for "
+                      "another resolution, give camera.width and camera.height too (they are "
+                      "then scaled to the photo)", stacklevel=2)
 
     if "path" not in gyro_d:
         raise InputError(src, "missing gyro.path (or --gyro)")
     if not isinstance(gyro_d["path"], (str, os.PathLike)):
         raise InputError(src, f"gyro.path must be a file path (a string), got {gyro_d['path']!r}")
-    gpath = os.path.join(base, os.fspath(gyro_d["path"]))
+    gpath = os.path.join(base, os.path.expanduser(os.fspath(gyro_d["path"])))
     fmt = gyro_d.get("format")
     csv_opts = {k: gyro_d[k] for k in CSV_OPTION_KEYS if k in gyro_d}
     rc = csv_opts.get("rate_columns")
@@ -394,7 +428,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         if isinstance(rc, str) or not isinstance(rc, (list, tuple)) or len(rc) != 3:
             raise InputError(src, f"gyro.rate_columns must list three columns, got {rc!r}")
         csv_opts["rate_columns"] = tuple(rc)
-    log = read_gyro_log(gpath, fmt, **(csv_opts if fmt in (None, "csv") else {}))
+    log = read_gyro_log(gpath, fmt, **csv_opts)
     if "time_unit_from" in log.meta and report:
         report(f"gyro log times read in {log.meta['time_unit']} (from "
                f"{log.meta['time_unit_from']}; give --time-unit if that is wrong)")

@@ -69,7 +69,9 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
     g.add_argument("--readout-time", type=float, metavar="S",
                    help="seconds from the first row's start to the last row's (0 = global shutter)")
     for k in ("fx", "fy", "cx", "cy"):
-        g.add_argument(f"--{k}", type=float, metavar="PX", help=f"intrinsic {k} in pixels")
+        g.add_argument(f"--{k}", type=float, metavar="PX",
+                       help=f"intrinsic {k} in pixels of the capture's camera.width x height "
+                            "(the photo's when the capture gives no size)")
     g.add_argument("--gyro", metavar="PATH", help="gyro log (gcsv, csv or android events)")
     g.add_argument("--gyro-format", choices=("gcsv", "csv", "android"))
     g.add_argument("--orientation", metavar="AXES",
@@ -141,6 +143,7 @@ def _load_capture(args, photo=None, say=None):
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
                        report=say)
     if photo is not None:
+        given_cam = cap.camera
         try:
             cap = cap.scaled_to(size[0], size[1], source=photo.path)
         except InputError as exc:
@@ -150,6 +153,12 @@ def _load_capture(args, photo=None, say=None):
                                  f"--photo-rotation {turned}; as stored the photo fits, so "
                                  f"its pixels were not turned: leave the option out") from None
             raise
+        if cap.camera is not given_cam:
+            sx, sy = size[0] / given_cam.width, size[1] / given_cam.height  # more than rounding:
+            crop = (f"; the aspect ratios differ by {abs(sx / sy - 1):.2%}: a cropped photo "
+                    "needs the crop's own intrinsics" if abs(sx / sy - 1) > 1 / min(size) else "")
+            say(f"note: the capture's camera is {given_cam.width}x{given_cam.height}: its "
+                f"intrinsics are scaled to the photo's {size[0]}x{size[1]}{crop}")
     return cap
 
 

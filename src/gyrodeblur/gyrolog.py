@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import csv
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -221,10 +222,15 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
         Passed to :func:`read_csv_log` for ``csv``.
     """
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise InputError(path, "is a folder, not a gyro log")
     if not os.path.isfile(path):
         raise InputError(path, "gyro log not found")
     if format is None:
         format = _guess_format(path)
+    if options and format != "csv":
+        warnings.warn(f"{path}: {', '.join(sorted(options))} appl{'ies' if len(options) == 1 else 'y'} "
+                      f"to CSV logs only; this log is {format}: ignored", stacklevel=2)
     if format == "gcsv":
         return read_gcsv(path)
     if format == "csv":
