@@ -234,3 +234,16 @@ def test_gyro_paths_home_folders_and_deep_nesting(capture_files, monkeypatch):
     (d / "deep.json").write_text("[" * 100000 + "]" * 100000)
     with pytest.raises(InputError, match="deep.json: not valid JSON"):
         load_capture(d / "deep.json")
+
+
+def test_a_duration_in_ms_is_named_when_the_log_does_not_cover_it(capture_files):
+    d, doc = capture_files
+    doc["exposure_time"] = 30.0                  # ms written as seconds
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="exposure lasts 30.02 s; exposure_time and "
+                                         "readout_time are seconds, not ms"):
+        load_capture(d / "cap.json")
+    doc["exposure_time"], doc["exposure_start"] = 0.03, 2000.0     # a clock mismatch
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="check time_offset and exposure_start"):
+        load_capture(d / "cap.json")

@@ -138,9 +138,11 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
     """
     src = log.source
     if log.t[0] > t0 or log.t[-1] < t1:
+        check = ("time_offset and exposure_start" if t1 - t0 <= min(1.0, log.t[-1] - log.t[0])
+                 else f"the durations: the {what} lasts {t1 - t0:.6g} s; exposure_time and "
+                      "readout_time are seconds, not ms")
         raise InputError(src, f"gyro log covers {log.t[0]:.6f}..{log.t[-1]:.6f} s but the "
-                              f"{what} needs {t0:.6f}..{t1:.6f} s (check time_offset and "
-                              "exposure_start)")
+                              f"{what} needs {t0:.6f}..{t1:.6f} s (check {check})")
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(log.t, t1, side="left")), len(log.t) - 1)
     gaps = np.diff(log.t[i0:i1 + 1])
