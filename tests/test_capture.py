@@ -247,3 +247,14 @@ def test_a_duration_in_ms_is_named_when_the_log_does_not_cover_it(capture_files)
     (d / "cap.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="check time_offset and exposure_start"):
         load_capture(d / "cap.json")
+
+
+def test_a_key_in_the_wrong_section_and_utf16_are_explained(capture_files):
+    d, doc = capture_files
+    doc["bias"] = [0.0, 0.0, 0.0]                  # belongs in "gyro"
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="unknown key.*bias belongs in gyro"):
+        load_capture(d / "cap.json")
+    (d / "cap.json").write_text(json.dumps(doc), encoding="utf-16")
+    with pytest.raises(InputError, match="cap.json: cannot read: not UTF-8 text"):
+        load_capture(d / "cap.json")

@@ -271,9 +271,11 @@ def _warn_unknown_keys(data: dict, source: str) -> None:
                    and k != "comment"]
         if unknown:
             where = f"{name}." if name else ""
+            moved = [f"{k} belongs in {sec}" for k in unknown for sec in ("camera", "gyro")
+                     if not name and k in KNOWN_KEYS[sec]]
             warnings.warn(f"{source}: unknown key(s) {', '.join(where + str(k) for k in unknown)} "
-                          f"ignored (known: {', '.join(where + k for k in KNOWN_KEYS[name])})",
-                          stacklevel=3)
+                          f"ignored (known: {', '.join(where + k for k in KNOWN_KEYS[name])}"
+                          + (f"; {', '.join(moved)}" if moved else "") + ")", stacklevel=3)
 
 
 def _no_repeated_keys(source: str):
@@ -344,7 +346,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             raise InputError(src, "not valid JSON (nested too deeply)") from None
         except json.JSONDecodeError as exc:
             raise InputError(src, f"not valid JSON ({exc.msg} at line {exc.lineno})") from None
-        except (OSError, UnicodeDecodeError) as exc:
+        except UnicodeDecodeError:
+            raise InputError(src, "cannot read: not UTF-8 text (save it as UTF-8; UTF-16, as "
+                                  "some Windows editors write, is not read)") from None
+        except OSError as exc:
             raise InputError(src, f"cannot read ({exc})") from None
         if not isinstance(data, dict):
             raise InputError(src, "the capture description must be a JSON object")
