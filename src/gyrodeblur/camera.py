@@ -65,11 +65,12 @@ class Camera:
             raise InputError("camera", f"image size {self.width}x{self.height} is too small")
         side = max(int(self.width), int(self.height))
         if min(self.fx, self.fy) < MIN_FOCAL_PER_SIDE * side:
-            raise InputError("camera", f"focal length fx={self.fx:g}, fy={self.fy:g} px is under "
-                                       f"{MIN_FOCAL_PER_SIDE:g} x the image's {side} px side (a view "
-                                       f"wider than {_widest_view_deg():.0f} degrees): is it in mm or "
-                                       "35 mm-equivalent? In pixels it is f_mm x width_px / "
-                                       "sensor_width_mm, or f_35mm x width_px / 36")
+            raise InputError("camera", f"focal length fx={self.fx:g}, fy={self.fy:g} px is "
+                                       f"under {MIN_FOCAL_PER_SIDE:g} x the image's {side} px "
+                                       f"side (a view wider than {_widest_view_deg():.0f} "
+                                       "degrees): is it in mm or 35 mm-equivalent? In pixels "
+                                       "it is f_mm x width_px / sensor_width_mm, or f_35mm x "
+                                       "width_px / 36")
         for name, n in (("cx", self.width), ("cy", self.height)):
             v = getattr(self, name)
             if not -0.5 <= v <= n - 0.5:

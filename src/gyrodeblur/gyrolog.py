@@ -141,8 +141,8 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
         check = ("time_offset and exposure_start" if t1 - t0 <= min(1.0, log.t[-1] - log.t[0])
                  else f"the durations: the {what} lasts {t1 - t0:.6g} s; exposure_time and "
                       "readout_time are seconds, not ms")
-        raise InputError(src, f"gyro log covers {log.t[0]:.6f}..{log.t[-1]:.6f} s but the "
-                              f"{what} needs {t0:.6f}..{t1:.6f} s (check {check})")
+        raise InputError(src, f"gyro log covers {_secs(log.t[0])}..{_secs(log.t[-1])} s but the "
+                              f"{what} needs {_secs(t0)}..{_secs(t1)} s (check {check})")
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(log.t, t1, side="left")), len(log.t) - 1)
     gaps = np.diff(log.t[i0:i1 + 1])
@@ -152,6 +152,11 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
                               f"{log.t[j]:.6f} s, inside the {what} (limit "
                               f"{max_gap * 1e3:.0f} ms; gyro.max_gap or --max-gap raises "
                               f"it, at the cost of interpolating across the gap)")
+
+
+def _secs(t: float) -> str:
+    """A time for a message: microseconds, or 7 digits for an absurd one (a 1e300 offset)."""
+    return f"{t:.6f}" if abs(t) < 1e12 else f"{t:.6g}"
 
 
 def rate_noise(log: GyroLog) -> float:
@@ -231,8 +236,9 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if format is None:
         format = _guess_format(path)
     if options and format != "csv":
-        warnings.warn(f"{path}: {', '.join(sorted(options))} appl{'ies' if len(options) == 1 else 'y'} "
-                      f"to CSV logs only; this log is {format}: ignored", stacklevel=2)
+        verb = "applies" if len(options) == 1 else "apply"
+        warnings.warn(f"{path}: {', '.join(sorted(options))} {verb} to CSV logs only; this "
+                      f"log is {format}: ignored", stacklevel=2)
     if format == "gcsv":
         return read_gcsv(path)
     if format == "csv":
