@@ -148,28 +148,43 @@ def test_unknown_keys_are_warned_of_and_notes_are_not(capture_files):
         load_capture(d / "cap.json")                   # a clean file: no warning
 
 
-@pytest.mark.parametrize("fx, match", [
-    (4.2, "in mm or 35 mm-equivalent"),          # a phone's focal length in mm
-    (26.0, "in mm or 35 mm-equivalent"),         # ... and its 35 mm equivalent
-])
-def test_a_focal_length_not_in_pixels_is_refused(capture_files, fx, match):
+@pytest.mark.parametrize("fx", [4.2, 26.0])     # a phone's focal length in mm, its 35 mm equiv.
+def test_a_focal_length_not_in_pixels_is_refused(capture_files, fx):
     """Either would make a wide-angle blur at the corners, not one longer than the frame,
     so only this check catches it."""
     d, doc = capture_files
     doc["camera"].update(fx=fx, fy=fx)
     (d / "cap.json").write_text(json.dumps(doc))
-    with pytest.raises(InputError, match=match) as exc:
+    with pytest.raises(InputError, match=r"cap.json: camera: focal length .* is it in mm or 35 "
+                                         r"mm-equivalent\? In pixels it is"):
         load_capture(d / "cap.json")
-    assert "cap.json" in str(exc.value)
-    Camera(0.16 * 1024, 0.16 * 1024, 511.5, 381.5, 1024, 764)     # a 145-degree view is fine
 
 
-def test_a_principal_point_outside_the_frame_is_refused_and_off_centre_warned(capture_files):
+def test_focal_length_checks_name_where_the_value_came_from(capture_files):
+    d, doc = capture_files
+    doc["camera"].update(fx=0.16 * 1024, fy=0.16 * 1024)   # a 145-degree view: fine
+    (d / "cap.json").write_text(json.dumps(doc))
+    load_capture(d / "cap.json")
+    with pytest.raises(InputError, match=r"cap.json with --fx: camera: focal length fx=3"):
+        load_capture(d / "cap.json", overrides={"fx": 3.0})
+    del doc["camera"]
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="the focal length from the photo's EXIF"):
+        load_capture(d / "cap.json", image_size=(1024, 764), exif_hints={"fx": 40.0})
+
+
+def test_a_principal_point_a_frame_off_is_refused_and_off_centre_warned(capture_files):
     d, doc = capture_files
     doc["camera"].update(cx=5000.0, cy=-3000.0)
     (d / "cap.json").write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="principal point cx=5000 px lies outside"):
+    with pytest.raises(InputError, match=r"principal point \(5000, -3000\) px is more than a "
+                                         "frame from the centre"):
         load_capture(d / "cap.json")
+    # a crop's own intrinsics (the top-left quarter of a 2048x1528 frame): outside, accepted
+    doc["camera"].update(cx=1023.5, cy=763.5)
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="far from the centre.*right for a crop's own"):
+        assert load_capture(d / "cap.json").camera.cx == 1023.5
     # intrinsics of the full frame without its size, for a half-size photo: the principal
     # point lands at the photo's corner; said, since nothing else would
     del doc["camera"]["width"], doc["camera"]["height"]
@@ -240,12 +255,17 @@ def test_a_duration_in_ms_is_named_when_the_log_does_not_cover_it(capture_files)
     d, doc = capture_files
     doc["exposure_time"] = 30.0                  # ms written as seconds
     (d / "cap.json").write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="exposure lasts 30.02 s; exposure_time and "
+    with pytest.raises(InputError, match="durations: the exposure lasts 30.02 s: exposure_time "
+                                         "and "
                                          "readout_time are seconds, not ms"):
         load_capture(d / "cap.json")
     doc["exposure_time"], doc["exposure_start"] = 0.03, 2000.0     # a clock mismatch
     (d / "cap.json").write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="check time_offset and exposure_start"):
+    with pytest.raises(InputError, match=r"\(check time_offset and exposure_start\)"):
+        load_capture(d / "cap.json")
+    doc["exposure_time"] = 1.5                   # a night exposure, or ms: both named
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="not ms; else time_offset and exposure_start"):
         load_capture(d / "cap.json")
 
 

@@ -363,3 +363,13 @@ def test_time_unit_from_interval_refuses_rates_outside_a_gyros():
     t = np.arange(100) * 5e6                       # 200 Hz in ns
     assert time_unit_from_interval(t)[0] == "ns"
     assert time_unit_from_interval(np.arange(100) * 0.1)[0] is None   # 10 Hz in s: refused
+
+
+def test_read_gyro_log_checks_its_format_and_options(tmp_path, trace):
+    write_gcsv(tmp_path / "g.gcsv", trace)
+    with pytest.raises(InputError, match="unknown gyro log format 'CSV'"):
+        read_gyro_log(tmp_path / "g.gcsv", "CSV", time_unit="ms")
+    with pytest.raises(TypeError, match="unknown option.*time_units"):
+        read_gyro_log(tmp_path / "g.gcsv", time_units="ms")
+    with pytest.warns(UserWarning, match="time_unit applies to CSV logs only; this log is gcsv"):
+        read_gyro_log(tmp_path / "g.gcsv", time_unit="ms")

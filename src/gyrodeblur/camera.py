@@ -11,16 +11,6 @@ from .errors import InputError
 __all__ = ["Camera"]
 
 
-#: Smallest focal length accepted, as a fraction of the image's longer side: a pinhole view
-#: of about 146 degrees across that side. A focal length in mm or 35 mm-equivalent given as
-#: pixels is far below it.
-MIN_FOCAL_PER_SIDE = 0.15
-
-
-def _widest_view_deg() -> float:
-    return float(np.degrees(2 * np.arctan(0.5 / MIN_FOCAL_PER_SIDE)))
-
-
 @dataclass(frozen=True)
 class Camera:
     """Pinhole intrinsics in pixels for an image of ``width`` x ``height``.
@@ -63,21 +53,6 @@ class Camera:
             raise InputError("camera", f"focal lengths must be positive (fx={self.fx}, fy={self.fy})")
         if int(self.width) < 2 or int(self.height) < 2:
             raise InputError("camera", f"image size {self.width}x{self.height} is too small")
-        side = max(int(self.width), int(self.height))
-        if min(self.fx, self.fy) < MIN_FOCAL_PER_SIDE * side:
-            raise InputError("camera", f"focal length fx={self.fx:g}, fy={self.fy:g} px is "
-                                       f"under {MIN_FOCAL_PER_SIDE:g} x the image's {side} px "
-                                       f"side (a view wider than {_widest_view_deg():.0f} "
-                                       "degrees): is it in mm or 35 mm-equivalent? In pixels "
-                                       "it is f_mm x width_px / sensor_width_mm, or f_35mm x "
-                                       "width_px / 36")
-        for name, n in (("cx", self.width), ("cy", self.height)):
-            v = getattr(self, name)
-            if not -0.5 <= v <= n - 0.5:
-                raise InputError("camera", f"principal point {name}={v:g} px lies outside the "
-                                           f"{int(self.width)}x{int(self.height)} image: it is in "
-                                           "pixels of that size (give camera.width and height "
-                                           "for intrinsics of another resolution)")
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
 

@@ -46,6 +46,10 @@ BIAS_GUARD = 0.05
 #: A principal point further than this fraction of the size from the image centre gets a
 #: warning (intrinsics for another resolution, or a crop).
 _FAR_PRINCIPAL_POINT = 0.25
+#: Smallest focal length a capture may give, as a fraction of the image's longer side: a
+#: pinhole view of about 147 degrees across that side. A focal length in mm or 35
+#: mm-equivalent given as pixels is far below it.
+MIN_FOCAL_PER_SIDE = 0.15
 #: Seconds of gyro log integrated on each side of the exposure window.
 ORIENTATION_MARGIN = 0.25
 
@@ -278,6 +282,40 @@ def _warn_unknown_keys(data: dict, source: str) -> None:
                           + (f"; {', '.join(moved)}" if moved else "") + ")", stacklevel=3)
 
 
+def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bool) -> None:
+    """Refuse intrinsics no pinhole photo has, and warn of unlikely ones: the values enter
+    here, as typed by a person or written by another tool (a focal length in mm, a principal
+    point as a fraction). ``origin(keys)`` names where the keys came from."""
+    w, h = camera.width, camera.height
+    side = max(w, h)
+    if min(camera.fx, camera.fy) < MIN_FOCAL_PER_SIDE * side:
+        what = ("the focal length from the photo's EXIF" if from_exif else
+                "is it in mm or 35 mm-equivalent? In pixels it is f_mm x width_px / "
+                "sensor_width_mm, or f_35mm x diagonal_px / 43.27")
+        raise InputError(origin(("fx", "fy")),
+                         f"camera: focal length fx={camera.fx:g}, fy={camera.fy:g} px is under "
+                         f"{MIN_FOCAL_PER_SIDE:g} x the image's {side} px side (a view wider "
+                         f"than {_widest_view_deg():.0f} degrees): {what}")
+    # a crop's own intrinsics may put the principal point outside it, but not a frame away
+    dx, dy = (camera.cx - (w - 1) / 2) / w, (camera.cy - (h - 1) / 2) / h
+    if max(abs(dx), abs(dy)) > 1.0:
+        raise InputError(origin(("cx", "cy")),
+                         f"camera: principal point ({camera.cx:g}, {camera.cy:g}) px is more "
+                         f"than a frame from the centre of the {w}x{h} image: it is in pixels of "
+                         "that size, not a fraction of it")
+    if max(abs(dx), abs(dy)) > _FAR_PRINCIPAL_POINT:
+        hint = ("; if camera.fx, cx and cy are for another resolution, give camera.width and "
+                "camera.height too (they are then scaled to the photo)" if not size_given
+                else " (right for a crop's own intrinsics, not for a scaled photo)")
+        warnings.warn(f"{origin(('cx', 'cy'))}: the principal point ({camera.cx:g}, "
+                      f"{camera.cy:g}) px is far from the centre of the {w}x{h} image{hint}",
+                      stacklevel=3)
+
+
+def _widest_view_deg() -> float:
+    return float(np.degrees(2 * np.arctan(0.5 / MIN_FOCAL_PER_SIDE)))
+
+
 def _no_repeated_keys(source: str):
     """A ``json.load`` hook refusing a key given twice in one object (the last would win
     silently: ``"readout_time": 0.03, ..., "readout_time": 0`` a global shutter)."""
@@ -364,6 +402,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise ValueError(f"unknown override(s) {', '.join(unknown)} (known: "
                          f"{', '.join(OVERRIDE_KEYS)})")
     cam_d = _section(data, "camera", src)
+    json_cam = set(cam_d)                 # the camera keys the file gives
     gyro_d = _section(data, "gyro", src)
     for k in ("fx", "fy", "cx", "cy", "width", "height"):
         if k in ov:
@@ -408,18 +447,22 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     cam_d.setdefault("cx", (width - 1) / 2)
     cam_d.setdefault("cy", (height - 1) / 2)
     intrinsics = [_get(cam_d, k, src) for k in ("fx", "fy", "cx", "cy")]
+    opts = [k for k in ("fx", "fy", "cx", "cy") if k in ov]
+
+    def origin(keys) -> str:          # the file, and the options among ``keys`` that set them
+        named = [f"--{k}" for k in opts if k in keys]
+        if not named:
+            return src
+        return f"{src} with {', '.join(named)}" if path is not None else ", ".join(named)
+
     try:
         camera = Camera(*intrinsics, width, height)
-    except InputError as exc:             # name the file (or the options) it came from
-        opts = [f"--{k}" for k in ("fx", "fy", "cx", "cy") if k in ov]
-        where = f"{src} with {', '.join(opts)}" if opts and path is not None else src
-        raise InputError(where, f"{exc.source}: {exc.problem}") from None
-    off = max(abs(camera.cx - (width - 1) / 2) / width, abs(camera.cy - (height - 1) / 2) / height)
-    if off > _FAR_PRINCIPAL_POINT:
-        warnings.warn(f"{src}: the principal point ({camera.cx:g}, {camera.cy:g}) px is far from "
-                      f"the centre of the {width}x{height} image; if camera.fx, cx and cy are for "
-                      "another resolution, give camera.width and camera.height too (they are "
-                      "then scaled to the photo)", stacklevel=2)
+    except InputError as exc:
+        raise InputError(origin((exc.source or "").replace("camera.", "").split(",")
+                                if exc.source != "camera" else ("fx", "fy")),
+                         f"{exc.source}: {exc.problem}") from None
+    _check_intrinsics(camera, origin, from_exif=not ({"fx", "fy"} & (json_cam | set(ov))),
+                      size_given=bool({"width", "height"} & (json_cam | set(ov))))
 
     if "path" not in gyro_d:
         raise InputError(src, "missing gyro.path (or --gyro)")

@@ -157,8 +157,9 @@ def _load_capture(args, photo=None, say=None):
             sx, sy = size[0] / given_cam.width, size[1] / given_cam.height  # more than rounding:
             crop = (f"; the aspect ratios differ by {abs(sx / sy - 1):.2%}: a cropped photo "
                     "needs the crop's own intrinsics" if abs(sx / sy - 1) > 1 / min(size) else "")
-            say(f"note: the capture's camera is {given_cam.width}x{given_cam.height}: its "
-                f"intrinsics are scaled to the photo's {size[0]}x{size[1]}{crop}")
+            say(f"note: {photo.path}: the capture's camera is {given_cam.width}x"
+                f"{given_cam.height}: its intrinsics are scaled to the photo's "
+                f"{size[0]}x{size[1]}{crop}")
     return cap
 
 

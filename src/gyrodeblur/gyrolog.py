@@ -138,9 +138,15 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
     """
     src = log.source
     if log.t[0] > t0 or log.t[-1] < t1:
-        check = ("time_offset and exposure_start" if t1 - t0 <= min(1.0, log.t[-1] - log.t[0])
-                 else f"the durations: the {what} lasts {t1 - t0:.6g} s; exposure_time and "
-                      "readout_time are seconds, not ms")
+        span, clocks = t1 - t0, "time_offset and exposure_start"
+        units = (f"the {what} lasts {span:.6g} s: exposure_time and readout_time are seconds, "
+                 "not ms")
+        if span <= 1.0:                            # a photo's exposure: the clocks
+            check = clocks
+        elif span <= log.t[-1] - log.t[0]:         # a night exposure, or ms read as s
+            check = f"{units}; else {clocks}"
+        else:                                      # longer than the whole log
+            check = f"the durations: {units}"
         raise InputError(src, f"gyro log covers {_secs(log.t[0])}..{_secs(log.t[-1])} s but the "
                               f"{what} needs {_secs(t0)}..{_secs(t1)} s (check {check})")
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
@@ -235,6 +241,12 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
         raise InputError(path, "gyro log not found")
     if format is None:
         format = _guess_format(path)
+    if format not in FORMATS:
+        raise InputError(path, f"unknown gyro log format {format!r} (known: {', '.join(FORMATS)})")
+    unknown = sorted(set(options) - set(_CSV_OPTIONS))
+    if unknown:
+        raise TypeError(f"unknown option(s) {', '.join(unknown)} "
+                        f"(known: {', '.join(_CSV_OPTIONS)})")
     if options and format != "csv":
         verb = "applies" if len(options) == 1 else "apply"
         warnings.warn(f"{path}: {', '.join(sorted(options))} {verb} to CSV logs only; this "
@@ -243,9 +255,11 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
         return read_gcsv(path)
     if format == "csv":
         return read_csv_log(path, **options)
-    if format == "android":
-        return read_android_events(path)
-    raise InputError(path, f"unknown gyro log format {format!r} (known: {', '.join(FORMATS)})")
+    return read_android_events(path)
+
+
+#: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.
+_CSV_OPTIONS = ("time_column", "rate_columns", "time_unit", "rate_unit", "delimiter")
 
 
 def _guess_format(path: str) -> str:
