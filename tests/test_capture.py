@@ -278,3 +278,14 @@ def test_a_key_in_the_wrong_section_and_utf16_are_explained(capture_files):
     (d / "cap.json").write_text(json.dumps(doc), encoding="utf-16")
     with pytest.raises(InputError, match="cap.json: cannot read: not UTF-8 text"):
         load_capture(d / "cap.json")
+
+
+@pytest.mark.parametrize("override, named", [
+    ({"readout_time": -1.0}, "with --readout-time: readout_time must be >= 0"),
+    ({"bias": [float("nan"), 0, 0]}, "with --bias: gyro bias must be three finite numbers"),
+    ({"max_gap": -1.0}, "with --max-gap: max_gap must be a positive number"),
+])
+def test_a_bad_value_from_an_option_names_the_option(capture_files, override, named):
+    d, _ = capture_files
+    with pytest.raises(InputError, match="cap.json " + named):
+        load_capture(d / "cap.json", overrides=override)

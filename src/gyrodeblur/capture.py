@@ -513,5 +513,16 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     spec = {k: v for k, v in gyro_d.items() if k not in ("bias",)}
     spec["path"] = os.fspath(gyro_d["path"])
     max_gap = _get(gyro_d, "max_gap", src, required=False)
-    return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
-                   spec, src, 0.05 if max_gap is None else max_gap)
+    try:
+        return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
+                       spec, src, 0.05 if max_gap is None else max_gap)
+    except InputError as exc:       # a field an option set: name the option too
+        if exc.source != src:
+            raise                   # the log's own errors (coverage) name the log
+        field = exc.problem.split()[0]
+        key = {"gyro": "bias"}.get(field, field)
+        if key not in ov:
+            raise
+        flag = "--" + key.replace("_", "-")
+        raise InputError(f"{src} with {flag}" if path is not None else flag,
+                         exc.problem) from None
