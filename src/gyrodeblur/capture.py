@@ -50,6 +50,7 @@ _FAR_PRINCIPAL_POINT = 0.25
 #: pinhole view of about 147 degrees across that side. A focal length in mm or 35
 #: mm-equivalent given as pixels is far below it.
 MIN_FOCAL_PER_SIDE = 0.15
+_WIDEST_VIEW_DEG = float(np.degrees(2 * np.arctan(0.5 / MIN_FOCAL_PER_SIDE)))
 #: Seconds of gyro log integrated on each side of the exposure window.
 ORIENTATION_MARGIN = 0.25
 
@@ -295,25 +296,21 @@ def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bo
         raise InputError(origin(("fx", "fy")),
                          f"camera: focal length fx={camera.fx:g}, fy={camera.fy:g} px is under "
                          f"{MIN_FOCAL_PER_SIDE:g} x the image's {side} px side (a view wider "
-                         f"than {_widest_view_deg():.0f} degrees): {what}")
+                         f"than {_WIDEST_VIEW_DEG:.0f} degrees): {what}")
     # a crop's own intrinsics may put the principal point outside it, but not a frame away
-    dx, dy = (camera.cx - (w - 1) / 2) / w, (camera.cy - (h - 1) / 2) / h
-    if max(abs(dx), abs(dy)) > 1.0:
+    off = max(abs(camera.cx - (w - 1) / 2) / w, abs(camera.cy - (h - 1) / 2) / h)
+    if off > 1.0:
         raise InputError(origin(("cx", "cy")),
                          f"camera: principal point ({camera.cx:g}, {camera.cy:g}) px is more "
                          f"than a frame from the centre of the {w}x{h} image: it is in pixels of "
                          "that size, not a fraction of it")
-    if max(abs(dx), abs(dy)) > _FAR_PRINCIPAL_POINT:
+    if off > _FAR_PRINCIPAL_POINT:
         hint = ("; if camera.fx, cx and cy are for another resolution, give camera.width and "
                 "camera.height too (they are then scaled to the photo)" if not size_given
                 else " (right for a crop's own intrinsics, not for a scaled photo)")
         warnings.warn(f"{origin(('cx', 'cy'))}: the principal point ({camera.cx:g}, "
                       f"{camera.cy:g}) px is far from the centre of the {w}x{h} image{hint}",
                       stacklevel=3)
-
-
-def _widest_view_deg() -> float:
-    return float(np.degrees(2 * np.arctan(0.5 / MIN_FOCAL_PER_SIDE)))
 
 
 def _no_repeated_keys(source: str):
@@ -447,20 +444,18 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     cam_d.setdefault("cx", (width - 1) / 2)
     cam_d.setdefault("cy", (height - 1) / 2)
     intrinsics = [_get(cam_d, k, src) for k in ("fx", "fy", "cx", "cy")]
-    opts = [k for k in ("fx", "fy", "cx", "cy") if k in ov]
 
     def origin(keys) -> str:          # the file, and the options among ``keys`` that set them
-        named = [f"--{k}" for k in opts if k in keys]
+        named = ["--" + k.replace("_", "-") for k in keys if k in ov]
         if not named:
             return src
         return f"{src} with {', '.join(named)}" if path is not None else ", ".join(named)
 
     try:
         camera = Camera(*intrinsics, width, height)
-    except InputError as exc:
-        raise InputError(origin((exc.source or "").replace("camera.", "").split(",")
-                                if exc.source != "camera" else ("fx", "fy")),
-                         f"{exc.source}: {exc.problem}") from None
+    except InputError as exc:         # source "camera.fx" (one value) or "camera" (fx, fy)
+        keys = ("fx", "fy") if exc.source == "camera" else (exc.source.removeprefix("camera."),)
+        raise InputError(origin(keys), f"{exc.source}: {exc.problem}") from None
     _check_intrinsics(camera, origin, from_exif=not ({"fx", "fy"} & (json_cam | set(ov))),
                       size_given=bool({"width", "height"} & (json_cam | set(ov))))
 
@@ -519,10 +514,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     except InputError as exc:       # a field an option set: name the option too
         if exc.source != src:
             raise                   # the log's own errors (coverage) name the log
-        field = exc.problem.split()[0]
-        key = {"gyro": "bias"}.get(field, field)
-        if key not in ov:
+        field = exc.problem.split()[0]          # "readout_time must be ...", "gyro bias ..."
+        where = origin(({"gyro": "bias"}.get(field, field),))
+        if where == src:
             raise
-        flag = "--" + key.replace("_", "-")
-        raise InputError(f"{src} with {flag}" if path is not None else flag,
-                         exc.problem) from None
+        raise InputError(where, exc.problem) from None

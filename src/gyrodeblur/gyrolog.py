@@ -33,6 +33,7 @@ Formats
 from __future__ import annotations
 
 import csv
+import inspect
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -258,10 +259,6 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     return read_android_events(path)
 
 
-#: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.
-_CSV_OPTIONS = ("time_column", "rate_columns", "time_unit", "rate_unit", "delimiter")
-
-
 def _guess_format(path: str) -> str:
     if path.lower().endswith(".gcsv"):
         return "gcsv"
@@ -464,6 +461,10 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         meta["time_unit_from"] = f"the median sample interval, {interval:.6g} {tu}"
     return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
                    {"time_unit": tu, "rate_unit": ru, **meta})
+
+
+#: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.
+_CSV_OPTIONS = tuple(inspect.signature(read_csv_log).parameters)[1:]
 
 
 def read_android_events(path: str | os.PathLike) -> GyroLog:
