@@ -218,16 +218,30 @@ def test_a_shake_that_repeats_within_the_exposure_makes_the_offset_ambiguous(cas
 
 
 def test_deblurring_with_the_calibrated_capture_is_close_to_the_true_one(case, recovered):
+    """The calibrated capture deblurs the photo nearly as well as the true one once the
+    result is shifted onto the sharp photo: the blur shows the PSFs' shapes, while
+    where the output sits (the exposure-start orientation) follows the time offset and
+    bias, which one photo pins down to about a millisecond (here -2.3 ms: -2.8 dB
+    unregistered, -0.3 dB registered)."""
+    from scipy import ndimage
+    from skimage.registration import phase_cross_correlation
+
     from gyrodeblur.deblur import deblur
-    from gyrodeblur.metrics import psnr
+    from gyrodeblur.metrics import crop_border, psnr
     sharp, true, blurred = case
     res, bad, _ = recovered
     b = 16
-    p_true = psnr(sharp, deblur(blurred, true, grid=(2, 3)), b)
-    p_cal = psnr(sharp, deblur(blurred, res.capture, grid=(2, 3)), b)
-    p_bad = psnr(sharp, deblur(blurred, bad, grid=(2, 3)), b)
-    assert p_cal > p_bad + 3.0
-    assert p_cal > p_true - 1.5
+
+    def registered(out):
+        shift = phase_cross_correlation(crop_border(sharp.mean(-1), b), crop_border(out.mean(-1), b),
+                                        upsample_factor=10, normalization=None)[0]
+        return psnr(sharp, ndimage.shift(out, (*shift, 0), order=1, mode="nearest"), b)
+
+    out_true, out_cal, out_bad = (deblur(blurred, c, grid=(2, 3)) for c in (true, res.capture, bad))
+    assert psnr(sharp, out_cal, b) > psnr(sharp, out_bad, b) + 3.0
+    assert psnr(sharp, out_cal, b) > psnr(sharp, out_true, b) - 4.0
+    assert registered(out_cal) > registered(out_true) - 1.0
+    assert registered(out_cal) > registered(out_bad) + 6.0
 
 
 def test_fixed_parameters_are_not_estimated(case):

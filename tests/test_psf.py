@@ -2,7 +2,11 @@
 
 import numpy as np
 
-from gyrodeblur.psf import psf_field, render_psf, splat
+from scipy import ndimage
+from scipy.signal import fftconvolve
+
+from gyrodeblur.psf import displacement_field, landing_pixel, psf_field, render_psf, splat
+from gyrodeblur.simulate import simulate_blur
 
 
 def _support(psf, thresh=1e-4):
@@ -106,3 +110,40 @@ def test_field_and_splat_properties(make_capture):
     s = splat(np.array([[0.25, -0.5]]))
     r = s.shape[0] // 2
     assert np.isclose(s[r, r], 0.75 * 0.5) and np.isclose(s[r - 1, r + 1], 0.25 * 0.5)
+
+
+def test_psf_is_timed_by_the_row_its_light_lands_on(make_capture):
+    # The camera tilts up fast (content moves down, +y, at ~600 px/s) while the rows are
+    # read top to bottom: the light of a point seen at row y0 at the reference time is
+    # recorded 14-26 rows lower, when those rows are exposed. Against the warping forward
+    # model (simulate_blur: each row at its own time, no PSF involved), the PSF rendered
+    # at a point must describe the blur where its light lands; timed by the point's own
+    # row instead, it is off by the displacement times the readout rate (~1-2 px here).
+    cap = make_capture([2.0, 0.0, 0.0], readout=0.03, exposure=0.03)
+    rng = np.random.default_rng(0)
+    u = ndimage.gaussian_filter(rng.normal(size=(240, 320)), 2.0)
+    u = (0.5 + 0.3 * u / u.std()).astype(np.float32)
+    g = simulate_blur(u, cap)
+    for x0, y0 in [(160, 40), (160, 120), (100, 180)]:
+        p = np.round(landing_pixel(cap, x0, y0)).astype(int)
+        assert p[1] - y0 > 10                          # the light lands well below y0
+        win = (slice(p[1] - 8, p[1] + 9), slice(p[0] - 8, p[0] + 9))
+        err = {}
+        for row in (None, y0):                         # None: the landing row's timing
+            model = fftconvolve(u, render_psf(cap, x0, y0, row=row), mode="same")
+            err[row] = np.sqrt(((model[win] - g[win]) ** 2).mean()) / g[win].std()
+        assert err[None] < 0.15 and err[None] < 0.4 * err[y0], (x0, y0, err)
+
+
+def test_displacement_field_is_where_the_light_lands(make_capture):
+    # Warping by the field must put each reference pixel on its PSF's mean: the field at
+    # a grid point is the mean of that point's (uncentred) PSF, and a pitch moves it +y.
+    cap = make_capture([2.0, 0.3, 0.5], readout=0.03, exposure=0.03)
+    ys, xs, d = displacement_field(cap, step=60)
+    for i, j in [(0, 0), (2, 3), (len(ys) - 1, len(xs) - 1)]:
+        psf = render_psf(cap, xs[j], ys[i], max_step=0.05)
+        r = psf.shape[0] // 2
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        assert np.allclose([(psf * xx).sum(), (psf * yy).sum()], d[i, j], atol=0.05)
+        assert np.allclose(landing_pixel(cap, xs[j], ys[i]), (xs[j], ys[i]) + d[i, j])
+    assert (d[..., 1] > 0).all()
