@@ -303,3 +303,30 @@ def test_blind_kernels_per_patch_follow_a_blur_that_changes_across_the_photo():
     assert field2.points[0][0] < 256 < field2.points[1][0]
     p_one, p_two = psnr(sharp, one, 16), psnr(sharp, two, 16)
     assert p_two > p_one + 1.0
+
+
+def test_alignment_warp_reports_the_samples_it_mirrors_and_the_solver_skips_them():
+    from gyrodeblur.deblur import warp_by_displacement
+    from gyrodeblur.tiling import deconvolve_patchwise, patch_grid
+
+    img = np.random.default_rng(0).random((40, 60)).astype(np.float32)
+    field = (np.array([0.0, 39.0]), np.array([0.0, 59.0]), np.tile([2.0, -3.0], (2, 2, 1)))
+    out, outside = warp_by_displacement(img, field, return_outside=True)
+    np.testing.assert_array_equal(out, warp_by_displacement(img, field))
+    expected = np.zeros(img.shape, bool)
+    expected[:, -2:] = True                         # x + 2 beyond the last column
+    expected[:3, :] = True                          # y - 3 above the first row
+    np.testing.assert_array_equal(outside, expected)
+    seen = []
+
+    def record(sub, psf, unknown=None):
+        seen.append(None if unknown is None else int(unknown.sum()))
+        return sub
+
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    deconvolve_patchwise(out, patches, [np.ones((1, 1), np.float32)] * 4, record, margin=4,
+                         unknown=outside)
+    # row-major windows: the bottom-left one alone reaches neither strip (and is not told)
+    assert seen[2] is None and all(n > 0 for k, n in enumerate(seen) if k != 2), seen
+    with pytest.raises(ValueError, match="unknown must be a boolean mask"):
+        deconvolve_patchwise(out, patches, [np.ones((1, 1))] * 4, record, unknown=outside[1:])

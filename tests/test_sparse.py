@@ -411,3 +411,22 @@ def test_a_clipped_streak_starts_as_its_light():
     energy = (blurred[small] - 0.05).sum()
     np.testing.assert_allclose(start[light] - 0.05, energy / 9, rtol=1e-5)
     np.testing.assert_array_equal(start[~small], blurred[~small])
+
+
+def test_unknown_pixels_get_no_data_term(textured_case):
+    """A strip of the photo that is not data (what an alignment warp mirrors in from
+    outside the frame) corrupts the result when taken as data; marked unknown, the prior
+    fills it and the rest is restored as if the strip held the true blurred values."""
+    sharp, blurred, psf = textured_case
+    bad = blurred.copy()
+    bad[:, :24] = bad[:, 24:48][:, ::-1]                 # mirrored, as the warp does
+    unknown = np.zeros(bad.shape[:2], bool)
+    unknown[:, :24] = True
+    inner = (slice(16, -16), slice(24, 56))             # beside the strip
+    clean = _psnr(sharp[inner], sparse_deconvolve(blurred, psf, noise_sigma=0.01)[inner])
+    taken = _psnr(sharp[inner], sparse_deconvolve(bad, psf, noise_sigma=0.01)[inner])
+    masked = _psnr(sharp[inner], sparse_deconvolve(bad, psf, noise_sigma=0.01,
+                                                   unknown=unknown)[inner])
+    assert masked > taken + 0.5 and masked > clean - 1.0, (clean, taken, masked)
+    with pytest.raises(ValueError, match="unknown must be a boolean mask"):
+        sparse_deconvolve(bad, psf, unknown=unknown[:-1])

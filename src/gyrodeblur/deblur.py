@@ -8,6 +8,7 @@ whole photo (to estimate e.g. its noise level once) and its options into a
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -42,8 +43,6 @@ def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
                     noise_sigma: float | None = None, **options) -> Deconvolver:
     """Sparse-prior (TV) ADMM deconvolution; the noise level is measured once on the
     photo as encoded (where sensor noise is roughly uniform), not in linear light."""
-    import inspect
-
     from .noise import estimate_noise_sigma
     from .sparse import sparse_deconvolve
     known = set(inspect.signature(sparse_deconvolve).parameters) - {"image", "psf"}
@@ -242,7 +241,7 @@ LIGHT_AREA = _ZONE_AREA
 
 
 def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | None = None,
-                         light_area: int | None = None) -> np.ndarray:
+                         light_area: int | None = None, return_outside: bool = False):
     """``g(x + c(x))``: sample ``image`` where each pixel's light landed on average.
 
     ``displacement`` is ``(ys, xs, d)`` from :func:`gyrodeblur.psf.displacement_field`
@@ -279,6 +278,10 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     ceiling) are warped as they are. Memory, when the photo has clipped pixels: one uint8
     indicator per channel and pixel; with ``light_area``, two more uint8 and, for a moment,
     one int32 per pixel (blob labels).
+
+    ``return_outside``: also return a boolean ``(H, W)`` mask of the pixels whose sample
+    position lies outside the photo (more than half a pixel beyond its edge pixels): their
+    values are mirrored, not data (the light they need was recorded outside the frame).
     """
     ys, xs, d = displacement
     img = np.asarray(image, np.float32)
@@ -288,6 +291,7 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     ax = _linear_weights(np.arange(W) * ((len(xs) - 1) / max(xs[-1], 1)), len(xs)).T
     fields = [np.ascontiguousarray(d[..., k], dtype=np.float32) for k in (0, 1)]
     out = np.empty((H, W, C), np.float32)
+    outside = np.zeros((H, W), bool) if return_outside else None
     # remap takes up to 4 interleaved channels (a copy only for more than 4)
     groups = [np.ascontiguousarray(planes[..., c:c + 4]) for c in range(0, C, 4)]
     masks = nearby = None
@@ -304,6 +308,9 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
         map_x += np.arange(W, dtype=np.float32)[None, :]
         map_y = (ay @ fields[1]) @ ax
         map_y += np.arange(r0, r1, dtype=np.float32)[:, None]
+        if outside is not None:
+            outside[r0:r1] = ((map_x < -0.5) | (map_x > W - 0.5)
+                              | (map_y < -0.5) | (map_y > H - 0.5))
         for c0 in range(0, W, cols):
             c1 = min(W, c0 + cols)
             mx, my = map_x[:, c0:c1], map_y[:, c0:c1]
@@ -325,7 +332,8 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
                                   borderMode=cv2.BORDER_REFLECT_101)
                     res[m.reshape(res.shape) >= 128] = top
                 out[r0:r1, c0:c1, k:k + src.shape[2]] = res
-    return out[..., 0] if img.ndim == 2 else out
+    out = out[..., 0] if img.ndim == 2 else out
+    return (out, outside) if return_outside else out
 
 
 def _beside_small_blobs(masks: list, light_area: int) -> np.ndarray | None:
@@ -454,7 +462,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         Clip the result to [0, 1] (default; values outside are ringing or overshoot).
     displacement : (ys, xs, d), optional
         Mean-displacement field the (centred) PSFs leave out; the photo is warped by it
-        first (:func:`warp_by_displacement`).
+        first (:func:`warp_by_displacement`). Where the warp samples outside the photo
+        (a strip as wide as the displacement at an edge) the values are mirrored, not
+        data; a method whose deconvolver takes an ``unknown`` mask (``"sparse"``) gives
+        them no data term.
     **options
         Passed to the method's factory (e.g. ``phi`` for Wiener).
     """
@@ -465,16 +476,22 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     encoded = check_image(image)
     img = curve.decode(encoded)
     deconvolve = METHODS[method](img, encoded=encoded, **options)
+    unknown = None
     if displacement is not None:
         box = max(p.shape[0] * p.shape[1] for p in psfs)
-        img = warp_by_displacement(img, displacement, clipped=CLIPPED,
-                                   light_area=int(LIGHT_AREA * box))
+        img, outside = warp_by_displacement(img, displacement, clipped=CLIPPED,
+                                            light_area=int(LIGHT_AREA * box),
+                                            return_outside=True)
+        if outside.any() and "unknown" in inspect.signature(deconvolve).parameters:
+            unknown = outside          # mirrored samples are not data (sparse: no data term)
     if len(patches) == 1 and patches[0].shape == img.shape[:2]:
-        out = deconvolve(img, psfs[0])
+        out = (deconvolve(img, psfs[0]) if unknown is None
+               else deconvolve(img, psfs[0], unknown=unknown))
         if progress:
             progress(1, 1)
     else:
-        out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress)
+        out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
+                                   unknown=unknown)
     out = np.asarray(out, np.float32)
     if np.may_share_memory(out, image):  # never clip the caller's array in place
         out = out.copy()

@@ -117,6 +117,7 @@ def sparse_deconvolve(
     saturation_dilation: int = 1,
     clip: bool = True,
     workers: int | None = None,
+    unknown: np.ndarray | None = None,
 ) -> np.ndarray:
     r"""Deconvolve ``image`` by ``psf`` with a sparse gradient prior (TV by default).
 
@@ -155,6 +156,10 @@ def sparse_deconvolve(
         Clip the result to ``[0, 1]``.
     workers : int, optional
         Deprecated and ignored: the FFTs are OpenCV's now (see Notes, *Cost*).
+    unknown : ndarray of bool, shape (H, W), optional
+        Pixels whose values are not data (e.g. where an alignment warp sampled outside the
+        photo): they get no data term, like the border the solver adds, and the prior
+        fills them.
 
     Returns
     -------
@@ -251,6 +256,13 @@ def sparse_deconvolve(
     color = g.ndim == 3
     gc = np.moveaxis(g, 2, 0) if color else g[None]  # (C, H, W) view
     sat = _clipping(gc, saturation_level, saturation_dilation, h)
+    if unknown is not None:
+        unknown = np.asarray(unknown, bool)
+        if unknown.shape != gc.shape[1:]:
+            raise ValueError(f"unknown must be a boolean mask of shape {gc.shape[1:]}, "
+                             f"got {unknown.shape}")
+        if unknown.any():
+            sat = _without_data(sat, unknown)
     args = (float(weight), float(exponent), int(iterations))
     if gc.shape[0] > 1 and gc.shape[1] * gc.shape[2] > _CHANNELWISE_PIXELS:
         out = np.empty(gc.shape, np.float32)
@@ -366,6 +378,15 @@ def _inconsistency(top: np.ndarray, sat: np.ndarray, lab: np.ndarray, n: int,
     deficit = np.maximum(np.float32(0.975) * least[beside] - top[beside], 0.0)
     return (np.bincount(owner, deficit, minlength=n + 1)
             / np.maximum(np.bincount(owner, minlength=n + 1), 1))
+
+
+def _without_data(sat: _Clipping | None, unknown: np.ndarray) -> _Clipping:
+    """``sat`` with the ``unknown`` pixels added to those without a data term."""
+    if sat is None:
+        return _Clipping(unknown, None, None)
+    at_least = None if sat.at_least is None else sat.at_least & ~unknown[None]
+    return _Clipping(sat.ignore | unknown, at_least if at_least is not None and at_least.any()
+                     else None, sat.lights)
 
 
 def _one_channel(sat: _Clipping | None, c: int) -> _Clipping | None:

@@ -208,7 +208,8 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
                          psfs: Sequence[np.ndarray],
                          deconvolve: Callable[[np.ndarray, np.ndarray], np.ndarray], *,
                          margin: int | None = None, workers: int | None = None,
-                         progress: Callable[[int, int], object] | None = None) -> np.ndarray:
+                         progress: Callable[[int, int], object] | None = None,
+                         unknown: np.ndarray | None = None) -> np.ndarray:
     """Deconvolve every patch with its own PSF and blend the results (sec. 6.5.2).
 
     For each patch the window is extended by a margin of real neighbouring pixels
@@ -245,6 +246,11 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
         patch order, so the output is identical for any value.
     progress : callable, optional
         Called as ``progress(done, total)`` after each patch, from the calling thread.
+    unknown : ndarray of bool, shape (H, W), optional
+        Pixels that are not data (e.g. an alignment warp's samples outside the photo).
+        Where an extended window holds some, they are passed on as
+        ``deconvolve(sub_image, psf, unknown=sub_mask)``, so ``deconvolve`` must take that
+        keyword (:func:`~gyrodeblur.sparse.sparse_deconvolve` does).
 
     Returns
     -------
@@ -301,6 +307,9 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
 
     margins = [patch_margin(psf) for psf in psfs]
+    if unknown is not None and np.shape(unknown) != (height, width):
+        raise ValueError(f"unknown must be a boolean mask of shape {(height, width)}, "
+                         f"got {np.shape(unknown)}")
     _warn_large_psfs(patches, psfs)
 
     try:
@@ -324,7 +333,12 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
 
     def run(k: int) -> tuple[np.ndarray, tuple[int, int]]:
         sub, origin = extract(k)
-        res = np.asarray(deconvolve(sub, psfs[k]))
+        mask = None if unknown is None else unknown[origin[0]:origin[0] + sub.shape[0],
+                                                    origin[1]:origin[1] + sub.shape[1]]
+        if mask is not None and mask.any():
+            res = np.asarray(deconvolve(sub, psfs[k], unknown=mask))
+        else:
+            res = np.asarray(deconvolve(sub, psfs[k]))
         if res.shape != sub.shape:
             raise ValueError(f"deconvolve returned shape {res.shape} for a sub-image of "
                              f"shape {sub.shape}")
