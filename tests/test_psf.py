@@ -132,18 +132,45 @@ def test_psf_is_timed_by_the_row_its_light_lands_on(make_capture):
         for row in (None, y0):                         # None: the landing row's timing
             model = fftconvolve(u, render_psf(cap, x0, y0, row=row), mode="same")
             err[row] = np.sqrt(((model[win] - g[win]) ** 2).mean()) / g[win].std()
-        assert err[None] < 0.15 and err[None] < 0.4 * err[y0], (x0, y0, err)
+        assert err[None] < 0.2 and err[None] < 0.4 * err[y0], (x0, y0, err)
 
 
 def test_displacement_field_is_where_the_light_lands(make_capture):
-    # Warping by the field must put each reference pixel on its PSF's mean: the field at
-    # a grid point is the mean of that point's (uncentred) PSF, and a pitch moves it +y.
+    # Warping the photo blurred by the forward model (simulate_blur, no PSF) by the field
+    # must leave each pixel's blur centred on it: the warped photo then matches the sharp
+    # one convolved with the centred PSF. With the old own-row timing the residual was
+    # 0.14-0.47 of the signal; the field is also each PSF's mean.
+    from gyrodeblur.deblur import warp_by_displacement
     cap = make_capture([2.0, 0.3, 0.5], readout=0.03, exposure=0.03)
-    ys, xs, d = displacement_field(cap, step=60)
+    rng = np.random.default_rng(1)
+    u = ndimage.gaussian_filter(rng.normal(size=(240, 320)), 2.0)
+    u = (0.5 + 0.3 * u / u.std()).astype(np.float32)
+    field = displacement_field(cap)
+    warped = warp_by_displacement(simulate_blur(u, cap), field)
+    for x, y in [(100, 60), (200, 120), (160, 170)]:
+        psf = render_psf(cap, x, y, centred=True)
+        model = fftconvolve(u, psf, mode="same")
+        win = (slice(y - 8, y + 9), slice(x - 8, x + 9))
+        err = np.sqrt(((model[win] - warped[win]) ** 2).mean()) / warped[win].std()
+        assert err < 0.08, (x, y, err)
+    ys, xs, d = field
     for i, j in [(0, 0), (2, 3), (len(ys) - 1, len(xs) - 1)]:
         psf = render_psf(cap, xs[j], ys[i], max_step=0.05)
         r = psf.shape[0] // 2
         yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
         assert np.allclose([(psf * xx).sum(), (psf * yy).sum()], d[i, j], atol=0.05)
-        assert np.allclose(landing_pixel(cap, xs[j], ys[i]), (xs[j], ys[i]) + d[i, j])
-    assert (d[..., 1] > 0).all()
+    assert (d[..., 1] > 0).all()                     # a pitch up moves content down
+
+
+def test_a_skew_beyond_the_shutter_falls_back_to_the_points_own_row(make_capture):
+    # A telephoto tilting fast with a short exposure: content crosses rows faster than the
+    # shutter sweeps them, the landing fixed point has no stable solution, and the PSF
+    # is timed by the point's own row (a clear PSF, not an error or a wild landing pixel).
+    cap = make_capture([-4.0, 0.0, 0.0], f=2400.0, exposure=0.002, readout=0.03)
+    assert np.allclose(landing_pixel(cap, 160.0, 40.0), (160.0, 40.0))
+    psf = render_psf(cap, 160.0, 40.0)               # (the iteration's wild point: an error)
+    _, my = _centroid(psf)                           # content moves up (w_x < 0), own row:
+    assert np.isclose(psf.sum(), 1.0)               # mid-exposure 6 ms after the first row
+    assert abs(my + 2400 * np.tan(4.0 * (0.03 * 40 / 240 + 0.001))) < 1.0
+    ok = make_capture([-0.5, 0.0, 0.0], f=300.0, exposure=0.03, readout=0.03)
+    assert landing_pixel(ok, 160.0, 120.0)[1] < 120.0 - 3      # converged, moved up

@@ -420,6 +420,7 @@ def test_unknown_pixels_get_no_data_term(textured_case):
     sharp, blurred, psf = textured_case
     bad = blurred.copy()
     bad[:, :24] = bad[:, 24:48][:, ::-1]                 # mirrored, as the warp does
+    bad[60:64, 4:8] = 1.0                                # and clipped there: still no data
     unknown = np.zeros(bad.shape[:2], bool)
     unknown[:, :24] = True
     inner = (slice(16, -16), slice(24, 56))             # beside the strip

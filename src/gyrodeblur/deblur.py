@@ -45,7 +45,7 @@ def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
     photo as encoded (where sensor noise is roughly uniform), not in linear light."""
     from .noise import estimate_noise_sigma
     from .sparse import sparse_deconvolve
-    known = set(inspect.signature(sparse_deconvolve).parameters) - {"image", "psf"}
+    known = set(inspect.signature(sparse_deconvolve).parameters) - {"image", "psf", "unknown"}
     unknown = sorted(set(options) - known)
     if unknown:                      # refused now, not from inside a worker thread
         raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'sparse' "
@@ -482,7 +482,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         img, outside = warp_by_displacement(img, displacement, clipped=CLIPPED,
                                             light_area=int(LIGHT_AREA * box),
                                             return_outside=True)
-        if outside.any() and "unknown" in inspect.signature(deconvolve).parameters:
+        if outside.any() and _takes_unknown(deconvolve):
             unknown = outside          # mirrored samples are not data (sparse: no data term)
     if len(patches) == 1 and patches[0].shape == img.shape[:2]:
         out = (deconvolve(img, psfs[0]) if unknown is None
@@ -501,6 +501,14 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if clip:
         _clip_rows(out, 0.0, 1.0)
     return out
+
+
+def _takes_unknown(deconvolve) -> bool:
+    """Whether a method's deconvolver takes an ``unknown`` mask (pixels without data)."""
+    try:
+        return "unknown" in inspect.signature(deconvolve).parameters
+    except (TypeError, ValueError):      # a callable without an inspectable signature
+        return False
 
 
 def _clip_rows(a: np.ndarray, lo, hi) -> None:

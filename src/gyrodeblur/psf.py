@@ -14,7 +14,8 @@ positions are under ``max_step`` pixels apart, and each sample is splatted bilin
 onto the pixel grid. Timing the trace by ``x0``'s own row instead (where the point was
 at the reference time, not where its light is recorded) is wrong by the vertical
 displacement times the readout rate: 2-3 px of misplaced PSF for a 40 px shake at the
-benchmark's 30 ms readout. For a global shutter and small motions both give the same PSF.
+benchmark's 30 ms readout. For a global shutter both agree to second order in the
+rotation.
 
 The returned array is odd-sized with ``x0`` at its centre sample, sums to 1, and is
 indexed ``psf[dy + r, dx + r]`` for offsets ``(dx, dy)`` in pixels (x right, y down). With
@@ -41,10 +42,11 @@ _MAX_SAMPLES = 1 << 20
 
 
 def trace(capture: Capture, x0: float, y0: float, n: int, row: float | None = None) -> np.ndarray:
-    """Positions ``(n, 2)`` (x, y in pixels) that the light of the point seen at
-    ``(x0, y0)`` at the reference time reaches, at the midpoints of ``n`` equal steps of
-    the exposure of the row it lands on (:func:`landing_pixel`; ``row``: that row's
-    timing instead, e.g. the middle row's for one PSF of the whole photo)."""
+    """Positions ``(n, 2)`` (x, y in pixels) of the PSF at ``(x0, y0)``: ``(x0, y0)`` plus
+    the offsets ``p - x0_p(t)`` of the pixel ``p`` its light lands on
+    (:func:`landing_pixel`), at the midpoints of ``n`` equal steps of ``p``'s row's
+    exposure (``row``: that row's timing instead, e.g. the middle row's for one PSF of the
+    whole photo). To first order these are where the point's light goes."""
     p = landing_pixel(capture, x0, y0, row=row)
     return np.array([x0, y0], np.float64) + _gather_offsets(capture, p[0], p[1], n, row)
 
@@ -64,12 +66,14 @@ def _gather_offsets(capture: Capture, px, py, n: int, row=None) -> np.ndarray:
     return np.stack([px, py], axis=-1)[..., None, :] - src
 
 
-#: Fixed-point steps :func:`landing_pixel` takes at most, and the change (px) at which
-#: it stops. Each step shrinks the error by the rate at which the mean displacement
-#: changes per pixel (the rolling shutter's skew: 0.05 px per px at 1.7 rad/s, fx 1000
-#: px and a 25 ms readout), so two or three steps reach the tolerance.
+#: Fixed-point steps :func:`landing_pixel` takes at most, the change (px) at which it
+#: stops, and the residual (px) above which a point counts as not converged. Each step
+#: shrinks the error by the rolling shutter's skew, the change of the mean displacement
+#: per pixel (about rate x fx x readout / height: 0.06 px per px at 1.7 rad/s, fx 1000
+#: px, a 25 ms readout and 680 rows), so two or three steps reach the tolerance.
 _LANDING_STEPS = 8
 _LANDING_TOL = 1e-3
+_LANDING_RESIDUAL = 0.5
 
 
 def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndarray:
@@ -78,17 +82,27 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
 
     ``x0``, ``y0`` are pixel positions (scalars or arrays of one shape); ``n`` time steps
     of ``p``'s row's exposure (or ``row``'s) form the mean. Returns ``(..., 2)`` (x, y).
+
+    The fixed-point iteration converges while content moves across rows more slowly than
+    the shutter sweeps them (skew under 1). Where it does not (a telephoto lens tilting
+    fast with a short exposure), the point falls back to its own position: its PSF is then
+    timed by its own row, as a global shutter would have it.
     """
     x0 = np.asarray(x0, np.float64)
     y0 = np.asarray(y0, np.float64)
-    p = np.stack([x0, y0], axis=-1)
-    start = p.copy()
+    start = np.stack([x0, y0], axis=-1)
+    p = start.copy()
     for _ in range(_LANDING_STEPS):
         new = start + _gather_offsets(capture, p[..., 0], p[..., 1], n, row).mean(axis=-2)
-        done = np.abs(new - p).max() < _LANDING_TOL
+        step = np.abs(new - p)
         p = new
-        if done or not np.all(np.isfinite(p)):
+        if not np.nanmax(step, initial=0.0) >= _LANDING_TOL:     # all converged, or all NaN
             break
+    residual = np.abs(start + _gather_offsets(capture, p[..., 0], p[..., 1], n, row)
+                      .mean(axis=-2) - p).max(axis=-1)
+    lost = ~(residual <= _LANDING_RESIDUAL)                       # NaN too
+    if np.any(lost):
+        p = np.where(lost[..., None], start, p)
     return p
 
 
@@ -168,7 +182,8 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     radius : int, optional
         Force the half-size; default: the smallest holding the whole trace (+1 px).
     row : float, optional
-        Row whose rolling-shutter timing to use (default ``y``).
+        Row whose rolling-shutter timing to use (default: the row the light lands on,
+        :func:`landing_pixel`).
     centred : bool
         Subtract the trace's mean displacement, so the PSF's centre of mass is its centre
         sample (its shape only; see :func:`displacement_field`).
@@ -246,9 +261,10 @@ def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int 
                   centred: bool = False) -> float:
     """How fast the PSF changes across the frame: pixels of trace difference per pixel.
 
-    The traces of a ``probes`` grid of points are sampled at ``n`` equal steps of their
-    own rows' exposures; for every pair of neighbouring probes, the largest difference of
-    their displacements ``x(t) - x0`` at equal steps, divided by their distance, is a
+    The traces (:func:`trace`) of a ``probes`` grid of points are sampled at ``n`` equal
+    steps of the exposures of the rows their light lands on; for every pair of
+    neighbouring probes, the largest difference of their offsets from the probe at equal
+    steps, divided by their distance, is a
     finite-difference estimate of the displacement field's spatial derivative (roll,
     perspective and the rolling shutter's row timing all contribute). The maximum over
     pairs is returned: a patch of ``w`` pixels sees its PSF change by about

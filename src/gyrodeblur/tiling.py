@@ -213,7 +213,7 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
     """Deconvolve every patch with its own PSF and blend the results (sec. 6.5.2).
 
     For each patch the window is extended by a margin of real neighbouring pixels
-    (default :func:`patch_margin`: one blur length beyond the PSF's reach, plus
+    (default :func:`patch_margin`: the larger of the PSF's reach and its length, plus
     ``MARGIN_EXTRA`` = 8 px), clamped at the image border,
     where the deconvolver's own border padding takes over. The extended sub-image goes
     to ``deconvolve(sub_image, psf)``; the result is cropped back to the window,
@@ -307,9 +307,11 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
 
     margins = [patch_margin(psf) for psf in psfs]
-    if unknown is not None and np.shape(unknown) != (height, width):
-        raise ValueError(f"unknown must be a boolean mask of shape {(height, width)}, "
-                         f"got {np.shape(unknown)}")
+    if unknown is not None:
+        unknown = np.asarray(unknown, bool)
+        if unknown.shape != (height, width):
+            raise ValueError(f"unknown must be a boolean mask of shape {(height, width)}, "
+                             f"got {unknown.shape}")
     _warn_large_psfs(patches, psfs)
 
     try:
