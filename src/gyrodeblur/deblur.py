@@ -479,11 +479,13 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     unknown = None
     if displacement is not None:
         box = max(p.shape[0] * p.shape[1] for p in psfs)
-        img, outside = warp_by_displacement(img, displacement, clipped=CLIPPED,
-                                            light_area=int(LIGHT_AREA * box),
-                                            return_outside=True)
-        if outside.any() and _takes_unknown(deconvolve):
-            unknown = outside          # mirrored samples are not data (sparse: no data term)
+        warp = partial(warp_by_displacement, img, displacement, clipped=CLIPPED,
+                       light_area=int(LIGHT_AREA * box))
+        if _takes_unknown(deconvolve):  # mirrored samples are not data: no data term
+            img, outside = warp(return_outside=True)
+            unknown = outside if outside.any() else None
+        else:
+            img = warp()
     if len(patches) == 1 and patches[0].shape == img.shape[:2]:
         out = (deconvolve(img, psfs[0]) if unknown is None
                else deconvolve(img, psfs[0], unknown=unknown))

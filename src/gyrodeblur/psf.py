@@ -33,8 +33,8 @@ import numpy as np
 from .capture import Capture
 from .errors import InputError
 
-__all__ = ["trace", "landing_pixel", "render_psf", "splat", "PSFField", "psf_field", "psf_extent",
-           "psf_variation", "displacement_field", "check_blur_span"]
+__all__ = ["trace", "landing_pixel", "render_psf", "splat", "PSFField", "psf_field",
+           "psf_extent", "psf_variation", "displacement_field", "check_blur_span"]
 
 #: Largest allowed distance (px) between consecutive trace samples when rendering.
 MAX_STEP_PX = 0.25
@@ -47,7 +47,12 @@ def trace(capture: Capture, x0: float, y0: float, n: int, row: float | None = No
     (:func:`landing_pixel`), at the midpoints of ``n`` equal steps of ``p``'s row's
     exposure (``row``: that row's timing instead, e.g. the middle row's for one PSF of the
     whole photo). To first order these are where the point's light goes."""
-    p = landing_pixel(capture, x0, y0, row=row)
+    return _trace_from(capture, x0, y0, landing_pixel(capture, x0, y0, row=row), n, row)
+
+
+def _trace_from(capture: Capture, x0: float, y0: float, p: np.ndarray, n: int,
+                row: float | None) -> np.ndarray:
+    """:func:`trace` with the landing pixel ``p`` already found."""
     return np.array([x0, y0], np.float64) + _gather_offsets(capture, p[0], p[1], n, row)
 
 
@@ -125,14 +130,15 @@ def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float,
     if not (np.isfinite(x0) and np.isfinite(y0)):
         raise InputError(None, f"pixel position ({x0}, {y0}) is not finite")
     n = 64
-    pts = trace(capture, x0, y0, n, row)
+    p = landing_pixel(capture, x0, y0, row=row)       # once: it does not depend on n
+    pts = _trace_from(capture, x0, y0, p, n, row)
     check_blur_span(capture, float(np.ptp(pts, axis=0).max()), f"at ({x0:.0f}, {y0:.0f})")
     while True:
         step = np.abs(np.diff(pts, axis=0)).max() if n > 1 else 0.0
         if step < max_step or n >= _MAX_SAMPLES:
             return pts
         n = min(_MAX_SAMPLES, int(np.ceil(n * step / (0.8 * max_step))))
-        pts = trace(capture, x0, y0, n, row)
+        pts = _trace_from(capture, x0, y0, p, n, row)
 
 
 def splat(offsets: np.ndarray, weights: np.ndarray | None = None,
@@ -289,8 +295,8 @@ def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int 
 def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
     """Mean displacement (px) of each pixel's PSF: where, on average over the exposure,
     the light of the reference-time pixel is recorded, relative to that pixel
-    (:func:`landing_pixel`, so warping the photo by it, :func:`gyrodeblur.deblur.warp_by_displacement`,
-    leaves each pixel's PSF centred on it).
+    (:func:`landing_pixel`; warping the photo by it,
+    :func:`gyrodeblur.deblur.warp_by_displacement`, leaves each pixel's PSF centred on it).
 
     Evaluated on a regular grid (about ``step`` px apart, corners included) with ``n``
     time steps per row's exposure, vectorised; the field is smooth, so bilinear

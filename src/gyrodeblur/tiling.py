@@ -179,15 +179,23 @@ def blend_weights(patches: Sequence[Patch],
     return [(wy_of[(p.y0, p.y1)], wx_of[(p.x0, p.x1)]) for p in patches]
 
 
-def psf_radius(psf: np.ndarray) -> int:
-    """Largest row or column distance from the centre sample to a non-zero PSF sample."""
+def _support(psf: np.ndarray):
+    """Indices of the rows and of the columns of ``psf`` holding a non-zero sample."""
     psf = np.asarray(psf)
-    nz_rows = np.flatnonzero(np.any(psf != 0, axis=1))
-    nz_cols = np.flatnonzero(np.any(psf != 0, axis=0))
-    if nz_rows.size == 0:
+    nonzero = psf != 0
+    return np.flatnonzero(np.any(nonzero, axis=1)), np.flatnonzero(np.any(nonzero, axis=0))
+
+
+def _radius(psf: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> int:
+    if rows.size == 0:
         return 0
     cy, cx = psf.shape[0] // 2, psf.shape[1] // 2
-    return int(max(cy - nz_rows[0], nz_rows[-1] - cy, cx - nz_cols[0], nz_cols[-1] - cx))
+    return int(max(cy - rows[0], rows[-1] - cy, cx - cols[0], cols[-1] - cx))
+
+
+def psf_radius(psf: np.ndarray) -> int:
+    """Largest row or column distance from the centre sample to a non-zero PSF sample."""
+    return _radius(np.asarray(psf), *_support(psf))
 
 
 def patch_margin(psf: np.ndarray) -> int:
@@ -198,10 +206,9 @@ def patch_margin(psf: np.ndarray) -> int:
     context helps; where a blur changes abruptly within a margin (a synthetic test
     pattern), the margin holds the wrong blur, and a smaller ``margin`` is better."""
     psf = np.asarray(psf)
-    rows = np.flatnonzero(np.any(psf != 0, axis=1))
-    cols = np.flatnonzero(np.any(psf != 0, axis=0))
+    rows, cols = _support(psf)
     extent = 0 if rows.size == 0 else int(max(rows[-1] - rows[0], cols[-1] - cols[0]) + 1)
-    return max(psf_radius(psf), extent) + MARGIN_EXTRA
+    return max(_radius(psf, rows, cols), extent) + MARGIN_EXTRA
 
 
 def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
