@@ -97,3 +97,44 @@ def test_the_predicted_motion_follows_the_gyro():
     pred = reg.predict(theta, 0, 1)
     assert pred[0] == pytest.approx(expected, abs=0.2) and abs(pred[1]) < 0.2, (pred, expected)
     assert np.all(np.abs(reg.residuals(theta)) < 0.5)
+
+
+def test_the_predicted_motion_is_timed_by_the_rows_the_light_lands_on():
+    """Under a rolling shutter a point's light is recorded during the exposure of the row
+    it lands on, which a fast tilt moves away from the row it starts on; the PSFs are
+    timed so (:func:`gyrodeblur.psf.landing_pixel`) and the predicted motion between two
+    photos must be too. Steady pitch at 1 rad/s (content moves down at ~800 px/s), a 50 ms
+    readout over 400 rows, a long exposure then a short one: the mean of the landing
+    pixels' motion, worked out with ``landing_pixel`` and a rotation matrix for the 50 ms
+    between the photos. Timing the first photo by the points' own rows is ~1.5 px off."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.frame_registration import FrameRegistration
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.psf import landing_pixel
+    from gyrodeblur.spectral_criterion import Corrections
+
+    f, wx, size = 800.0, 1.0, (400, 600)
+    t = np.arange(0.0, 2.0, 0.002)
+    cam = Camera.centred(size[1], size[0], f)
+    log = GyroLog(t, np.tile((wx, 0.0, 0.0), (t.size, 1)))
+    cap_a = Capture(0.80, 0.050, 0.050, cam, log)
+    cap_b = Capture(0.85, 0.010, 0.050, cam, log)
+    img = np.full(size, 0.5)
+    photos = [CalibrationPhoto(img, c, "linear", i) for i, c in enumerate((cap_a, cap_b))]
+    reg = FrameRegistration(photos, extent=10.0)
+    pred = reg.predict(Corrections(axes=np.eye(3)), 0, 1)
+
+    gx, gy = np.meshgrid([0.25, 0.5, 0.75], [0.25, 0.5, 0.75])
+    px, py = gx.ravel() * (size[1] - 1), gy.ravel() * (size[0] - 1)
+    th = wx * (cap_b.exposure_start - cap_a.exposure_start)
+    R = np.array([[1, 0, 0], [0, np.cos(th), -np.sin(th)], [0, np.sin(th), np.cos(th)]])
+    ray = np.stack([(px - cam.cx) / f, (py - cam.cy) / f, np.ones(px.size)])
+    q = R.T @ ray                                     # the points' rays at b's start
+    bx, by = cam.cx + f * q[0] / q[2], cam.cy + f * q[1] / q[2]
+    expected = (landing_pixel(cap_b, bx, by) - landing_pixel(cap_a, px, py)).mean(0)
+    own_row_a = np.mean([landing_pixel(cap_a, x, y, row=y) - landing_pixel(cap_a, x, y)
+                         for x, y in zip(px, py)], axis=0)
+    assert abs(own_row_a[1]) > 1.0                     # the test can tell the two apart
+    assert np.allclose(pred, expected, atol=0.25), (pred, expected)

@@ -23,6 +23,10 @@ __all__ = ["FrameRegistration", "phase_shift"]
 #: the blur extent (thumbnail pixels): well inside the PSFs' main spectral lobe.
 _LOWPASS_BLUR = 0.25
 
+#: Fixed-point steps for the row a point's light lands on (2-3 converge to 0.01 px while
+#: content crosses rows more slowly than the shutter sweeps them).
+_LANDING_STEPS = 4
+
 
 def phase_shift(a: np.ndarray, b: np.ndarray, lowpass: float = 0.1) -> tuple[np.ndarray, float]:
     """Translation ``d`` (x, y) with ``b(x) ~ a(x - d)`` by phase correlation, and the
@@ -114,12 +118,27 @@ class FrameRegistration:
             d = np.einsum("pnji,pj->pni", R, ray)  # R^T ray
             return cam.project(d).mean(1)
 
+        def landed(t0, readout, exposure, height, row):
+            """Mean position of each point's light, timed by the row it lands on (the
+            fixed point of row -> centroid over that row's exposure), as the PSFs are
+            (:func:`gyrodeblur.psf.landing_pixel`); a point whose iteration does not
+            settle (skew over 1) keeps the timing of the row it starts on, as there."""
+            first = None
+            for _ in range(_LANDING_STEPS):
+                c = centroid(t0 + readout * np.clip(row, 0, height - 1)[:, None] / height
+                             + exposure * s[None, :])
+                first = c if first is None else first
+                step = np.abs(c[:, 1] - row)
+                row = c[:, 1]
+                if step.max() < 0.01:
+                    break
+            return np.where((step <= 0.5)[:, None], c, first)
+
         ro_a = max(0.0, ca.readout_time + theta.readout)
         ro_b = max(0.0, cb.readout_time + theta.readout)
-        c_a = centroid(t_a + ro_a * py[:, None] / pa.H + ca.exposure_time * s[None, :])
-        row_b = centroid(np.full((px.size, 1), t_b))[:, 1]
-        c_b = centroid(t_b + ro_b * np.clip(row_b, 0, pb.H - 1)[:, None] / pb.H
-                       + cb.exposure_time * s[None, :])
+        c_a = landed(t_a, ro_a, ca.exposure_time, pa.H, py)
+        row_b = centroid(np.full((px.size, 1), t_b))[:, 1]      # where they are at t_b
+        c_b = landed(t_b, ro_b, cb.exposure_time, pb.H, row_b)
         return (c_b - c_a).mean(0)
 
     def residuals(self, theta: Corrections) -> np.ndarray:
