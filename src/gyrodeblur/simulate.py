@@ -52,7 +52,7 @@ def warp_samples(capture: Capture, max_step: float = MAX_STEP_PX) -> int:
 
 def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None = None,
                   seed: int | None = None, quantize: bool = False,
-                  n_samples: int | None = None) -> np.ndarray:
+                  n_samples: int | None = None, order: int = 3) -> np.ndarray:
     """Blur ``sharp`` by the camera rotation recorded in ``capture``.
 
     Parameters
@@ -70,6 +70,13 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         Clip to [0, 1] and round to 8-bit levels (k / 255).
     n_samples : int, optional
         Time samples; default: enough that every pixel moves < 0.5 px between samples.
+    order : {3, 1}
+        Spline order of the sampling between pixels. 3 (default): cubic B-spline, close
+        to the band-limited interpolation that a scene low-passed by the lens and the
+        pixels' area calls for. 1: bilinear, which low-passes each warp by an amount that
+        depends on its sub-pixel position (fully at the Nyquist frequency half-way
+        between pixels), as a bilinear PSF splat does: the benchmarks' synthesis before
+        session 17.
 
     Returns
     -------
@@ -77,9 +84,12 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
 
     Notes
     -----
-    Sampling is bilinear (``scipy.ndimage.map_coordinates``, order 1); outside the frame
-    the image is mirrored (half-sample symmetric).
+    Sampling: ``scipy.ndimage.map_coordinates`` of ``order`` (the cubic spline's
+    coefficients computed once per channel); outside the frame the image is mirrored
+    (half-sample symmetric).
     """
+    if order not in (1, 3):
+        raise ValueError(f"order must be 1 (bilinear) or 3 (cubic spline), got {order!r}")
     img = check_image(sharp, "sharp image")
     H, W = img.shape[:2]
     cam = capture.camera
@@ -88,6 +98,10 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     n = n_samples or warp_samples(capture)
     planes = img.reshape(H, W, -1)
     acc = np.zeros_like(planes)
+    if order > 1:                    # spline coefficients, once (sampled unfiltered below)
+        planes = np.stack([ndimage.spline_filter(planes[..., c], order, output=np.float32,
+                                                 mode="reflect")
+                           for c in range(planes.shape[2])], axis=-1)
     xs = np.arange(W, dtype=np.float64)[None, :]
     ys = np.arange(H, dtype=np.float64)[:, None]
     for j in range(n):
@@ -97,8 +111,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den
         coords = np.stack([sy, sx])
         for c in range(planes.shape[2]):
-            acc[..., c] += ndimage.map_coordinates(planes[..., c], coords, order=1,
-                                                   mode="reflect")
+            acc[..., c] += ndimage.map_coordinates(planes[..., c], coords, order=order,
+                                                   mode="reflect", prefilter=False)
     out = (acc / n).reshape(img.shape)
     if snr_db is not None:
         out = add_noise(out, snr_db, seed)
