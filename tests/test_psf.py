@@ -204,3 +204,23 @@ def test_a_skew_beyond_the_shutter_falls_back_to_the_points_own_row(make_capture
     assert abs(my + 2400 * np.tan(4.0 * (0.03 * 40 / 240 + 0.001))) < 1.0
     ok = make_capture([-0.5, 0.0, 0.0], f=300.0, exposure=0.03, readout=0.03)
     assert landing_pixel(ok, 160.0, 120.0)[1] < 120.0 - 3      # converged, moved up
+
+
+def test_psf_pictures_draw_the_sinc_lobes_below_zero_black():
+    """A PSF off the pixel grid rings below zero; its picture (``psf`` command, the demo's
+    field) must draw those samples black, not cast NaN (the square-root stretch of a
+    negative value) into the image."""
+    import warnings
+
+    from gyrodeblur.psf import PSFField
+    from gyrodeblur.psfplot import field_image, psf_image
+
+    p = lanczos_splat(np.array([[0.4, 0.5], [2.4, 1.5]]))
+    assert p.min() < 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        one = psf_image(p, zoom=1)
+        field = field_image(PSFField(np.array([[50.0, 40.0]]), [p], (1, 1)), 100, 80,
+                            canvas_width=100)
+    assert one.dtype == np.uint8 and np.all(one[..., 1][p < 0] == 0)
+    assert one[..., 1].max() == 255 and field.max() == 255

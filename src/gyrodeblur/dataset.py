@@ -124,7 +124,9 @@ class Case:
         ``readout_time`` (s), ``fx`` (px), ``snr_db``, ``noise_seed``, ``roll_deg`` (largest
         roll, rotation about the optical axis, during the window, degrees),
         ``rotation_deg`` (largest total rotation), ``blur_px`` (extent of the PSF at the
-        image centre), ``mean_rate`` (rad/s), ``sim_samples``.
+        image centre), ``mean_rate`` (rad/s), ``sim_samples``, ``sim_sampling``
+        (:func:`simulate_blur`'s sampling between pixels: "cubic spline" since session 17;
+        absent: bilinear).
     """
 
     name: str
@@ -292,7 +294,8 @@ def render_case(name: str, sharp: np.ndarray, capture: Capture, meta: dict, *,
     blurred = linear_to_srgb(simulate_blur(lin, capture, n_samples=n))
     if snr_db is not None:
         blurred = add_noise(blurred, snr_db, meta.get("noise_seed"))
-    meta = {**meta, "snr_db": snr_db, "sim_samples": n, "sim_step_px": sim_step_px}
+    meta = {**meta, "snr_db": snr_db, "sim_samples": n, "sim_step_px": sim_step_px,
+            "sim_sampling": "cubic spline"}
     return Case(name, sharp, quantize_8bit(blurred), capture, meta)
 
 

@@ -17,7 +17,8 @@ __all__ = ["psf_image", "field_image"]
 
 
 def _stretch(psf: np.ndarray) -> np.ndarray:
-    p = np.asarray(psf, dtype=np.float64)
+    """``sqrt(psf / max)`` in [0, 1]; the lobes of a windowed sinc below zero draw black."""
+    p = np.clip(np.asarray(psf, dtype=np.float64), 0.0, None)
     m = p.max()
     return np.sqrt(p / m) if m > 0 else p
 
