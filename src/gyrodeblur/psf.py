@@ -35,8 +35,7 @@ from .capture import Capture
 from .errors import InputError
 
 __all__ = ["trace", "landing_pixel", "render_psf", "splat", "lanczos_splat", "PSFField",
-           "psf_field",
-           "psf_extent", "psf_variation", "displacement_field", "check_blur_span"]
+           "psf_field", "psf_extent", "psf_variation", "displacement_field", "check_blur_span"]
 
 #: Largest allowed distance (px) between consecutive trace samples when rendering.
 MAX_STEP_PX = 0.25
@@ -197,13 +196,13 @@ def lanczos_splat(offsets: np.ndarray, weights: np.ndarray | None = None,
     grid gives a single sample, as with :func:`splat`; one off it rings a little below
     zero beside it.
 
-    Measured (scratch runs, 12 photos of the benchmark at its default shake, the default
-    deblur): with blur synthesised at twice the resolution and area-averaged (a camera
-    integrating over its pixels), 27.08 dB against 26.14 with bilinear PSFs (12 of 12
-    photos better); with blur synthesised by cubic-spline sampling also better; with
-    the bilinear-sampled synthesis that shares the bilinear splat's low-pass, 0.2 dB
-    worse (26.06 against 26.27). A full sinc did as well on the first and worse on the
-    last; Lanczos-2 and cubic convolution kept less of the gain.
+    Measured with the default deblur (BENCHMARKS.md, section 2): on blur synthesised at
+    twice the resolution and area-averaged (a camera integrating over its pixels; 12
+    photos, scratch), 27.08 dB against 26.14 with bilinear PSFs, 12 of 12 photos better;
+    on the benchmark's 36 cases synthesised by cubic spline, 27.05 against 26.09 dB; on
+    the same cases synthesised bilinearly (which shares the bilinear splat's low-pass),
+    26.26 against 26.61 dB. A full sinc did as well on the first and worse on the last;
+    Lanczos-2 and cubic convolution kept less of the gain.
 
     Returns a ``(2r+1, 2r+1)`` float32 array normalised to sum 1, where ``r`` is
     ``radius`` or the points' reach plus :data:`LANCZOS_A` px. Taps outside it are

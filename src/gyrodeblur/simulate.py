@@ -76,7 +76,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         pixels' area calls for. 1: bilinear, which low-passes each warp by an amount that
         depends on its sub-pixel position (fully at the Nyquist frequency half-way
         between pixels), as a bilinear PSF splat does: the benchmarks' synthesis before
-        session 17.
+        session 17. Use 1 for scenes with hard-edged lights far above 1 (a cubic spline
+        rings around them, below zero: negative light).
 
     Returns
     -------
