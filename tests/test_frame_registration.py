@@ -106,7 +106,7 @@ def test_the_predicted_motion_is_timed_by_the_rows_the_light_lands_on():
     photos must be too. Steady pitch at 1 rad/s (content moves down at ~800 px/s), a 50 ms
     readout over 400 rows, a long exposure then a short one: the mean of the landing
     pixels' motion, worked out with ``landing_pixel`` and a rotation matrix for the 50 ms
-    between the photos. Timing the first photo by the points' own rows is ~1.5 px off."""
+    between the photos. Timing the first photo by the points' own rows is 1.3 px off."""
     from gyrodeblur.calibration_patches import CalibrationPhoto
     from gyrodeblur.camera import Camera
     from gyrodeblur.capture import Capture
