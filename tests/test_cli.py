@@ -46,6 +46,31 @@ def test_simulate_then_deblur_keeps_metadata(capture_dir, capsys):
     assert (d / "field.png").exists()
 
 
+def test_simulate_samples_by_cubic_spline_unless_told_bilinear(capture_dir, capsys):
+    """``--sampling bilinear`` reproduces ``simulate_blur(order=1)`` (the synthesis before
+    session 17); the default is the cubic spline, which keeps more of the photo's fine
+    detail (a bilinear tap pair halves the Nyquist frequency half-way between pixels)."""
+    from gyrodeblur.capture import load_capture
+    from gyrodeblur.simulate import simulate_blur
+    from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
+
+    d = capture_dir
+    for sampling in ("cubic", "bilinear"):
+        assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / f"{sampling}.png"), "--sampling", sampling,
+                     "--bit-depth", "16"]) == 0
+    cubic, bilinear = (read_photo(d / f"{s}.png").pixels for s in ("cubic", "bilinear"))
+    sharp = srgb_to_linear(read_photo(d / "sharp.jpg").pixels)
+    expected = linear_to_srgb(simulate_blur(sharp, load_capture(d / "cap.json"), order=1))
+    assert np.abs(bilinear - expected).max() < 1e-4
+    detail = [np.abs(np.diff(b, axis=1)).mean() for b in (cubic, bilinear)]
+    assert detail[0] > detail[1], detail
+    with pytest.raises(SystemExit) as exit_:
+        main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+              "-o", str(d / "x.png"), "--sampling", "nearest"])
+    assert exit_.value.code == 2 and "--sampling" in capsys.readouterr().err
+
+
 def test_psf_commands(capture_dir):
     d = capture_dir
     assert main(["psf", "--capture", str(d / "cap.json"), "--at", "10,20", "-o", str(d / "p.npy")]) == 0

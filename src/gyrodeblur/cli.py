@@ -291,7 +291,8 @@ def cmd_simulate(args, say) -> None:
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
     blurred = curve.encode(simulate_blur(curve.decode(colour), cap, snr_db=args.snr_db,
-                                         seed=args.seed))
+                                         seed=args.seed,
+                                         order={"cubic": 3, "bilinear": 1}[args.sampling]))
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
     blurred = to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
@@ -433,6 +434,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--snr-db", type=float, default=None,
                    help="add Gaussian noise at this SNR (dB, on the blurred image's std)")
     s.add_argument("--seed", type=int, default=None, help="noise seed")
+    s.add_argument("--sampling", choices=("cubic", "bilinear"), default="cubic",
+                   help="sampling of the sharp photo between pixels: cubic spline (default; a "
+                        "band-limited scene) or bilinear (for hard lights far above the clip "
+                        "level, which a spline rings around; the synthesis before session 17)")
     s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
     s.add_argument("--bit-depth", type=int, choices=(8, 16), help="output bit depth (default: the input's)")
     _add_rotation_option(s)
