@@ -49,7 +49,7 @@ def test_simulate_then_deblur_keeps_metadata(capture_dir, capsys):
 def test_simulate_samples_by_cubic_spline_unless_told_bilinear(capture_dir, capsys):
     """``--sampling bilinear`` reproduces ``simulate_blur(order=1)`` (the synthesis before
     session 17); the default is the cubic spline, which keeps more of the photo's fine
-    detail (a bilinear tap pair halves the Nyquist frequency half-way between pixels)."""
+    detail (a bilinear tap pair removes the Nyquist frequency half-way between pixels)."""
     from gyrodeblur.capture import load_capture
     from gyrodeblur.simulate import simulate_blur
     from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
