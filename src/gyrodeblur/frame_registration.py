@@ -123,15 +123,18 @@ class FrameRegistration:
             fixed point of row -> centroid over that row's exposure), as the PSFs are
             (:func:`gyrodeblur.psf.landing_pixel`); a point whose iteration does not
             settle (skew over 1) keeps the timing of the row it starts on, as there."""
-            first = None
-            for _ in range(_LANDING_STEPS):
-                c = centroid(t0 + readout * np.clip(row, 0, height - 1)[:, None] / height
-                             + exposure * s[None, :])
-                first = c if first is None else first
-                step = np.abs(c[:, 1] - row)
-                row = c[:, 1]
+            def over_exposure_of(rows):
+                return centroid(t0 + readout * np.clip(rows, 0, height - 1)[:, None] / height
+                                + exposure * s[None, :])
+
+            first = c = over_exposure_of(row)
+            step = np.abs(c[:, 1] - row)
+            for _ in range(_LANDING_STEPS - 1):
                 if step.max() < 0.01:
                     break
+                row = c[:, 1]
+                c = over_exposure_of(row)
+                step = np.abs(c[:, 1] - row)
             return np.where((step <= 0.5)[:, None], c, first)
 
         ro_a = max(0.0, ca.readout_time + theta.readout)

@@ -149,35 +149,13 @@ def splat(offsets: np.ndarray, weights: np.ndarray | None = None,
     Returns a ``(2r+1, 2r+1)`` float32 array normalised to sum 1, where ``r`` is
     ``radius`` or just enough to hold every point.
     """
-    offsets = np.asarray(offsets, dtype=np.float64)
-    w = np.full(len(offsets), 1.0) if weights is None else np.asarray(weights, np.float64)
-    if radius is None:
-        radius = int(np.ceil(np.abs(offsets).max())) + 1 if len(offsets) else 1
-    size = 2 * radius + 1
-    fx = np.floor(offsets[:, 0])
-    fy = np.floor(offsets[:, 1])
-    ax = offsets[:, 0] - fx
-    ay = offsets[:, 1] - fy
-    ix = fx.astype(np.int64) + radius
-    iy = fy.astype(np.int64) + radius
-    acc = np.zeros(size * size)
-    for dy, wy in ((0, 1 - ay), (1, ay)):
-        for dx, wx in ((0, 1 - ax), (1, ax)):
-            jx, jy = ix + dx, iy + dy
-            ok = (jx >= 0) & (jx < size) & (jy >= 0) & (jy < size)
-            acc += np.bincount((jy * size + jx)[ok], weights=(w * wx * wy)[ok],
-                               minlength=size * size)
-    acc = acc.reshape(size, size)
-    total = acc.sum()
-    if total > 0:
-        acc /= total
-    return acc.astype(np.float32)
+    return _separable_splat(offsets, weights, radius, np.arange(0, 2), _triangle)
 
 
 #: Lobes of the windowed sinc :func:`lanczos_splat` renders each point with (Lanczos-a):
 #: 2a taps per axis, reaching a px beyond the point.
 LANCZOS_A = 3
-#: Points per block of :func:`lanczos_splat` (bounds its memory: 36 taps each).
+#: Points per block of :func:`_separable_splat` (bounds its memory: up to 36 taps each).
 _SPLAT_BLOCK = 1 << 16
 
 
@@ -208,27 +186,36 @@ def lanczos_splat(offsets: np.ndarray, weights: np.ndarray | None = None,
     ``radius`` or the points' reach plus :data:`LANCZOS_A` px. Taps outside it are
     dropped.
     """
+    a = LANCZOS_A
+    return _separable_splat(offsets, weights, radius, np.arange(1 - a, a + 1),
+                            lambda d: _lanczos(d, a))
+
+
+def _separable_splat(offsets, weights, radius: int | None, taps: np.ndarray,
+                     kernel) -> np.ndarray:
+    """Spread each point over the pixels ``floor(o) + taps`` along each axis with weights
+    ``kernel(o - pixel)`` (normalised to sum 1 per point and axis), into a centred
+    ``(2r+1, 2r+1)`` float32 array normalised to sum 1; ``r`` is ``radius`` or the
+    points' reach plus the last tap. Taps outside the array are dropped."""
     offsets = np.asarray(offsets, dtype=np.float64).reshape(-1, 2)
     w = np.full(len(offsets), 1.0) if weights is None else np.asarray(weights, np.float64)
-    a = LANCZOS_A
+    reach = int(taps[-1])
     if radius is None:
-        radius = int(np.ceil(np.abs(offsets).max())) + a if len(offsets) else a
+        radius = int(np.ceil(np.abs(offsets).max())) + reach if len(offsets) else reach
     size = 2 * radius + 1
-    taps = np.arange(1 - a, a + 1)[:, None]                            # (2a, 1)
+    taps = taps[:, None]                                                # (t, 1)
     acc = np.zeros(size * size)
     for k in range(0, len(offsets), _SPLAT_BLOCK):
         o, wk = offsets[k:k + _SPLAT_BLOCK], w[k:k + _SPLAT_BLOCK]
         base = np.floor(o)
-        ix = base[:, 0].astype(np.int64) + taps + radius                 # (2a, m)
+        ix = base[:, 0].astype(np.int64) + taps + radius                 # (t, m)
         iy = base[:, 1].astype(np.int64) + taps + radius
-        kx = _lanczos(o[:, 0] - (base[:, 0] + taps), a)
-        ky = _lanczos(o[:, 1] - (base[:, 1] + taps), a)
-        kx[np.abs(kx) < 1e-12] = 0.0                   # sinc at whole pixels: exactly 0
-        ky[np.abs(ky) < 1e-12] = 0.0
+        kx = kernel(o[:, 0] - (base[:, 0] + taps))
+        ky = kernel(o[:, 1] - (base[:, 1] + taps))
         kx /= kx.sum(axis=0)
         ky /= ky.sum(axis=0)
         ok = ((ix >= 0) & (ix < size))[None, :, :] & ((iy >= 0) & (iy < size))[:, None, :]
-        index = iy[:, None, :] * size + ix[None, :, :]                  # (2a, 2a, m)
+        index = iy[:, None, :] * size + ix[None, :, :]                  # (t, t, m)
         value = ky[:, None, :] * kx[None, :, :] * wk
         acc += np.bincount(index[ok], weights=value[ok], minlength=size * size)
     psf = acc.reshape(size, size)
@@ -238,9 +225,17 @@ def lanczos_splat(offsets: np.ndarray, weights: np.ndarray | None = None,
     return psf.astype(np.float32)
 
 
+def _triangle(d: np.ndarray) -> np.ndarray:
+    """The bilinear (tent) kernel ``max(0, 1 - |d|)``."""
+    return np.maximum(0.0, 1.0 - np.abs(d))
+
+
 def _lanczos(d: np.ndarray, a: int) -> np.ndarray:
-    """The Lanczos-``a`` kernel ``sinc(d) sinc(d / a)`` (0 for ``|d| >= a``)."""
-    return np.where(np.abs(d) < a, np.sinc(d) * np.sinc(d / a), 0.0)
+    """The Lanczos-``a`` kernel ``sinc(d) sinc(d / a)`` (0 for ``|d| >= a``, and exactly 0
+    at whole pixels, where ``np.sinc`` leaves ~1e-17)."""
+    k = np.where(np.abs(d) < a, np.sinc(d) * np.sinc(d / a), 0.0)
+    k[np.abs(k) < 1e-12] = 0.0
+    return k
 
 
 def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_STEP_PX,
