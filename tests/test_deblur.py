@@ -6,11 +6,13 @@ from skimage.transform import rescale
 
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture
-from gyrodeblur.deblur import deblur, plan_psf_field
+from gyrodeblur.deblur import auto_grid, deblur, plan_psf_field
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log
 from gyrodeblur.imageio import read_photo
 from gyrodeblur.metrics import psnr
+from gyrodeblur.psf import psf_variation
 from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
+from gyrodeblur.tiling import patch_grid
 from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
 PHOTOS = ["lai_manmade_01", "lai_natural_02", "lai_people_01", "lai_text_01"]
@@ -89,6 +91,23 @@ def test_grid_coarsens_for_huge_psfs():
     with pytest.warns(UserWarning, match="grid coarsened"):
         patches, field, notes = plan_psf_field(cap, (240, 320), grid=(6, 8))
     assert field.grid != (6, 8) and notes
+
+
+def test_auto_grid_keeps_the_psf_change_across_a_patch_within_its_tolerance(make_capture):
+    # A roll about the optical axis: every PSF is an arc whose length grows with the
+    # distance from the centre, so the PSF changes by about ``variation`` px per px.
+    shape = (480, 640)
+    grids = []
+    for roll in (0.3, 0.6):                                       # rad/s
+        cap = make_capture((0.0, 0.0, roll), width=640, height=480, f=500.0)
+        variation = psf_variation(cap, centred=True)
+        rows, cols = auto_grid(cap, shape, tolerance=0.5, max_patches=10_000)
+        window = patch_grid(shape, (rows, cols), 0.25)[0]
+        assert max(window.shape) * variation <= 0.5 * 1.1
+        assert rows >= 6 and cols >= 8                            # the chapter's grid at least
+        grids.append((rows, cols))
+        assert np.prod(auto_grid(cap, shape, tolerance=0.5, max_patches=40)) <= 40
+    assert grids[1][0] > grids[0][0] and grids[1][1] > grids[0][1]
 
 
 def test_sparse_default_beats_wiener_on_average(cases):

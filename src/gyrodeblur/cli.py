@@ -455,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--mode", choices=("variant", "invariant"), default="variant")
     s.add_argument("--grid", default=None, metavar="RxC|auto",
                    help="patch grid; default: 6x8 (the chapter's) for --method wiener, 'auto' "
-                        "(patches small enough that the PSF changes < 2 px across one) otherwise; "
+                        "(patches small enough that the PSF changes < 0.5 px across one) otherwise; "
                         "with --blind, 1x1 (one kernel) unless given")
     s.add_argument("--overlap", type=float, default=None, help=f"patch overlap fraction (default {DEFAULT_OVERLAP:g})")
     s.add_argument("--method", choices=sorted(METHODS), default=None,

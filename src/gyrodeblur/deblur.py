@@ -88,8 +88,14 @@ class DeblurReport:
         return int(e.min()), int(e.max())
 
 
-#: Largest change (px) of the PSF across one patch that :func:`auto_grid` aims for.
-AUTO_GRID_TOLERANCE = 2.0
+#: Largest change (px) of the PSF across one patch that :func:`auto_grid` aims for. Half a
+#: pixel: since the PSFs model a band-limited photo (session 17) the deconvolution is sharp
+#: enough for sub-pixel PSF errors to cost (gyro noise moving traces by 0.2-0.4 px costs
+#: 1 dB). 2.0 px before: on the 36-case benchmark 0.5 gained 0.19 dB mean (27.05 ->
+#: 27.24; 14 cases up by over 0.05 dB, 4 down, worst -1.1 dB at 7x10 -> 8x11 patches) for
+#: 11 % more time, on 12 long exposures 0.12 dB; from 3 MP up the grid is capped by
+#: :data:`AUTO_GRID_MAX_PATCHES` either way.
+AUTO_GRID_TOLERANCE = 0.5
 #: The alignment warp resamples the photo, a slight low-pass that costs up to ~2 dB on
 #: sharp, nearly uniform blurs (measured on the shared benchmark at 34 dB); it is used
 #: only where the mean displacement changes faster than this (px per px), where it gained
@@ -545,7 +551,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     grid : (rows, cols) or "auto"
         Patch grid for ``mode="variant"``. Default: the chapter's 6 x 8 for
         ``method="wiener"``, ``"auto"`` (:func:`auto_grid`: patches small enough that the
-        PSF changes by at most ~2 px across one) for the other methods.
+        PSF changes by at most ~half a pixel across one) for the other methods.
     align : bool, optional
         Warp the photo by the PSFs' mean-displacement field and deconvolve with centred
         PSFs (see :func:`plan_psf_field`). Default: off for ``"wiener"`` (the chapter's
