@@ -110,6 +110,23 @@ def test_auto_grid_keeps_the_psf_change_across_a_patch_within_its_tolerance(make
     assert grids[1][0] > grids[0][0] and grids[1][1] > grids[0][1]
 
 
+def test_auto_grid_gives_the_rows_more_patches_under_a_rolling_shutter():
+    # A yaw that speeds up (8 rad/s^2) through a 30 ms readout: each row sees a later
+    # and faster part of it, so the PSF changes down the frame far more than across it
+    # (a long lens, little perspective). A landscape photo then gets more rows than columns.
+    t = np.arange(0.0, 0.2, 0.005)
+    w = np.zeros((t.size, 3))
+    w[:, 1] = 8.0 * (t - 0.05)
+    cap = Capture(0.05, 0.03, 0.03, Camera.centred(640, 480, 1500.0), GyroLog(t, w))
+    shape = (480, 640)
+    down, across = psf_variation(cap, centred=True, per_axis=True)
+    assert down > 4 * across
+    rows, cols = auto_grid(cap, shape, tolerance=0.5, max_patches=10_000)
+    window = patch_grid(shape, (rows, cols), 0.25)[0]
+    assert rows > cols >= 8
+    assert window.shape[0] * down <= 0.5 * 1.1 and window.shape[1] * across <= 0.5
+
+
 def test_sparse_default_beats_wiener_on_average(cases):
     gains = []
     for name, sharp, blurred, cap in cases:

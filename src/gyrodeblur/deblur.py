@@ -91,10 +91,10 @@ class DeblurReport:
 #: Largest change (px) of the PSF across one patch that :func:`auto_grid` aims for. Half a
 #: pixel: since the PSFs model a band-limited photo (session 17) the deconvolution is sharp
 #: enough for sub-pixel PSF errors to cost (gyro noise moving traces by 0.2-0.4 px costs
-#: 1 dB). 2.0 px before: on the 36-case benchmark 0.5 gained 0.19 dB mean (27.05 ->
-#: 27.24; 14 cases up by over 0.05 dB, 4 down, worst -1.1 dB at 7x10 -> 8x11 patches) for
-#: 11 % more time, on 12 long exposures 0.12 dB; from 3 MP up the grid is capped by
-#: :data:`AUTO_GRID_MAX_PATCHES` either way.
+#: 1 dB). Session 18, on the 36-case benchmark, one run alternating the two: 2 px with one
+#: window size for both axes 27.05 dB mean, 79.5 s; half a pixel with the rows and the
+#: columns sized apart 27.33 dB, 87.7 s (half a pixel alone, in another run: 27.24 dB, +11 %
+#: time; 12 long exposures +0.12 dB). From 3 MP up :data:`AUTO_GRID_MAX_PATCHES` rules.
 AUTO_GRID_TOLERANCE = 0.5
 #: The alignment warp resamples the photo, a slight low-pass that costs up to ~2 dB on
 #: sharp, nearly uniform blurs (measured on the shared benchmark at 34 dB); it is used
@@ -127,7 +127,9 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
 
     One PSF per patch is exact only where the blur does not change; roll, wide lenses
     and the rolling shutter make it change (:func:`gyrodeblur.psf.psf_variation`, px per
-    px). Windows are made about ``tolerance / variation`` pixels wide, but never
+    px). Windows are made about ``tolerance / variation`` pixels tall and wide, with the
+    variation down the frame and across it apart (a rolling shutter makes the PSF
+    change faster from row to row: the rows get more of the patches), but never
     narrower than the largest PSF's extent (the margin of real neighbours around each
     window gives the deconvolution its context) nor 32 px, never coarser than the
     chapter's 6 x 8 (unless the photo is too small for it: windows stay at least 1.25x
@@ -142,23 +144,27 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     H, W = shape[:2]
     overlap = check_overlap(overlap)
     cap = capture.scaled_to(W, H)
-    variation = psf_variation(cap, centred=centred)
     extent = max(psf_extent(render_psf(cap, x, y, max_step=0.5))
                  for x in (0, (W - 1) / 2, W - 1) for y in (0, (H - 1) / 2, H - 1))
-    window = tolerance / variation if variation > 0 else np.inf
-    window = max(window, float(extent), 32.0)
 
-    def count(length: int) -> int:
+    def count(length: int, variation: float) -> int:
+        window = tolerance / variation if variation > 0 else np.inf
+        window = max(window, float(extent), 32.0)
         return max(1, int(np.ceil((length / window - overlap) / (1 - overlap))))
 
     def fits(length: int) -> int:        # most patches whose windows keep 1.25x the smallest
         return max(1, int((length / (1.25 * MIN_WINDOW) - overlap) / (1 - overlap)))
 
-    rows = min(max(count(H), DEFAULT_GRID[0]), fits(H))
-    cols = min(max(count(W), DEFAULT_GRID[1]), fits(W))
-    if rows * cols > max_patches:
+    down, across = psf_variation(cap, centred=centred, per_axis=True)
+    rows = min(max(count(H, down), DEFAULT_GRID[0]), fits(H))
+    cols = min(max(count(W, across), DEFAULT_GRID[1]), fits(W))
+    if rows * cols > max_patches:       # both axes shrink alike, not under the 6 x 8
         f = np.sqrt(max_patches / (rows * cols))
-        rows, cols = max(1, int(rows * f)), max(1, int(cols * f))
+        fl_r, fl_c = ((min(rows, DEFAULT_GRID[0]), min(cols, DEFAULT_GRID[1]))
+                      if np.prod(DEFAULT_GRID) <= max_patches else (1, 1))
+        rows, cols = max(fl_r, int(rows * f)), max(fl_c, int(cols * f))
+        rows = max(fl_r, min(rows, max_patches // cols))    # a floor's gain is the other's loss
+        cols = max(fl_c, min(cols, max_patches // rows))
     return rows, cols
 
 

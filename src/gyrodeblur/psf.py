@@ -330,7 +330,7 @@ def psf_field(capture: Capture, points, *, grid: tuple | None = None,
 
 
 def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int = 32,
-                  centred: bool = False) -> float:
+                  centred: bool = False, per_axis: bool = False):
     """How fast the PSF changes across the frame: pixels of trace difference per pixel.
 
     The traces (:func:`trace`) of a ``probes`` grid of points are sampled at ``n`` equal
@@ -342,7 +342,9 @@ def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int 
     pairs is returned: a patch of ``w`` pixels sees its PSF change by about
     ``w * psf_variation`` pixels from one side to the other. ``centred=True`` measures
     the change of the PSFs' shape only (each trace minus its mean displacement), what is
-    left once the photo is warped by :func:`displacement_field`.
+    left once the photo is warped by :func:`displacement_field`. ``per_axis=True`` returns
+    the maxima over vertical and over horizontal pairs apart, ``(down, across)``: a rolling
+    shutter changes the PSF from row to row faster than from column to column.
     """
     cam = capture.camera
     ys = np.linspace(0, cam.height - 1, probes[0])
@@ -355,6 +357,8 @@ def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int 
                 d[i, j] -= d[i, j].mean(axis=0)
     dx = np.abs(np.diff(d, axis=1)).max(axis=(2, 3)) / (xs[1] - xs[0])
     dy = np.abs(np.diff(d, axis=0)).max(axis=(2, 3)) / (ys[1] - ys[0])
+    if per_axis:
+        return float(dy.max()), float(dx.max())
     return float(max(dx.max(), dy.max()))
 
 
