@@ -64,13 +64,14 @@ them in order and decides what to keep (5) and what to report.
    offsets within 3 ms 27 -> 28/36, mean PSNR gap -3.29 -> -3.13 dB, 12 % more time).
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
-   rolling shutter separate the two. The winner's "mirror twin" is compared at the same
+   rolling shutter separate the two. The winner's "mirror twin" starts from the same
    parameters, its bias mirrored with the rates unless the bias is fixed (a bias is a
-   rate: left as it is, it would turn the twin's PSFs, not reflect them): by the frame
-   registration below when there is one; else the twin is taken when the spectra do not
-   prefer the winner by 40 nats per patch or more and the phase (normalised gradient
-   sparsity of the Wiener-deconvolved patches) prefers the twin, by two standard errors
-   over the patches.
+   rate: left as it is, it would turn the twin's PSFs, not reflect them). The frame
+   registration below decides at those parameters when there is one; else the twin is
+   refined (six iterations: roll and the rolling shutter do not mirror, so its optimum
+   lies a little away) and taken when its objective is no worse than the winner's and
+   the phase (normalised gradient sparsity of the Wiener-deconvolved patches) prefers it,
+   by two standard errors over the patches.
 4. Several photos of one session share every correction (each keeps its own exposure
    start and given values); each photo has its own patches (9 each, or 18 shared out), so
    that one with little blur does not take the patches of one that says more (on the
@@ -359,7 +360,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
     #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
     if "axes" not in fix and len(cand) > 1 and not kept:
-        M, twin, msg = fit.mirror_twin(M, x, [cap.bias for cap in captures])
+        M, twin, msg = fit.mirror_twin(M, x, fx, [cap.bias for cap in captures])
         if twin is not None:
             x, fx, Fm, sc = twin
         note(msg, "  ")

@@ -57,11 +57,14 @@ _READOUT_SCAN = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 #: reported: the photo cannot tell the two offsets apart.
 OFFSET_APART = 0.003
 OFFSET_RIVAL_NATS = 2.0
-#: Spectral cost gap (nats per patch) under which mirror twins are told apart by phase.
-_TWIN_NATS = 40.0
-#: ... and the phase must prefer the twin by this many standard errors of its mean over
-#: the patches (a blur of a few pixels has hardly any phase: a coin toss keeps the winner;
-#: with a single patch there is no standard error, and the phase never swaps).
+#: Without a frame registration the mirror twin, refined from the winner's parameters, is
+#: taken when its objective is no worse than the winner's and the phase prefers it by this
+#: many standard errors of its mean over the patches (a blur of a few pixels has hardly any
+#: phase: a coin toss keeps the winner; with a single patch there is no standard error, and
+#: the phase never swaps). Until session 19 the twin was scored at the winner's parameters
+#: unrefined, and kept out by a spectral gap of 40 nats per patch there: roll and the
+#: rolling shutter do not mirror, so a right twin sits a little away from the wrong winner's
+#: optimum (lai_manmade_02_w1, 29 px: +69 nats per patch unrefined, 0.8 better refined).
 _TWIN_SIGMAS = 2.0
 _TARGET_EXTENT = 32.0      # px: working scale makes the largest PSF about this long
 _PATCH = 128               # px: patch side at working scale
@@ -341,32 +344,35 @@ class CalibrationFit:
                 rivals.append((tb.offset, tb.readout, float(fb - f)))
         return rivals
 
-    def mirror_twin(self, M, x, given_biases):
-        """Mapping ``M`` at ``x`` against its mirror twin at the same parameters (by the
-        frame registration when there is one, else by :func:`_phase_prefers_twin`).
-        Returns the mapping taken, its refinement when it is the twin (else ``None``), and
-        a note that says why."""
+    def mirror_twin(self, M, x, f, given_biases):
+        """Mapping ``M`` at ``x`` (objective ``f``) against its mirror twin: by the frame
+        registration at the same parameters when there is one, else refined from them and
+        judged by :func:`_phase_prefers_twin`. Returns the mapping taken, its refinement
+        when it is the twin (else ``None``), and a note that says why."""
         Mt = TWIN @ M
         xt = np.clip(_twin_parameters(x, given_biases, self.fix), self.lo, self.hi)
         th_w = self.search.theta_of(x, M, self.ubar)
         th_t = self.search.theta_of(xt, Mt, self.ubar)
         per_patch = (self.fine.cost(th_t) - self.fine.cost(th_w)) / len(self.fine.points)
-        d = np.log(self.fine.sparsity(th_t) / self.fine.sparsity(th_w))
-        margin, sem = _mean_and_error(d)
         msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
-               f"{per_patch:+.1f} nats/patch, sparsity {margin:+.4f} +- {sem:.4f} (log ratio; "
-               f"{int((d > 0).sum())}/{d.size} patches prefer {axes_to_letters(M)})")
+               f"{per_patch:+.1f} nats/patch")
         reg = self.reg
         if reg is not None and reg.pairs:
             r_w = float(np.sum(reg.residuals(th_w) ** 2))
             r_t = float(np.sum(reg.residuals(th_t) ** 2))
             msg += f", registration chi2 {r_w:.1f} vs {r_t:.1f}"
-            swap = r_t < r_w
+            twin = self.refine(Mt, xt, 6) if r_t < r_w else None
         else:
-            swap = _phase_prefers_twin(per_patch, d)
-        twin = None
-        if swap:
             twin = self.refine(Mt, xt, 6)
+            th_r = self.search.theta_of(twin[0], Mt, self.ubar)
+            d = np.log(self.fine.sparsity(th_r) / self.fine.sparsity(th_w))
+            margin, sem = _mean_and_error(d)
+            msg += (f"; refined, objective {twin[1] - f:+.1f}, sparsity {margin:+.4f} +- "
+                    f"{sem:.4f} (log ratio; {int((d > 0).sum())}/{d.size} patches prefer "
+                    f"{axes_to_letters(M)})")
+            if not _phase_prefers_twin(twin[1] - f, d):
+                twin = None
+        if twin is not None:
             msg += f": {axes_to_letters(Mt)} taken"
             M = Mt
         return M, twin, msg
@@ -414,13 +420,13 @@ def _mean_and_error(d: np.ndarray) -> tuple[float, float]:
     return float(d.mean()), sem
 
 
-def _phase_prefers_twin(per_patch: float, log_ratio: np.ndarray) -> bool:
-    """Whether the mirror twin replaces the winner when no frame registration decides:
-    its spectra (cost, nats per patch, twin minus winner) do not favour the winner by
-    :data:`_TWIN_NATS` or more, and the per-patch log sparsity ratios (twin over winner)
-    favour the twin by :data:`_TWIN_SIGMAS` standard errors of their mean."""
+def _phase_prefers_twin(gain: float, log_ratio: np.ndarray) -> bool:
+    """Whether the mirror twin replaces the winner when no frame registration decides: the
+    refined twin's objective is no worse (``gain``, twin minus winner, tempered nats, <= 0),
+    and the per-patch log sparsity ratios (twin over winner) favour the twin by
+    :data:`_TWIN_SIGMAS` standard errors of their mean."""
     margin, sem = _mean_and_error(log_ratio)
-    return bool(per_patch < _TWIN_NATS and margin + _TWIN_SIGMAS * sem < 0)
+    return bool(gain <= 0 and margin + _TWIN_SIGMAS * sem < 0)
 
 
 def _twin_parameters(x: np.ndarray, given_biases, fix=()) -> np.ndarray:
