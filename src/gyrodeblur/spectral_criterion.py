@@ -145,6 +145,7 @@ class PatchSpectra:
         self.pbin = np.stack(self.pbin) if self.pbin else np.zeros((0, self.nbins))
         self._prepare_fast_envelope()
         self._orient_cache: dict = {}
+        self._last_spectra: tuple = (None, None)    # (key, result) of the latest call
         self._rho_warm: dict = {}
         self.E = None
         self.envelope = envelope
@@ -245,7 +246,24 @@ class PatchSpectra:
             shape=(ky.size, P * K))
 
     def spectra(self, theta: Corrections, taus=None, rows=None, keep_otf=False):
-        """Model spectra ``S`` ``(n_tau * n_patch, N)`` (and the centre-row OTFs)."""
+        """Model spectra ``S`` ``(n_tau * n_patch, N)`` (and the centre-row OTFs).
+
+        The latest call's result is kept (read-only) and returned again for the same
+        arguments: the search asks for the spectra at one point several times in a row (a
+        step's trial cost, then the next step's Jacobian base and envelope fit there)."""
+        key = (theta.axes.tobytes(), theta.offset, theta.readout, theta.focal,
+               np.asarray(theta.bias, float).tobytes(),
+               None if taus is None else np.asarray(taus, float).tobytes(),
+               None if rows is None else np.asarray(rows, float).tobytes(), bool(keep_otf))
+        if self._last_spectra[0] == key:
+            return self._last_spectra[1]
+        out = self._spectra(theta, taus, rows, keep_otf)
+        for a in (out if keep_otf else (out,)):
+            a.flags.writeable = False
+        self._last_spectra = (key, out)
+        return out
+
+    def _spectra(self, theta: Corrections, taus, rows, keep_otf):
         rows = self.rows if rows is None else np.asarray(rows, float)
         rw = self.row_w if rows is self.rows else np.ones(len(rows)) / len(rows)
         tl = [0.0] if taus is None else list(taus)
