@@ -1,24 +1,18 @@
 """Tests of the calibration's search steps (gyrodeblur.calibration_fit): the shortlist of
-mappings, the mirror twin's parameters, the phase tie-break and the twin step on a blurred
-photo. The search as a whole is tested through ``calibrate`` in test_calibrate.py."""
+mappings, the mirror twin's parameters and the phase tie-break. The search as a whole (and
+the twin step on a blurred photo) is tested in test_calibrate.py."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from gyrodeblur.axes import axes_to_letters, parse_axes
-from gyrodeblur.bias_prior import BiasPrior
-from gyrodeblur.calibration_fit import (TWIN, CalibrationFit, _phase_prefers_twin,
-                                        _twin_parameters, relative_ranking, shortlist,
-                                        with_twin)
-from gyrodeblur.calibration_patches import CalibrationPhoto
-from gyrodeblur.calibration_search import SearchSpace
+from gyrodeblur.axes import parse_axes
+from gyrodeblur.calibration_fit import (TWIN, _phase_prefers_twin, _twin_parameters,
+                                        relative_ranking, shortlist, with_twin)
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture
 from gyrodeblur.gyrolog import GyroLog
-from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
 from gyrodeblur.spectral_criterion import Corrections
-from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
 
 def _capture() -> Capture:
@@ -100,33 +94,3 @@ def test_the_twin_needs_a_clear_phase_preference():
     assert not _phase_prefers_twin(0.5, clear)           # the refined twin scores worse
     assert not _phase_prefers_twin(-0.8, clear[:1])      # one patch: no standard error
 
-
-def test_a_wrong_mirror_twin_gives_way_to_the_right_mapping():
-    """The twin step on a photo blurred by warping (a 13 px hand shake, rolling shutter):
-    the right mapping, refined, keeps its place against its twin; its mirror twin, refined
-    to its own optimum, gives way to it. Scored unrefined at the twin's optimum, the right
-    mapping's spectra are 200 nats per patch worse there (roll and the rolling shutter do
-    not mirror), which kept the wrong twin before session 19."""
-    from skimage import data, transform
-    true = _capture().replace(exposure_time=0.04, readout_time=0.03,
-                              camera=Camera.centred(384, 256, 1.3 * 384))
-    t = np.arange(0.0, 1.2, 1 / 200)        # hand-shake-like, with roll
-    w = np.stack([0.55 * np.sin(2 * np.pi * 3.1 * t + 0.4) + 0.25 * np.sin(2 * np.pi * 7.7 * t),
-                  0.75 * np.cos(2 * np.pi * 2.3 * t + 1.0) + 0.3 * np.sin(2 * np.pi * 8.9 * t + 2),
-                  0.25 * np.sin(2 * np.pi * 4.3 * t + 0.7)], 1)
-    true = true.replace(log=GyroLog(t, w @ true.axes))       # camera -> device: M^T w
-    sharp = transform.resize(data.astronaut(), (256, 384), anti_aliasing=True).astype(np.float32)
-    blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), true)),
-                                      40.0, 0))
-    photos = [CalibrationPhoto(blurred, true, "srgb", 0)]
-    fit = CalibrationFit(photos, SearchSpace(photos, set(), 0.04), set(),
-                         BiasPrior(np.zeros(3)), 9, 2, lambda msg: None)
-    M = true.axes
-    x, f = fit.refine(M, np.zeros(6), 10)[:2]
-    kept, twin, note = fit.mirror_twin(M, x, f, [true.bias])
-    assert twin is None and np.array_equal(kept, M), note
-    Mt = TWIN @ M
-    xt, ft = fit.refine(Mt, np.clip(_twin_parameters(x, [true.bias]), fit.lo, fit.hi), 10)[:2]
-    taken, refined, note = fit.mirror_twin(Mt, xt, ft, [true.bias])
-    assert axes_to_letters(taken) == axes_to_letters(M), note
-    assert refined is not None and refined[1] < ft, note

@@ -357,8 +357,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
              f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
              f"is known, or calibrate on several photos of the session", "  ")
 
-    # 3. the mirror twin at the same parameters: |H| nearly equal; if the spectra cannot
-    #    tell them apart, the phase (sparsity of the deconvolved patches) decides.
+    # 3. the mirror twin (|H| nearly equal): the frame registration decides at the same
+    #    parameters, else the twin is refined and the phase (sparsity of the deconvolved
+    #    patches) must prefer it as well.
     if "axes" not in fix and len(cand) > 1 and not kept:
         M, twin, msg = fit.mirror_twin(M, x, fx, [cap.bias for cap in captures])
         if twin is not None:
