@@ -493,6 +493,18 @@ def test_cli_downscale_needs_refine_and_a_factor_up_to_one(cli_dir, capsys):
     assert not (d / "out" / "ds.json").exists()
 
 
+def test_cli_workers_need_refine_and_a_count_of_one_or_more(cli_dir, capsys):
+    d = cli_dir
+    rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+               "--workers", "2", "-o", str(d / "out" / "nowk.png")])
+    assert rc == 2 and "--refine" in capsys.readouterr().err
+    rc = main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+               "--workers", "0", "-o", str(d / "out" / "wk.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--workers" in err and ">= 1" in err
+    assert not (d / "out" / "wk.json").exists()
+
+
 def _noisy(cap: Capture, sigma: float, seed: int = 0) -> Capture:
     rng = np.random.default_rng(seed)
     log = cap.log

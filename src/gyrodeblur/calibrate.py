@@ -127,6 +127,7 @@ from .calibration_fit import (BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, Calibrati
                               relative_ranking, shortlist, with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
+from .calibration_workers import StepRunner, available_workers
 from .capture import Capture
 from .errors import InputError
 from .images import check_image
@@ -213,7 +214,8 @@ _CANDIDATES = 5            # mappings refined at full working scale (+ the best'
 
 def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
               transfer: str = "srgb", n_patches: int | None = None, say=None,
-              mappings=None, downscale: float = 1.0) -> CalibrationResult:
+              mappings=None, downscale: float = 1.0,
+              workers: int | None = None) -> CalibrationResult:
     """Estimate time offset, gyro bias, readout time, focal scale and axis mapping.
 
     Parameters
@@ -246,6 +248,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         averaging). For photos softer than their pixel grid (upscaled, or heavily
         denoised): the spectral criterion reads an empty top octave as blur. The corrected
         captures keep the given ones' resolution.
+    workers : int, optional
+        Processes that refine independent starts side by side (Linux; default: the CPUs
+        available, at most :data:`gyrodeblur.calibration_workers.MAX_WORKERS`; 1: none).
+        The result is the same for any number.
 
     Returns
     -------
@@ -267,6 +273,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
             or not 0 < downscale <= 1:
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
+    if workers is not None and (isinstance(workers, bool)
+                                or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
     if not (isinstance(offset_range, (int, float, np.number)) and 0 <= offset_range < np.inf):
         raise InputError(None, f"offset_range must be a number of seconds >= 0, got {offset_range!r}")
     if n_patches is not None and (isinstance(n_patches, bool)
@@ -306,14 +315,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
 
     # 1. coarse: every mapping x time shifts per patch, combined along a line (time offset +
     #    readout error x row); the two rankings take turns in the shortlist
-    rankings = fit.coarse_rankings(cand)
+    steps = StepRunner(fit, available_workers() if workers is None else workers)
+    rankings = fit.coarse_rankings(cand, steps)
     ranking = relative_ranking(rankings[-1])
     short = shortlist(rankings)
     # 2. candidates at full working scale, the best refined further
     top = with_twin(short[:_CANDIDATES], rankings[0])
-    results = sorted((fit.candidate(r[1], r[2], r[4]) for r in top), key=lambda r: r[0])
+    results = sorted(steps.map("candidate", [(r[1], r[2], r[4]) for r in top]), key=lambda r: r[0])
     _, x, M, alts = results[0]
-    x, fx, Fm, sc = fit.refine_winner(M, x, alts)
+    x, fx, Fm, sc = fit.refine_winner(M, x, alts, steps)
     gap = float(min(r[0] for r in results[1:]) - fx) if len(results) > 1 else np.nan
     if np.isfinite(gap) and gap < 0:        # a runner-up's refinement was cut short
         gap = 0.0

@@ -110,7 +110,7 @@ def calibrate_command(args, say, load_capture) -> None:
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
-                    downscale=args.downscale)
+                    downscale=args.downscale, workers=args.workers)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):

@@ -198,24 +198,29 @@ class CalibrationFit:
                          self.extra_for(M)), x0
 
     # -- steps --------------------------------------------------------------------------
-    def coarse_rankings(self, cand) -> list[list]:
+    def coarse_rankings(self, cand, steps) -> list[list]:
         """Per coarse criterion (flat, then fitted envelope), the mappings' rows
-        ``(score, time shift, readout error, 1.0, M)``, best first."""
+        ``(score, time shift, readout error, 1.0, M)``, best first (the rows computed by
+        ``steps``, a :class:`gyrodeblur.calibration_workers.StepRunner`)."""
+        rows = steps.map("coarse_row", [(envelope, M) for envelope in (False, True) for M in cand])
         rankings = []
-        for envelope in (False, True):
-            self.coarse.envelope = envelope
-            scored = []
-            for M in cand:
-                C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.bias_prior.for_mapping(M)[0]),
-                                      taus=self.taus)
-                tot, tau0, kap = line_fit(C, self.taus, self.uc, self.kappas)
-                scored.append((tot, tau0, kap, 1.0, M))
-            scored.sort(key=lambda r: r[0])
+        for k, envelope in enumerate((False, True)):
+            scored = sorted(rows[k * len(cand):(k + 1) * len(cand)], key=lambda r: r[0])
             rankings.append(scored)
             ranking = relative_ranking(scored)
             self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
                      + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
         return rankings
+
+    def coarse_row(self, envelope: bool, M) -> tuple:
+        """Mapping ``M``'s row of a coarse ranking (per-patch envelopes fitted to each
+        evaluation or flat): the per-patch costs over the time shifts combined along the
+        readout line, ``(score, time shift, readout error, 1.0, M)``."""
+        self.coarse.envelope = envelope
+        C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.bias_prior.for_mapping(M)[0]),
+                              taus=self.taus)
+        tot, tau0, kap = line_fit(C, self.taus, self.uc, self.kappas)
+        return tot, tau0, kap, 1.0, M
 
     def candidate(self, tau0, kap, M):
         """Mapping ``M`` at the working scale: per-patch time shifts x focal grid with the
@@ -259,16 +264,16 @@ class CalibrationFit:
                  f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
         return fx, x, M, [a for a in alts if a is not x]
 
-    def refine_winner(self, M, x, alts):
+    def refine_winner(self, M, x, alts, steps):
         """The winning mapping's refinement from its best start, its other starts, the
         given focal length and bias, and time shifts around its own: the lowest objective
-        (x, f, F, scores). Every basin reached is kept in :attr:`basins`."""
+        (x, f, F, scores). Every basin reached is kept in :attr:`basins`. Independent
+        refinements run side by side in ``steps`` (a
+        :class:`gyrodeblur.calibration_workers.StepRunner`)."""
         self.basins = []
-        best = self.refine_fully(M, x)
         # The winner's other starts, refined as far: four iterations do not always tell which
         # basin is lowest (a time shift 5 ms off can lead after four and trail after fourteen).
-        for xa in alts:
-            best = _lowest(best, self.refine_fully(M, xa))
+        best = _lowest_of(steps.map("refine_fully", [(M, x)] + [(M, xa) for xa in alts]))
         # Focal length and a bias along the motion trade off (see Criterion), and the valley
         # between them holds several local minima: the coarse start's focal guess can leave
         # the refinement in one far from the given values. So the winner is refined once more
@@ -281,8 +286,8 @@ class CalibrationFit:
         if any(j >= 2 for j in idx) and np.any(x[2:] != np.r_[0.0, b_prior]):
             xs = x.copy()
             xs[2:] = np.r_[0.0, b_prior]
-            xs = self.refine(M, np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])[0]
-            best = _lowest(best, self.refine_fully(M, xs))
+            xs = steps.map("refine", [(M, np.clip(xs, lo, hi), 6, [j for j in idx if j != 2])])[0][0]
+            best = _lowest(best, steps.map("refine_fully", [(M, xs)])[0])
         # Last, time shifts around the winner's, every _SCAN_STEP up to _SCAN_REACH away, from
         # the given (prior) values of the other parameters: the coarse start's line fits can
         # miss a nearby basin that the fine cost prefers; the best _SCAN_REFINED are refined
@@ -296,7 +301,7 @@ class CalibrationFit:
                     continue
                 tried.add(round(float(xs0[0]), 6))
                 starts.append(xs0)
-            best = self._scan(M, starts, best)
+            best = self._scan(M, starts, best, steps)
         # And readout times across the prior's range at the winner's mid-row time: with the
         # rows between well timed, a readout 30-40 % off can sit in a basin of its own
         # (the top and bottom patches then fit other parts of the trace).
@@ -308,16 +313,16 @@ class CalibrationFit:
                 xs0 = x.copy()
                 xs0[1] = fr * r0
                 starts.append(np.clip(xs0, lo, hi))
-            best = self._scan(M, starts, best)
+            best = self._scan(M, starts, best, steps)
         return best
 
-    def _scan(self, M, starts, best):
+    def _scan(self, M, starts, best, steps):
         """``starts`` refined four iterations each, the best :data:`_SCAN_REFINED` of them
         refined as far as the winner: the lowest objective of those and ``best``."""
-        scan = sorted((self.refine(M, xs0, 4)[:2] for xs0 in starts), key=lambda r: r[1])
-        for xs0, _ in scan[:_SCAN_REFINED]:
-            best = _lowest(best, self.refine_fully(M, xs0))
-        return best
+        scan = sorted((r[:2] for r in steps.map("refine", [(M, xs0, 4) for xs0 in starts])),
+                      key=lambda r: r[1])
+        return _lowest_of([best] + steps.map("refine_fully",
+                                             [(M, xs0) for xs0, _ in scan[:_SCAN_REFINED]]))
 
     def refine_fully(self, M, x0):
         """:meth:`refine` as far as the winner (ten iterations), the basin reached kept in
@@ -353,6 +358,7 @@ class CalibrationFit:
         xt = np.clip(_twin_parameters(x, given_biases, self.fix), self.lo, self.hi)
         th_w = self.search.theta_of(x, M, self.ubar)
         th_t = self.search.theta_of(xt, Mt, self.ubar)
+        self.fine.set_envelope(th_w)
         per_patch = (self.fine.cost(th_t) - self.fine.cost(th_w)) / len(self.fine.points)
         msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
                f"{per_patch:+.1f} nats/patch")
@@ -411,6 +417,14 @@ def _lowest(a: tuple, b: tuple) -> tuple:
     """Of two refinements ``(x, objective, ...)``, the one with the lower objective (``a``
     on a tie)."""
     return b if b[1] < a[1] else a
+
+
+def _lowest_of(refinements: list) -> tuple:
+    """The refinement with the lowest objective (the first of equals)."""
+    best = refinements[0]
+    for r in refinements[1:]:
+        best = _lowest(best, r)
+    return best
 
 
 def _mean_and_error(d: np.ndarray) -> tuple[float, float]:

@@ -117,6 +117,8 @@ def _ignored_options(args) -> None:
                                                   "deblurs the whole photo with one PSF)")
     if args.downscale != 1.0 and not args.refine:   # (with --blind, --refine is refused)
         raise InputError("--downscale", "applies with --refine only")
+    if args.workers is not None and not args.refine:
+        raise InputError("--workers", "applies with --refine only")
 
 
 def _load_capture(args, photo=None, say=None):
@@ -361,7 +363,8 @@ def cmd_deblur(args, say) -> None:
         if args.refine:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates
-            res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale)
+            res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
+                            workers=args.workers)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
@@ -399,6 +402,9 @@ def cmd_calibrate(args, say) -> None:
 DOWNSCALE_HELP = ("calibrate on the photos shrunk by this factor, 0 < F <= 1 (default 1): for "
                   "photos softer than their pixel grid, e.g. upscaled or heavily denoised, "
                   "try 0.5; the corrected capture keeps the given resolution")
+WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
+                "(Linux; default: the CPUs available, up to 4; 1: none); the result is the "
+                "same for any number")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -481,6 +487,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "offset,bias,readout,focal,axes")
     s.add_argument("--downscale", type=float, default=1.0, metavar="F",
                    help="with --refine: " + DOWNSCALE_HELP)
+    s.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="with --refine: " + WORKERS_HELP)
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
     _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
@@ -505,6 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "axes (a value given with --time-offset, --bias, --readout-time, "
                         "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
+    s.add_argument("--workers", type=int, default=None, metavar="N", help=WORKERS_HELP)
     _add_rotation_option(s, per_photo=True)
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s, required=True, per_photo=True)

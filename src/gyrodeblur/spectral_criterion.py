@@ -150,6 +150,7 @@ class PatchSpectra:
         self.E = None
         self.envelope = envelope
         self.evaluations = 0
+        self.fft_threads = 2           # threads of the OTFs' FFTs (the results do not depend on it)
 
     # -- geometry ---------------------------------------------------------------------
     def _orientation(self, i: int, theta: Corrections, lo: float, hi: float) -> Orientation:
@@ -214,7 +215,7 @@ class PatchSpectra:
         w = wy[..., :, None] * wx[..., None, :]
         k = np.bincount(idx.ravel(), w.ravel(), minlength=B * P * P).reshape(B, P, P)
         k /= np.maximum(k.sum(axis=(1, 2), keepdims=True), 1e-30)
-        return sfft.rfft2(k.astype(np.float32), axes=(1, 2), workers=2)
+        return sfft.rfft2(k.astype(np.float32), axes=(1, 2), workers=self.fft_threads)
 
     def model(self, h2: np.ndarray) -> np.ndarray:
         """``|H|^2 |A|^2 / |D|^2`` smoothed by the Hann window's power kernel, masked:
@@ -305,6 +306,28 @@ class PatchSpectra:
         S = self.spectra(theta)
         E = self.fast_envelope(S, iters=_ENVELOPE_ITERS_HELD)
         self.E = E / E.mean(1, keepdims=True)
+
+    # -- state between evaluations ------------------------------------------------------
+    def held_state(self) -> tuple:
+        """What later evaluations depend on besides their arguments: the held envelopes,
+        whether each evaluation fits its own, the noise ratios that warm-start the next
+        profile, the orientations cached, the latest spectra, and the evaluation count.
+        For :meth:`restore`."""
+        return (self.E, self.envelope, dict(self._rho_warm), dict(self._orient_cache),
+                self._last_spectra, self.evaluations)
+
+    def restore(self, state: tuple) -> None:
+        """Back to a :meth:`held_state`."""
+        (self.E, self.envelope, warm, orient, self._last_spectra, self.evaluations) = state
+        self._rho_warm, self._orient_cache = dict(warm), dict(orient)
+
+    def start_afresh(self) -> None:
+        """Forget the warm starts and caches (not the held envelopes): the evaluations that
+        follow then depend only on their arguments and the envelopes, whatever ran before
+        (the warm start of the noise ratio and an orientation integrated over a wider window
+        move a cost in its last digits)."""
+        self._rho_warm, self._orient_cache = {}, {}
+        self._last_spectra = (None, None)
 
     def _whittle(self, S: np.ndarray, params: bool = False):
         reps = S.shape[0] // len(self.points)

@@ -1,0 +1,135 @@
+"""Independent steps of a calibration search, side by side in worker processes.
+
+A calibration refines many starts that do not depend on one another: the coarse ranking's
+mappings, the candidates, the winner's other starts and scans (see
+:mod:`gyrodeblur.calibrate`, Search). Each is a Python loop over small arrays, so threads
+would wait on each other; :class:`StepRunner` runs a batch of them in forked processes,
+which inherit the fitting context (the photos' patches) without copying it, and return
+only their results.
+
+Every step starts from the same state, however many workers there are: the criterion's
+warm starts and caches are cleared (:meth:`PatchSpectra.start_afresh`), and a step run in
+this process hands the state it changed back (:meth:`PatchSpectra.restore`). So a
+calibration gives the same figures with one worker as with several, to the last digit
+(tested). What a step reports (its messages, the basins it reached, its cost evaluations)
+is replayed in the order the steps were given.
+
+Processes are forked, so workers are used on Linux only (elsewhere, and inside a daemonic
+process, the steps run one after another).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+import warnings
+from dataclasses import dataclass
+
+__all__ = ["StepRunner", "available_workers", "MAX_WORKERS"]
+
+#: At most this many worker processes by default: a batch holds up to about seven steps
+#: (a calibration's candidates), and each step's FFTs take two threads.
+MAX_WORKERS = 4
+
+# (fit, method name, argument tuples) of the batch being run: set before the workers are
+# forked, which is how they receive it
+_BATCH = None
+
+
+def available_workers() -> int:
+    """The CPUs this process may run on, at most :data:`MAX_WORKERS`."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:          # not on Linux
+        n = os.cpu_count() or 1
+    return max(1, min(n, MAX_WORKERS))
+
+
+def _can_fork() -> bool:
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
+
+
+@dataclass
+class _Done:
+    """A step's result and what it reported."""
+
+    result: object
+    said: list
+    basins: list
+    fine_evaluations: int
+    coarse_evaluations: int
+
+
+def _run_step(fit, method: str, args: tuple) -> _Done:
+    """``fit.method(*args)`` from fresh warm starts, the fit's state handed back after."""
+    held = (fit.fine.held_state(), fit.coarse.held_state(), list(fit.basins), fit.say)
+    said: list = []
+    try:
+        fit.fine.start_afresh()
+        fit.coarse.start_afresh()
+        fit.say = said.append
+        result = getattr(fit, method)(*args)
+        return _Done(result, said, fit.basins[len(held[2]):],
+                     fit.fine.evaluations - held[0][-1], fit.coarse.evaluations - held[1][-1])
+    finally:
+        fit.fine.restore(held[0])
+        fit.coarse.restore(held[1])
+        fit.basins[:] = held[2]
+        fit.say = held[3]
+
+
+def _worker(k: int):
+    fit, method, arglist = _BATCH
+    fit.fine.fft_threads = fit.coarse.fft_threads = 1      # the workers share the CPUs
+    try:
+        return _run_step(fit, method, arglist[k])
+    except BaseException:           # raised again where it can be: in the caller
+        return None
+
+
+class StepRunner:
+    """Runs batches of independent steps of one :class:`CalibrationFit`.
+
+    Parameters
+    ----------
+    fit : CalibrationFit
+        The fitting context; its methods are the steps.
+    workers : int
+        Processes to use at most (1: every step in this process).
+    """
+
+    def __init__(self, fit, workers: int):
+        self.fit = fit
+        self.workers = max(1, int(workers))
+
+    def map(self, method: str, arglist) -> list:
+        """``[fit.method(*args) for args in arglist]``, the steps side by side when there
+        are workers; their messages, basins and evaluation counts are added to the fit's
+        in order."""
+        global _BATCH
+        arglist = [tuple(a) for a in arglist]
+        n = min(self.workers, len(arglist))
+        done: list = [None] * len(arglist)
+        if n > 1 and _can_fork():
+            _BATCH = (self.fit, method, arglist)
+            try:
+                with warnings.catch_warnings():    # fork() with the FFT's threads idle
+                    warnings.simplefilter("ignore", DeprecationWarning)
+                    with multiprocessing.get_context("fork").Pool(n) as pool:
+                        done = pool.map(_worker, range(len(arglist)), chunksize=1)
+            finally:
+                _BATCH = None
+        fit = self.fit
+        out = []
+        for k, d in enumerate(done):
+            if d is None:            # no workers, or the step failed there: run it here
+                d = _run_step(fit, method, arglist[k])
+            for msg in d.said:
+                fit.say(msg)
+            fit.basins.extend(d.basins)
+            fit.fine.evaluations += d.fine_evaluations
+            fit.coarse.evaluations += d.coarse_evaluations
+            out.append(d.result)
+        return out

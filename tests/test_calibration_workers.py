@@ -1,0 +1,134 @@
+"""Calibration steps side by side: the same results with any number of workers, messages
+and basins in order, errors raised in the caller."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+import gyrodeblur.calibration_workers as cw
+from gyrodeblur.axes import parse_axes
+from gyrodeblur.calibrate import calibrate
+from gyrodeblur.calibration_workers import MAX_WORKERS, StepRunner, available_workers
+from gyrodeblur.camera import Camera
+from gyrodeblur.capture import Capture
+from gyrodeblur.errors import InputError
+from gyrodeblur.gyrolog import GyroLog
+from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
+from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
+
+forks = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers fork (Linux)")
+
+
+class _Spectra:
+    """The state :func:`calibration_workers._run_step` holds and hands back."""
+
+    def __init__(self):
+        self.E, self.evaluations, self.fft_threads, self.fresh = None, 0, 2, 0
+
+    def held_state(self):
+        return (self.E, self.evaluations)
+
+    def restore(self, state):
+        self.E, self.evaluations = state
+
+    def start_afresh(self):
+        self.fresh += 1
+
+
+class _Fit:
+    def __init__(self):
+        self.fine, self.coarse = _Spectra(), _Spectra()
+        self.basins, self.said = [], []
+        self.say = self.said.append
+
+    def step(self, k):
+        assert self.fine.E is None          # every step starts from the caller's state
+        self.fine.E = f"held by step {k}"
+        self.say(f"step {k} in {os.getpid()}")
+        self.basins.append(k)
+        self.fine.evaluations += k
+        self.coarse.evaluations += 1
+        return k * k
+
+    def fail(self, name):
+        raise InputError(name, "cannot be calibrated")
+
+
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_steps_report_in_the_order_given_whoever_ran_them(workers):
+    fit = _Fit()
+    fit.basins.append("before")
+    assert StepRunner(fit, workers).map("step", [(1,), (2,), (3,), (4,)]) == [1, 4, 9, 16]
+    assert [m.split(" in ")[0] for m in fit.said] == ["step 1", "step 2", "step 3", "step 4"]
+    assert fit.basins == ["before", 1, 2, 3, 4]
+    assert fit.fine.evaluations == 10 and fit.coarse.evaluations == 4
+    assert fit.fine.E is None               # what a step held is not left behind
+
+
+@forks
+def test_two_workers_run_the_steps_in_other_processes():
+    fit = _Fit()
+    StepRunner(fit, 2).map("step", [(1,), (2,)])
+    pids = {int(m.split(" in ")[1]) for m in fit.said}
+    assert os.getpid() not in pids
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_step_raises_its_own_error_in_the_caller(workers):
+    with pytest.raises(InputError, match="photo.png: cannot be calibrated"):
+        StepRunner(_Fit(), workers).map("fail", [("photo.png",), ("photo.png",)])
+
+
+def test_available_workers_is_bounded():
+    assert 1 <= available_workers() <= MAX_WORKERS
+
+
+def test_workers_must_be_a_whole_number():
+    img = np.zeros((64, 64), np.float32)
+    cap = Capture(0.0, 0.01, 0.0, Camera.centred(64, 64, 60.0),
+                  GyroLog(np.arange(0, 1, 0.005), np.zeros((200, 3))))
+    for bad in (0, 1.5, True):
+        with pytest.raises(InputError, match="--workers"):
+            calibrate([img], cap, workers=bad)
+
+
+@forks
+def test_a_calibration_is_the_same_with_one_worker_or_two(monkeypatch, tmp_path):
+    """A warped 9 px shake, four candidate mappings: every figure and note alike (the last
+    note, the time taken, aside), and the second run did use other processes."""
+    from skimage import data, transform
+
+    W, H = 320, 224
+    t = np.arange(0.0, 1.2, 1 / 200)
+    wc = np.stack([0.5 * np.sin(2 * np.pi * 3.1 * t + 0.4) + 0.2 * np.sin(2 * np.pi * 7.7 * t),
+                   0.7 * np.cos(2 * np.pi * 2.3 * t + 1.0),
+                   0.2 * np.sin(2 * np.pi * 4.3 * t + 0.7)], 1)
+    true = Capture(0.5, 0.04, 0.03, Camera.centred(W, H, 1.3 * W), GyroLog(t, wc), axes="Xyz")
+    sharp = transform.resize(data.astronaut(), (H, W), anti_aliasing=True).astype(np.float32)
+    blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), true)),
+                                      40.0, 0))
+    bad = true.replace(time_offset=0.012, readout_time=0.036, bias=np.array([0.02, -0.02, 0.0]),
+                       axes=parse_axes("YXz"))
+    kw = dict(mappings=["Xyz", "xYz", "YXz", "yXZ"], n_patches=6)
+
+    run_step = cw._run_step
+    ran = tmp_path / "pids"
+
+    def spy(fit, method, args):            # in a worker too: it was forked with it
+        with open(ran, "a") as f:
+            f.write(f"{os.getpid()}\n")
+        return run_step(fit, method, args)
+
+    one = calibrate([blurred], bad, workers=1, **kw)
+    monkeypatch.setattr(cw, "_run_step", spy)
+    two = calibrate([blurred], bad, workers=2, **kw)
+    assert set(ran.read_text().split()) - {str(os.getpid())}
+    a, b = one.capture, two.capture
+    assert (a.time_offset, a.readout_time, a.camera.fx) == (b.time_offset, b.readout_time, b.camera.fx)
+    assert np.array_equal(a.bias, b.bias) and np.array_equal(a.axes, b.axes)
+    assert one.notes[:-1] == two.notes[:-1] and one.ranking == two.ranking
+    assert repr(one.estimates) == repr(two.estimates)
