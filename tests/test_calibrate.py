@@ -481,28 +481,19 @@ def test_cli_fix_needs_refine(cli_dir, capsys):
     assert rc == 2 and "--refine" in capsys.readouterr().err
 
 
-def test_cli_downscale_needs_refine_and_a_factor_up_to_one(cli_dir, capsys):
+@pytest.mark.parametrize("option, value, bad, says", [("--downscale", "0.5", "2", "(0, 1]"),
+                                                     ("--workers", "2", "0", ">= 1")])
+def test_cli_calibration_options_need_refine_and_a_valid_value(cli_dir, capsys, option, value,
+                                                               bad, says):
     d = cli_dir
     rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
-               "--downscale", "0.5", "-o", str(d / "out" / "nods.png")])
+               option, value, "-o", str(d / "out" / "norefine.png")])
     assert rc == 2 and "--refine" in capsys.readouterr().err
     rc = main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
-               "--downscale", "2", "-o", str(d / "out" / "ds.json")])
+               option, bad, "-o", str(d / "out" / "bad.json")])
     err = capsys.readouterr().err
-    assert rc == 2 and "--downscale" in err and "(0, 1]" in err
-    assert not (d / "out" / "ds.json").exists()
-
-
-def test_cli_workers_need_refine_and_a_count_of_one_or_more(cli_dir, capsys):
-    d = cli_dir
-    rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
-               "--workers", "2", "-o", str(d / "out" / "nowk.png")])
-    assert rc == 2 and "--refine" in capsys.readouterr().err
-    rc = main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
-               "--workers", "0", "-o", str(d / "out" / "wk.json")])
-    err = capsys.readouterr().err
-    assert rc == 2 and "--workers" in err and ">= 1" in err
-    assert not (d / "out" / "wk.json").exists()
+    assert rc == 2 and option in err and says in err
+    assert not (d / "out" / "bad.json").exists()
 
 
 def _noisy(cap: Capture, sigma: float, seed: int = 0) -> Capture:
