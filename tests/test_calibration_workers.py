@@ -57,6 +57,11 @@ class _Fit:
     def fail(self, name):
         raise InputError(name, "cannot be calibrated")
 
+    def die_in_a_worker(self, parent, k):
+        if os.getpid() != parent:
+            os._exit(1)                     # as if killed (out of memory)
+        return k
+
 
 @pytest.mark.parametrize("workers", [1, 2, 3])
 def test_steps_report_in_the_order_given_whoever_ran_them(workers):
@@ -81,6 +86,11 @@ def test_two_workers_run_the_steps_in_other_processes():
 def test_a_failing_step_raises_its_own_error_in_the_caller(workers):
     with pytest.raises(InputError, match="photo.png: cannot be calibrated"):
         StepRunner(_Fit(), workers).map("fail", [("photo.png",), ("photo.png",)])
+
+
+@forks
+def test_steps_a_dead_worker_left_undone_run_in_the_caller():
+    assert StepRunner(_Fit(), 2).map("die_in_a_worker", [(os.getpid(), 1), (os.getpid(), 2)]) == [1, 2]
 
 
 def test_available_workers_is_bounded():

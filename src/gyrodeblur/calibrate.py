@@ -83,12 +83,6 @@ them in order and decides what to keep (5) and what to report.
    the motion and the focal length, and weakly the time offset, where blur alone is
    ambiguous (a straight pan).
 
-The independent steps (the coarse mappings, the candidates, the winner's other starts and
-scans) run side by side in worker processes (:mod:`gyrodeblur.calibration_workers`), each
-from fresh warm starts, so the result does not depend on how many there are (the 24-case
-benchmark on 2 cores: 15.8 s a photo, 20.8 s one step after another before; 12 MP: 18.8 s,
-25.3 s before).
-
 5. When the best mapping is the given one, the given parameters are kept unless the best
    found lowers the tempered objective by :data:`_KEEP_MARGIN`: a correct capture on a
    photo that says little (small blur) is left alone rather than moved along directions
@@ -105,6 +99,12 @@ benchmark on 2 cores: 15.8 s a photo, 20.8 s one step after another before; 12 M
    chi-square with as many degrees of freedom as are free): 4.5 with one free, 7.0 with
    three. On the benchmark with one parameter free and the rest right (session 13), 10
    kept readout errors of up to 8 ms that the photo itself preferred to correct.
+
+The independent steps (the coarse mappings, the candidates, the winner's other starts and
+scans) run side by side in worker processes (:mod:`gyrodeblur.calibration_workers`), each
+from fresh warm starts, so the result does not depend on how many there are (the 24-case
+benchmark on 2 cores: 15.8 s a photo, 20.8 s one step after another before; 12 MP: 18.8 s,
+25.3 s before).
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
 objective (priors included). The axis mapping's confidence is the objective gap to the

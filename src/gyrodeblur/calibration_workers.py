@@ -24,6 +24,8 @@ import multiprocessing
 import os
 import sys
 import warnings
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 __all__ = ["StepRunner", "available_workers", "MAX_WORKERS"]
@@ -65,6 +67,7 @@ class _Done:
 def _run_step(fit, method: str, args: tuple) -> _Done:
     """``fit.method(*args)`` from fresh warm starts, the fit's state handed back after."""
     held = (fit.fine.held_state(), fit.coarse.held_state(), list(fit.basins), fit.say)
+    counts = (fit.fine.evaluations, fit.coarse.evaluations)
     said: list = []
     try:
         fit.fine.start_afresh()
@@ -72,7 +75,7 @@ def _run_step(fit, method: str, args: tuple) -> _Done:
         fit.say = said.append
         result = getattr(fit, method)(*args)
         return _Done(result, said, fit.basins[len(held[2]):],
-                     fit.fine.evaluations - held[0][-1], fit.coarse.evaluations - held[1][-1])
+                     fit.fine.evaluations - counts[0], fit.coarse.evaluations - counts[1])
     finally:
         fit.fine.restore(held[0])
         fit.coarse.restore(held[1])
@@ -80,9 +83,13 @@ def _run_step(fit, method: str, args: tuple) -> _Done:
         fit.say = held[3]
 
 
+def _start_worker() -> None:
+    fit = _BATCH[0]
+    fit.fine.fft_threads = fit.coarse.fft_threads = 1      # the workers share the CPUs
+
+
 def _worker(k: int):
     fit, method, arglist = _BATCH
-    fit.fine.fft_threads = fit.coarse.fft_threads = 1      # the workers share the CPUs
     try:
         return _run_step(fit, method, arglist[k])
     except BaseException:           # raised again where it can be: in the caller
@@ -117,14 +124,20 @@ class StepRunner:
             try:
                 with warnings.catch_warnings():    # fork() with the FFT's threads idle
                     warnings.simplefilter("ignore", DeprecationWarning)
-                    with multiprocessing.get_context("fork").Pool(n) as pool:
-                        done = pool.map(_worker, range(len(arglist)), chunksize=1)
+                    with ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
+                                             initializer=_start_worker) as pool:
+                        for k, d in enumerate(pool.map(_worker, range(len(arglist)))):
+                            done[k] = d
+            except BrokenProcessPool:    # a worker died (killed, out of memory): the
+                pass                     # steps it left undone run here
             finally:
                 _BATCH = None
         fit = self.fit
         out = []
         for k, d in enumerate(done):
-            if d is None:            # no workers, or the step failed there: run it here
+            # no workers, or the step failed or died there: run it here (an error is then
+            # raised as it would be without workers)
+            if d is None:
                 d = _run_step(fit, method, arglist[k])
             for msg in d.said:
                 fit.say(msg)
