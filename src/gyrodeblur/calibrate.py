@@ -327,7 +327,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     short = shortlist(rankings)
     # 2. candidates at full working scale, the best refined further
     top = with_twin(short[:_CANDIDATES], rankings[0])
-    results = sorted(steps.map("candidate", [(r[1], r[2], r[4]) for r in top]), key=lambda r: r[0])
+    results = sorted(fit.candidates(top, steps), key=lambda r: r[0])
     _, x, M, alts = results[0]
     x, fx, Fm, sc = fit.refine_winner(M, x, alts, steps)
     gap = float(min(r[0] for r in results[1:]) - fx) if len(results) > 1 else np.nan

@@ -222,11 +222,37 @@ class CalibrationFit:
         tot, tau0, kap = line_fit(C, self.taus, self.uc, self.kappas)
         return tot, tau0, kap, 1.0, M
 
-    def candidate(self, tau0, kap, M):
-        """Mapping ``M`` at the working scale: per-patch time shifts x focal grid with the
-        envelopes held from the coarse start, combined along the readout line; from the
-        best few distinct starts, Levenberg-Marquardt. Returns (objective, x, M, the other
-        starts' results)."""
+    def candidates(self, rows, steps) -> list:
+        """The coarse ``rows`` (``(score, time shift, readout error, 1.0, M)``) at the
+        working scale: each mapping's starts (:meth:`candidate_starts`), then from all of
+        them Levenberg-Marquardt, 4 iterations, in one batch of ``steps`` (a
+        :class:`gyrodeblur.calibration_workers.StepRunner`), so that no mapping's starts
+        wait for each other. Per mapping, in the order of ``rows``: (objective, x, M, the
+        other starts' results)."""
+        starts = steps.map("candidate_starts", [(r[1], r[2], r[4]) for r in rows])
+        flat = [(k, x0) for k, xs in enumerate(starts) for x0 in xs]
+        refined = steps.map("refine", [(rows[k][4], x0, 4) for k, x0 in flat])
+        out = []
+        for k, r in enumerate(rows):
+            M = r[4]
+            fx, alts = np.inf, []
+            for (j, _), (x1, f1, _, _) in zip(flat, refined):
+                if j != k:
+                    continue
+                alts.append(x1)
+                if f1 < fx:
+                    x, fx = x1, f1
+            self.say(f"  candidate {axes_to_letters(M) or 'given'}: time shift {x[0] * 1e3:+.1f} ms, "
+                     f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
+            out.append((fx, x, M, [a for a in alts if a is not x]))
+        return out
+
+    def candidate_starts(self, tau0, kap, M) -> list:
+        """Mapping ``M``'s starts at the working scale: per-patch time shifts x focal grid
+        with the envelopes held from the coarse start (``tau0``, ``kap``), combined along
+        the readout line; the best few that differ in time shift (at the pivot row) or
+        readout, as parameter vectors (the refinement from the best line fit alone can stop
+        in the wrong basin)."""
         search = self.search
         if "offset" in self.fix:
             tm = np.array([0.0])
@@ -241,11 +267,9 @@ class CalibrationFit:
             C = self.fine.costs(self.theta0.copy(axes=M, focal=fo,
                                                  bias=self.bias_prior.for_mapping(M)[0]),
                                 taus=tm, rows=(0.0,))
-            for kap in self.kappas:
-                tot, t0, kp = line_fit(C, tm, self.uc, [kap])
-                starts.append((tot, t0, kp, fo))
-        # the best few starts that differ in time shift (at the pivot row) or readout: the
-        # refinement from the best line fit alone can stop in the wrong basin
+            for kp in self.kappas:
+                tot, t0, k1 = line_fit(C, tm, self.uc, [kp])
+                starts.append((tot, t0, k1, fo))
         starts.sort(key=lambda r: r[0])
         chosen = [starts[0]]
         for r in starts[1:]:
@@ -254,15 +278,7 @@ class CalibrationFit:
             if all(abs((r[1] - c[1]) + (r[2] - c[2]) * (0.5 - self.ubar)) > _DISTINCT_SHIFT
                    or abs(r[2] - c[2]) > _DISTINCT_READOUT for c in chosen):
                 chosen.append(r)
-        fx, alts = np.inf, []
-        for best in chosen:
-            x1, f1, _, _ = self.refine(M, self.start_vec(best[1], best[2], M, best[3]), 4)
-            alts.append(x1)
-            if f1 < fx:
-                x, fx = x1, f1
-        self.say(f"  candidate {axes_to_letters(M) or 'given'}: time shift {x[0] * 1e3:+.1f} ms, "
-                 f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
-        return fx, x, M, [a for a in alts if a is not x]
+        return [self.start_vec(c[1], c[2], M, c[3]) for c in chosen]
 
     def refine_winner(self, M, x, alts, steps):
         """The winning mapping's refinement from its best start, its other starts, the
