@@ -103,7 +103,7 @@ them in order and decides what to keep (5) and what to report.
 The independent steps (the coarse mappings, the candidates, the winner's other starts and
 scans) run side by side in worker processes (:mod:`gyrodeblur.calibration_workers`), each
 from fresh warm starts, so the result does not depend on how many there are (the 24-case
-benchmark on 2 cores: 15.8 s a photo, 20.8 s one step after another before; 12 MP: 18.8 s,
+benchmark on 2 cores: 15.9 s a photo, 20.8 s one step after another before; 12 MP: 18.6 s,
 25.3 s before).
 
 Uncertainties are one-sigma marginals of the Laplace approximation of the tempered
