@@ -279,13 +279,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
             or not 0 < downscale <= 1:
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
-    if workers is not None and (isinstance(workers, bool)
-                                or not isinstance(workers, (int, np.integer)) or workers < 1):
+    if workers is not None and not _is_count(workers):
         raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
     if not (isinstance(offset_range, (int, float, np.number)) and 0 <= offset_range < np.inf):
         raise InputError(None, f"offset_range must be a number of seconds >= 0, got {offset_range!r}")
-    if n_patches is not None and (isinstance(n_patches, bool)
-                                  or not isinstance(n_patches, (int, np.integer)) or n_patches < 1):
+    if n_patches is not None and not _is_count(n_patches):
         raise InputError(None, f"n_patches must be a whole number >= 1, got {n_patches!r}")
     work_caps = captures
     if downscale < 1:
@@ -429,6 +427,11 @@ def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarra
     if axes_to_letters(given) is None:
         cand.append(given)
     return cand
+
+
+def _is_count(value) -> bool:
+    """Whether ``value`` is a whole number >= 1 (an int, not a bool)."""
+    return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= 1
 
 
 def _shrunk_photos(images, captures, factor: float):

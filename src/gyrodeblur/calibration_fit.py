@@ -230,18 +230,14 @@ class CalibrationFit:
         wait for each other. Per mapping, in the order of ``rows``: (objective, x, M, the
         other starts' results)."""
         starts = steps.map("candidate_starts", [(r[1], r[2], r[4]) for r in rows])
-        flat = [(k, x0) for k, xs in enumerate(starts) for x0 in xs]
-        refined = steps.map("refine", [(rows[k][4], x0, 4) for k, x0 in flat])
+        refined = iter(steps.map("refine", [(r[4], x0, 4) for r, xs in zip(rows, starts)
+                                            for x0 in xs]))
         out = []
-        for k, r in enumerate(rows):
+        for r, xs in zip(rows, starts):
             M = r[4]
-            fx, alts = np.inf, []
-            for (j, _), (x1, f1, _, _) in zip(flat, refined):
-                if j != k:
-                    continue
-                alts.append(x1)
-                if f1 < fx:
-                    x, fx = x1, f1
+            mine = [next(refined)[:2] for _ in xs]
+            x, fx = min(mine, key=lambda t: t[1])       # the first of equals
+            alts = [xa for xa, _ in mine]
             self.say(f"  candidate {axes_to_letters(M) or 'given'}: time shift {x[0] * 1e3:+.1f} ms, "
                      f"readout {x[1] * 1e3:+.1f} ms, focal x{np.exp(x[2]):.3f}: objective {fx:.1f}")
             out.append((fx, x, M, [a for a in alts if a is not x]))
@@ -375,7 +371,8 @@ class CalibrationFit:
         th_w = self.search.theta_of(x, M, self.ubar)
         th_t = self.search.theta_of(xt, Mt, self.ubar)
         self.fine.set_envelope(th_w)
-        per_patch = (self.fine.cost(th_t) - self.fine.cost(th_w)) / len(self.fine.points)
+        c_w = self.fine.cost(th_w)          # (the spectra the envelope fit just computed)
+        per_patch = (self.fine.cost(th_t) - c_w) / len(self.fine.points)
         msg = (f"mirror twin {axes_to_letters(Mt)} at the same parameters: spectra "
                f"{per_patch:+.1f} nats/patch")
         reg = self.reg
