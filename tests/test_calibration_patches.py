@@ -45,6 +45,33 @@ def test_patches_are_textured_unclipped_and_apart():
     assert min(d) > 0.5 * 64
 
 
+def test_a_page_of_text_gets_all_its_patches_the_unclipped_ones_first():
+    """White paper (clipped) with dark strokes all over, so that nearly every window is
+    more than 30 % clipped, and one grey textured corner. The corner's windows come
+    first; the strokes' best windows fill the other places rather than leaving them
+    empty (a photo with only two unclipped windows must not be calibrated on two patches
+    when one with none gets six)."""
+    rng = np.random.default_rng(2)
+    img = np.ones((400, 600), np.float32)
+    strokes = ndimage.gaussian_filter(rng.normal(size=(400, 600)), 2.0)
+    img[strokes > 0.08] = 0.1
+    img[:110, :110] = 0.4 + 0.15 * ndimage.gaussian_filter(rng.normal(size=(110, 110)), 1.5)
+    img = np.clip(img, 0, 1)
+    win = 64
+    clipped = ndimage.uniform_filter((img >= 1.0).astype(float), win)[32:-32, 32:-32]
+    assert (clipped > 0.3).mean() > 0.9           # the page: nearly all windows clipped
+    photo = CalibrationPhoto(img, _capture(), "srgb", 0)
+    centres = select_patch_centres(photo, 6, win)
+    assert len(centres) == 6
+    first = [(x, y) for x, y in centres if x < 110 and y < 110]
+    assert len(first) >= 1 and centres[:len(first)] == first, centres
+    for x, y in centres[len(first):]:
+        w = img[int(y) - 32:int(y) + 32, int(x) - 32:int(x) + 32]
+        assert w.std() > 0.2, (x, y)              # on the strokes, not on blank paper
+    d = [np.hypot(a[0] - b[0], a[1] - b[1]) for i, a in enumerate(centres) for b in centres[i + 1:]]
+    assert min(d) > 0.5 * win
+
+
 def test_a_nearly_flat_cell_gives_its_place_to_texture_elsewhere():
     """The right half is sky: flat but for faint sensor noise. Its grid cells' best windows
     would show noise, not blur, so all six windows lie on the textured left half."""

@@ -21,6 +21,10 @@ __all__ = ["CalibrationPhoto", "select_patch_centres"]
 #: (smaller structure-tensor eigenvalue) gives no window: another cell's takes its place
 _FLAT_FRACTION = 0.05
 
+#: a window with more of its pixels clipped than this is taken only when the photo has too
+#: few others
+_SATURATED_MAX = 0.3
+
 
 class CalibrationPhoto:
     """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
@@ -82,7 +86,10 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     ``footprint`` spread over a grid of cells (best isotropic texture per cell: the
     smaller eigenvalue of the structure tensor; none from a cell whose best is nearly
     flat, under ``_FLAT_FRACTION`` of the photo's best: the next cell, or the best
-    remaining anywhere, takes its place), then the best remaining anywhere."""
+    remaining anywhere, takes its place), then the best remaining anywhere. Windows more
+    than ``_SATURATED_MAX`` clipped are left out while these fill the ``n``; where they
+    do not (a page of text on white paper), the same pass is made again with them in,
+    penalised for their clipped share, and its windows come after the first pass's."""
     th, sat, k = photo.thumbnail()
     h, w = th.shape
     win = max(3, int(round(footprint / k)))
@@ -93,11 +100,12 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     jxy = ndimage.uniform_filter(gx * gy, win, mode="nearest")
     lam_min = 0.5 * (jxx + jyy - np.sqrt((jxx - jyy) ** 2 + 4 * jxy ** 2))
     satf = ndimage.uniform_filter(sat, win, mode="nearest")
-    # clipped highlights break the linear model: avoid them, but a page of text on white
-    # paper has little else, so they are penalised rather than excluded up to 30 %
-    score = np.where(satf > 0.3, -1.0, lam_min * (1 - 3 * satf))
-    if not (score > 0).any():                    # nothing else: take what there is
-        score = lam_min * (1 - 0.9 * satf)
+    # clipped highlights break the linear model: windows over 30 % clipped come only after
+    # every other, and the rest are penalised for what they have; but a page of text on
+    # white paper has little else, and a cell is better served by its best such window
+    # than by none
+    tiers = (np.where(satf > _SATURATED_MAX, -1.0, lam_min * (1 - 3 * satf)),
+             lam_min * (1 - 0.9 * satf))
     half = win / 2
     ylo, yhi = int(np.ceil(half)) - 1, int(np.floor(h - half))
     xlo, xhi = int(np.ceil(half)) - 1, int(np.floor(w - half))
@@ -105,8 +113,6 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
         ylo = yhi = h // 2
     if xhi < xlo:
         xlo = xhi = w // 2
-    valid = np.full(score.shape, -np.inf)
-    valid[ylo:yhi + 1, xlo:xhi + 1] = score[ylo:yhi + 1, xlo:xhi + 1]
     aspect = photo.W / photo.H
     cols = max(1, int(round(np.sqrt(n * aspect))))
     rows = max(1, int(np.ceil(n / cols)))
@@ -117,11 +123,7 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
     radius = 0.7 * win
     found = []
 
-    # a cell with nothing but a nearly flat window (sky, a wall) gives its place to another
-    # cell's window: its spectrum would show noise, not blur
-    floor = _FLAT_FRACTION * float(valid.max()) if np.isfinite(valid).any() else 0.0
-
-    def pick(y0, y1, x0, x1, least=0.0) -> bool:
+    def pick(valid, tier, y0, y1, x0, x1, least=0.0) -> bool:
         sub = valid[y0:y1, x0:x1].copy()
         for (ty, tx) in taken:
             sub[np.hypot(Y[y0:y1, x0:x1] - ty, X[y0:y1, x0:x1] - tx) < radius] = -np.inf
@@ -133,14 +135,21 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
             return False
         yy, xx = np.unravel_index(j, sub.shape)
         taken.append((y0 + yy, x0 + xx))
-        found.append((v, (x0 + xx + 0.5) * k - 0.5, (y0 + yy + 0.5) * k - 0.5))
+        found.append((tier, -v, (x0 + xx + 0.5) * k - 0.5, (y0 + yy + 0.5) * k - 0.5))
         return True
 
-    for r in range(rows):                        # the best window of each cell ...
-        for c in range(cols):
-            if len(found) < n:
-                pick(yb[r], max(yb[r + 1], yb[r] + 1), xb[c], max(xb[c + 1], xb[c] + 1), floor)
-    while len(found) < n and pick(0, h, 0, w):   # ... then the best anywhere else
-        pass
-    found.sort(key=lambda f: -f[0])
-    return [(x, y) for _, x, y in found[:n]]
+    for tier, score in enumerate(tiers):
+        valid = np.full(score.shape, -np.inf)
+        valid[ylo:yhi + 1, xlo:xhi + 1] = score[ylo:yhi + 1, xlo:xhi + 1]
+        # a cell with nothing but a nearly flat window (sky, a wall) gives its place to
+        # another cell's window: its spectrum would show noise, not blur
+        floor = _FLAT_FRACTION * float(valid.max()) if np.isfinite(valid).any() else 0.0
+        for r in range(rows):                    # the best window of each cell ...
+            for c in range(cols):
+                if len(found) < n:
+                    pick(valid, tier, yb[r], max(yb[r + 1], yb[r] + 1),
+                         xb[c], max(xb[c + 1], xb[c] + 1), floor)
+        while len(found) < n and pick(valid, tier, 0, h, 0, w):   # ... then anywhere else
+            pass
+    found.sort()
+    return [(x, y) for _, _, x, y in found[:n]]
