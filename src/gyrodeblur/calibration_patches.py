@@ -139,6 +139,8 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
         return True
 
     for tier, score in enumerate(tiers):
+        if len(found) >= n:                      # the unclipped windows filled them all
+            break
         valid = np.full(score.shape, -np.inf)
         valid[ylo:yhi + 1, xlo:xhi + 1] = score[ylo:yhi + 1, xlo:xhi + 1]
         # a cell with nothing but a nearly flat window (sky, a wall) gives its place to
