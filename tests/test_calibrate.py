@@ -200,6 +200,20 @@ def test_a_right_mapping_is_not_given_up_for_a_coin_toss(case):
                for note in res.notes)
 
 
+def test_the_given_mapping_stands_against_another_within_the_margin():
+    """The odds for the given mapping are odds against another mapping at its best: its
+    candidate goes on unless the winner's is better by the margin."""
+    from gyrodeblur.calibrate import standing_candidate
+    given, twin, other = parse_axes("Xyz"), parse_axes("xYz"), parse_axes("zyx")
+    rows = [(-3665.9, "x_twin", twin, []), (-3663.4, "x_given", given, []),
+            (-3582.5, "x_other", other, [])]
+    assert standing_candidate(rows, given, 14.0)[1] == "x_given"      # 2.5 < 14
+    assert standing_candidate(rows, given, 2.0)[1] == "x_twin"        # 2.5 >= 2
+    assert standing_candidate(rows, other, 14.0)[1] == "x_twin"       # 83 nats behind
+    assert standing_candidate(rows, parse_axes("YXz"), 14.0)[1] == "x_twin"   # not a candidate
+    assert standing_candidate(rows[1:], given, 14.0)[1] == "x_given"  # the best already
+
+
 def test_a_wrong_mirror_twin_gives_way_to_the_right_mapping(case):
     """The twin step on the 13 px shake (rolling shutter): the right mapping, refined, keeps
     its place against its twin; its mirror twin, refined to its own optimum, gives way to

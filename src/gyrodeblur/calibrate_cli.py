@@ -37,7 +37,8 @@ def format_estimates(est: dict) -> list[str]:
     elif not np.isfinite(gap):
         conf = "only candidate"
     else:
-        conf = f"next best mapping: objective {gap:+.1f} higher"
+        conf = (f"next best mapping: objective {gap:+.1f} higher" if gap >= 0 else
+                f"next best mapping: objective {-gap:.1f} lower, within the given one's margin")
         if gap < AXES_CONFIDENT_NATS:
             conf += ": uncertain"
     lines.append(f"  axes         {b} -> {a}  ({conf})")
