@@ -522,6 +522,24 @@ def test_keep_margin_grows_with_gyro_noise():
     assert _keep_margin(0.021) == pytest.approx(3 * _KEEP_MARGIN)
 
 
+def test_gyro_noise_is_measured_per_sample_at_200_hz():
+    """The angle white rate noise adds over an exposure grows with sigma sqrt(dt): a 1 kHz
+    log with sqrt(5) times the per-sample noise of a 200 Hz one blurs PSFs as much, and
+    its level (what raises the keep margin) is the same."""
+    from gyrodeblur.calibrate import _gyro_noise_level
+    rng = np.random.default_rng(3)
+
+    def level(rate, sigma):
+        t = np.arange(0.0, 1.2, 1 / rate)
+        log = GyroLog(t, 0.2 * np.sin(2 * np.pi * 2 * t)[:, None] + rng.normal(0, sigma, (t.size, 3)))
+        return _gyro_noise_level([_true_capture(0.5, log)])
+
+    slow, fast = level(200, 0.02), level(1000, 0.02 * np.sqrt(5))
+    assert slow == pytest.approx(0.02, rel=0.1)
+    assert fast == pytest.approx(slow, rel=0.1)
+    assert level(1000, 0.02) == pytest.approx(0.02 / np.sqrt(5), rel=0.1)
+
+
 def test_keep_margin_shrinks_with_fewer_free_coordinates(case):
     """With all six continuous coordinates free the margin is 10 nats; with fewer, the
     same odds of moving a right capture by chance (twice the gain ~ chi-square with

@@ -94,9 +94,11 @@ them in order and decides what to keep (5) and what to report.
    is wrong with them. A noisy gyro makes its PSFs' fine
    structure noisy, and a fit then gains objective by following that noise (at 0.02 rad/s
    per sample, gains of 3-17 with no better PSFs); so the margin grows with the log's
-   white-noise level (:func:`gyrodeblur.gyrolog.rate_noise`) above the chapter's typical phone gyro,
-   0.007 rad/s: ``margin = 10 max(1, noise / 0.007)`` (in proportion, not with the
-   variance: that kept real 5 ms offset errors under 0.02 rad/s noise). The margin of 10
+   white-noise level (:func:`gyrodeblur.gyrolog.rate_noise`, scaled to a 200 Hz log: the
+   angle the noise adds over an exposure grows with ``sigma sqrt(dt)``) above the
+   chapter's typical phone gyro, 0.007 rad/s: ``margin = 10 max(1, noise / 0.007)``
+   (in proportion, not with the variance: that kept real 5 ms offset errors under 0.02
+   rad/s noise). The margin of 10
    is for all six continuous coordinates free (offset, readout, focal, bias); with some
    fixed it shrinks to the same odds of moving a right capture (twice the gain is about
    chi-square with as many degrees of freedom as are free): 4.5 with one free, 7.0 with
@@ -216,8 +218,10 @@ _KEEP_MARGIN = 10.0
 #: margin of 10 was tried: two benchmark photos of 3-4 px blur then kept the wrong mapping
 #: they were given, which the right one beat by 4.2 and 6.7.
 _KEEP_MAPPING_NATS = 2.0
-#: rad/s per sample: gyro noise above this raises the keep margin (in proportion).
+#: rad/s per sample at :data:`_TYPICAL_GYRO_RATE` samples a second: gyro noise above this
+#: raises the keep margin (in proportion).
 _TYPICAL_GYRO_NOISE = 0.007
+_TYPICAL_GYRO_RATE = 200.0
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
 
 
@@ -352,7 +356,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         else:           # another mapping: the odds of 7 to 1, however many are free
             margin = mapping_margin
         if np.isfinite(noise) and noise > _TYPICAL_GYRO_NOISE:
-            note(f"gyro noise {noise:.4f} rad/s per sample: the given parameters are "
+            note(f"gyro noise {noise:.4f} rad/s per sample (at {_TYPICAL_GYRO_RATE:g} Hz): "
+                 f"the given parameters are "
                  f"kept unless the objective improves by {margin:.0f}", "  ")
         if f_given - fx < margin:
             from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
@@ -498,8 +503,17 @@ def _shrunk(image: np.ndarray, factor: float) -> np.ndarray:
 
 
 def _gyro_noise_level(captures) -> float:
-    """The largest white-noise level (rad/s per sample) of the captures' gyro logs."""
-    levels = [rate_noise(log) for log, _ in logs_with_captures(captures)]
+    """The largest white-noise level of the captures' gyro logs, as rad/s per sample at
+    :data:`_TYPICAL_GYRO_RATE` samples a second.
+
+    What a PSF feels of white rate noise is the angle it adds up to over the exposure, a
+    random walk of ``sigma sqrt(dt T)``: a log sampled at 1 kHz with 0.01 rad/s per sample
+    turns a PSF as little as one at 200 Hz with 0.0045. So each log's level
+    (:func:`gyrodeblur.gyrolog.rate_noise`) is scaled by ``sqrt(200 Hz / its rate)``."""
+    levels = []
+    for log, _ in logs_with_captures(captures):
+        dt = float(np.median(np.diff(log.t))) if log.t.size > 1 else np.nan
+        levels.append(rate_noise(log) * np.sqrt(_TYPICAL_GYRO_RATE * dt))
     levels = [v for v in levels if np.isfinite(v)]
     return max(levels) if levels else float("nan")
 
