@@ -341,8 +341,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         note(f"the given mapping's best ({chosen[0]:.1f}) is within {mapping_margin:.3g} of "
              f"{axes_to_letters(best[2]) or 'given'}'s ({best[0]:.1f}): it stands", "  ")
     x, fx, Fm, sc = fit.refine_winner(M, x, alts, steps)
-    others = [r[0] for r in results if not np.allclose(r[2], M)]
-    gap = float(min(others) - fx) if others else np.nan
+    gap = _gap_to_other_mappings(results, M, fx)
     if np.isfinite(gap) and gap < 0:        # a runner-up's refinement was cut short
         gap = 0.0
 
@@ -357,8 +356,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             margin = mapping_margin
         if np.isfinite(noise) and noise > _TYPICAL_GYRO_NOISE:
             note(f"gyro noise {noise:.4f} rad/s per sample (at {_TYPICAL_GYRO_RATE:g} Hz): "
-                 f"the given parameters are "
-                 f"kept unless the objective improves by {margin:.0f}", "  ")
+                 f"the given parameters are kept unless the objective improves by "
+                 f"{margin:.0f}", "  ")
         if f_given - fx < margin:
             from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
             found = c0.time_offset + search.theta_of(x, M, fit.ubar).offset
@@ -369,8 +368,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
             _, _, Fm, sc = fit.refine(M, x, 0)
             kept = True
             note(msg, "  ")
-            others = [r[0] for r in results if not np.allclose(r[2], M)]
-            gap = float(min(others) - fx) if others else np.nan
+            gap = _gap_to_other_mappings(results, M, fx)
 
     # other offsets the photo(s) cannot tell from the chosen one: the winner's refinements
     # reached their basins (scored under the winner's mapping; a mirror twin taken below
@@ -395,15 +393,14 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         note(msg, "  ")
 
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
-        others = [r for r in results if not np.allclose(r[2], M)]
-        runner = min(others, key=lambda r: r[0])[2] if others else None
+        rival = _best_other_mapping(results, M)
+        runner = None if rival is None else rival[2]
         note(f"warning: the axis mapping is uncertain: the next best"
              f"{' (' + (axes_to_letters(runner) or 'given') + ')' if runner is not None else ''}"
              + (f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g})" if gap >= 0 else
                 f" scores {-gap:.1f} better, by less than the margin kept for the given one")
-             + "; the blur says little"
-             " about its direction. Give the mapping (--orientation) if it is known, or"
-             " calibrate on several photos of the session", "  ")
+             + "; the blur says little about its direction. Give the mapping (--orientation)"
+             " if it is known, or calibrate on several photos of the session", "  ")
 
     theta = search.theta_of(x, M, fit.ubar)
     unc = _uncertainties(x, fit.idx, Fm, sc, fit.ubar)
@@ -449,6 +446,20 @@ def standing_candidate(results: list, given: np.ndarray, margin: float) -> tuple
     if own and own[0] is not best and own[0][0] - best[0] < margin:
         return own[0]
     return best
+
+
+def _best_other_mapping(results: list, M: np.ndarray):
+    """The best candidate row ``(objective, x, M, ...)`` of a mapping other than ``M``
+    (``None`` when there is none)."""
+    rows = [r for r in results if not np.allclose(r[2], M)]
+    return min(rows, key=lambda r: r[0]) if rows else None
+
+
+def _gap_to_other_mappings(results: list, M: np.ndarray, objective: float) -> float:
+    """How much worse (tempered nats) the best other mapping's candidate scores than
+    ``objective`` (``nan`` when there is no other)."""
+    rival = _best_other_mapping(results, M)
+    return np.nan if rival is None else float(rival[0] - objective)
 
 
 def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarray]:
