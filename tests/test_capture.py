@@ -289,3 +289,55 @@ def test_a_bad_value_from_an_option_names_the_option(capture_files, override, na
     d, _ = capture_files
     with pytest.raises(InputError, match="cap.json " + named):
         load_capture(d / "cap.json", overrides=override)
+
+
+def test_a_readout_in_ms_is_refused_even_where_the_log_covers_it(capture_files):
+    d, doc = capture_files
+    doc["readout_time"] = 0.5                    # the log (2 s) covers a 0.5 s readout
+    (d / "cap.json").write_text(json.dumps(doc))
+    assert load_capture(d / "cap.json").readout_time == 0.5
+    with pytest.raises(InputError, match="cap.json with --readout-time: readout_time 1.5 s is "
+                                         "longer than any sensor's readout .*not ms"):
+        load_capture(d / "cap.json", overrides={"readout_time": 1.5})
+    g = d / "gyro.gcsv"                          # a header's own value is blamed on the log
+    g.write_text(g.read_text().replace("tscale,", "frame_readout_time,-20\ntscale,", 1))
+    del doc["readout_time"]
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"gyro.gcsv: the gcsv header's frame_readout_time "
+                                         r"\(ms\) must be 0 to 1000, got -20"):
+        load_capture(d / "cap.json")
+
+
+def test_an_automatic_bias_from_a_camera_that_was_not_still_is_warned_of(tmp_path):
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 2, 0.005)
+    w = 0.02 + 0.004 * rng.standard_normal((t.size, 3))             # still, on a table
+    doc = {"exposure_start": 0.95, "exposure_time": 0.05, "readout_time": 0.0,
+           "camera": {"fx": 500, "width": 640, "height": 480},
+           "gyro": {"path": "g.gcsv", "bias": "auto"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    write_gcsv(tmp_path / "g.gcsv", GyroLog(t, w))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.allclose(load_capture(tmp_path / "c.json").bias, 0.02, atol=2e-3)
+    w += 0.3 * np.sin(2 * np.pi * 1.5 * t)[:, None]                 # held in a hand
+    write_gcsv(tmp_path / "g.gcsv", GyroLog(t, w))
+    with pytest.warns(UserWarning, match="g.gcsv: the automatic bias, .* comes from samples "
+                                         "that vary by 0.3.. rad/s: the camera was not still"):
+        load_capture(tmp_path / "c.json")
+
+
+def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
+    t = 1000.0 + np.arange(400) / 200.0
+    rows = "\n".join(f"{v:.3f},0.01,0.3,-0.02" for v in t)
+    (tmp_path / "g.csv").write_text("t_s,gx,gy,gz\n" + rows + "\n")
+    doc = {"exposure_start": 1001.0, "exposure_time": 0.03,
+           "camera": {"fx": 500, "width": 640, "height": 480}, "gyro": {"path": "g.csv"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    said = []
+    load_capture(tmp_path / "c.json", report=said.append)
+    assert said == ["gyro rates read in rad/s (the column names state no unit; give "
+                    "--rate-unit deg/s if they are degrees)"]
+    said.clear()
+    load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"}, report=said.append)
+    assert said == []

@@ -117,7 +117,7 @@ def test_csv_semicolons_comments_quotes_and_byte_order_mark(tmp_path, trace):
     assert np.allclose(log.t, trace.t) and np.allclose(log.omega, trace.omega)
     # line numbers in messages count the comment lines
     p.write_text("# comment\nt_s;wx;wy;wz\n0;0;0;0\n0.01;0;x;0\n0.02;0;0;0\n")
-    with pytest.raises(InputError, match="line 4: not a number"):
+    with pytest.raises(InputError, match="line 4: column .wy. is not a number"):
         read_gyro_log(p)
     # a gcsv with a byte-order mark
     g = tmp_path / "g.gcsv"
@@ -373,3 +373,86 @@ def test_read_gyro_log_checks_its_format_and_options(tmp_path, trace):
         read_gyro_log(tmp_path / "g.gcsv", time_units="ms")
     with pytest.warns(UserWarning, match="time_unit applies to CSV logs only; this log is gcsv"):
         read_gyro_log(tmp_path / "g.gcsv", time_unit="ms")
+
+
+def _rows(trace, rate_scale=1.0, prefix=""):
+    return "\n".join(f"{prefix}{int(round(a * 1e9))}," + ",".join(repr(float(v) * rate_scale)
+                                                               for v in w)
+                     for a, w in zip(trace.t, trace.omega))
+
+
+def test_text_columns_the_log_does_not_use_are_not_read(tmp_path, trace):
+    # the iOS SensorLog app writes a date first, then times and the gyro's columns by name
+    p = tmp_path / "sensorlog.csv"
+    p.write_text("loggingTime(txt),gyroTimestamp_sinceReboot(ns),gyroRotationX(rad/s),"
+                 "gyroRotationY(rad/s),gyroRotationZ(rad/s)\n"
+                 + _rows(trace, prefix="2024-01-01 10:00:00.000 +0100,") + "\n")
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t, atol=1e-9) and np.allclose(log.omega, trace.omega)
+    # a text value in a column that is used is named by its column
+    p.write_text("t_ns,gx,gy,gz\n0,0,0,0\n5000000,0,abc,0\n10000000,0,0,0\n")
+    with pytest.raises(InputError, match=r"line 3: column 'gy' is not a number \('abc'\)"):
+        read_gyro_log(p, time_unit="ns", rate_unit="rad/s")
+
+
+@pytest.mark.parametrize("options,match", [
+    ({"rate_columns": (1, 1, 1)}, "three different columns"),
+    ({"rate_columns": ("gx", "gy", "gy")}, "three different columns"),
+    ({"rate_columns": (0, 1, 2)}, "other than the time column"),
+    ({"rate_columns": (True, 2, 3)}, "must name a column .* got True"),
+    ({"rate_columns": (-1, -2, -3)}, "column -1 does not exist"),
+    ({"time_column": -4}, "column -4 does not exist"),
+    ({"time_unit": ["ns"]}, r"time_unit must be one of s, ms, us, ns, got \['ns'\]"),
+    ({"rate_unit": {"u": "rad/s"}}, "rate_unit must be one of rad/s, deg/s"),
+])
+def test_csv_options_of_the_wrong_kind_are_refused(tmp_path, trace, options, match):
+    p = tmp_path / "g.csv"
+    p.write_text("t_ns,gx,gy,gz\n" + _rows(trace) + "\n")
+    with pytest.raises(InputError, match=match) as e:
+        read_csv_log(p, **options)
+    assert "g.csv" in str(e.value)
+
+
+def test_a_rate_unit_against_the_names_warns_and_an_unstated_one_is_said(tmp_path, trace):
+    p = tmp_path / "g.csv"
+    p.write_text("t_ns,wx_rad_s,wy_rad_s,wz_rad_s\n" + _rows(trace) + "\n")
+    with pytest.warns(UserWarning, match="deg/s, overrides the rad/s that column 'wx_rad_s'"):
+        log = read_csv_log(p, rate_unit="deg/s")
+    assert np.allclose(log.omega, np.radians(trace.omega))
+    assert "rate_unit_from" not in log.meta
+    p.write_text("t_ns,gx,gy,gz\n" + _rows(trace) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # a hand-held log in rad/s: no warning
+        assert read_csv_log(p).meta["rate_unit_from"].startswith("assumed")
+    # a calm hand (about 0.05 rad/s) logged in deg/s, unlabelled: read as a pan of 2.6 rad/s
+    p.write_text("t_ns,gx,gy,gz\n" + _rows(trace, 0.05 * 180 / np.pi) + "\n")
+    with pytest.warns(UserWarning, match="fast pan throughout; if they are deg/s"):
+        read_csv_log(p)
+
+
+def test_an_android_dump_of_many_sensors_keeps_the_gyro(tmp_path, trace):
+    p = tmp_path / "events.txt"
+    lines = ["# type timestamp_ns values"]
+    for a, (b, c, d) in zip(trace.t, trace.omega):
+        ns = int(round(a * 1e9))
+        lines += [f"16 {ns} 0.1 0.2 0.3 0.001 0.002 0.003", f"5 {ns} 120.0",
+                  f"4 {ns} {float(b)!r} {float(c)!r} {float(d)!r}",
+                  f"11 {ns} 0.1 0.2 0.3 0.9 0.01"]
+    p.write_text("\n".join(lines) + "\n")
+    log = read_gyro_log(p)                       # format guessed from a type-16 line
+    assert np.allclose(log.t, trace.t, atol=1e-9) and np.allclose(log.omega, trace.omega)
+    p.write_text("4 1000000000 0.1 0.2\n4 1005000000 0.1 0.2 0.3\n")
+    with pytest.raises(InputError, match="line 1: a gyroscope event .* got 4 values"):
+        read_android_events(p)
+
+
+@pytest.mark.parametrize("encoding", ["cp1252", "utf-16"])
+def test_logs_saved_by_windows_tools_are_read(tmp_path, trace, encoding):
+    p = tmp_path / "g.csv"
+    rows = _rows(trace, 180 / np.pi).replace(",", ";").replace(".", ",")
+    p.write_bytes(("t (ns);gx (°/s);gy (°/s);gz (°/s)\r\n" + rows + "\r\n").encode(encoding))
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t, atol=1e-9) and np.allclose(log.omega, trace.omega)
+    p.write_bytes(b"t_ns,gx,gy,gz\n\x00\x01\x02")
+    with pytest.raises(InputError, match="not a text file"):
+        read_gyro_log(p)

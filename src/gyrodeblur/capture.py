@@ -43,6 +43,12 @@ __all__ = ["Capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
 BIAS_GUARD = 0.05
+#: Longest rolling-shutter readout accepted (s): sensors read a frame out in 5-100 ms, the
+#: slowest electronic shutters in about 0.3 s; a larger value is milliseconds given as seconds.
+MAX_READOUT_TIME = 1.0
+#: An automatic bias (rad/s, any axis) above this, or a spread of the samples it comes
+#: from above it, says they were not still: a phone's gyro bias is typically under 0.02.
+_AUTO_BIAS_SUSPECT = 0.05
 #: A principal point further than this fraction of the size from the image centre gets a
 #: warning (intrinsics for another resolution, or a crop).
 _FAR_PRINCIPAL_POINT = 0.25
@@ -116,6 +122,10 @@ class Capture:
             raise InputError(src, f"exposure_time must be positive, got {self.exposure_time}")
         if self.readout_time < 0:
             raise InputError(src, f"readout_time must be >= 0, got {self.readout_time}")
+        if self.readout_time > MAX_READOUT_TIME:
+            raise InputError(src, f"readout_time {self.readout_time:g} s is longer than any "
+                                  f"sensor's readout (at most {MAX_READOUT_TIME:g} s; it is "
+                                  "seconds, not ms)")
         object.__setattr__(self, "axes", parse_axes(self.axes, source=src))
         try:
             if any(isinstance(b, (bool, np.bool_)) for b in np.ravel(np.asarray(self.bias, object))):
@@ -227,7 +237,17 @@ def estimate_bias_outside(log: GyroLog, axes: np.ndarray, t0: float, t1: float,
     if n < min_samples:
         raise InputError(source, f"bias 'auto' needs at least {min_samples} gyro samples "
                                  f"outside the exposure window, the log has {n}")
-    return np.median(log.omega[out] @ np.asarray(axes).T, axis=0)
+    rates = log.omega[out] @ np.asarray(axes).T
+    bias = np.median(rates, axis=0)
+    spread = 1.4826 * np.median(np.abs(rates - bias), axis=0)     # robust sigma
+    if np.max(np.abs(bias)) > _AUTO_BIAS_SUSPECT or np.max(spread) > _AUTO_BIAS_SUSPECT:
+        warnings.warn(f"{source}: the automatic bias, "
+                      f"{', '.join(f'{b:+.3f}' for b in bias)} rad/s, comes from samples "
+                      f"that vary by {np.max(spread):.3f} rad/s: the camera was not still "
+                      "outside the exposure, and a phone's bias is rarely above "
+                      f"{_AUTO_BIAS_SUSPECT:g}; give gyro.bias, or leave it to calibrate",
+                      stacklevel=3)
+    return bias
 
 
 def _get(d: dict, key: str, source: str, kind=float, required=True):
@@ -475,6 +495,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     if "time_unit_from" in log.meta and report:
         report(f"gyro log times read in {log.meta['time_unit']} (from "
                f"{log.meta['time_unit_from']}; give --time-unit if that is wrong)")
+    if "rate_unit_from" in log.meta and report:
+        report("gyro rates read in rad/s (the column names state no unit; give --rate-unit "
+               "deg/s if they are degrees)")
     axes = parse_axes(gyro_d.get("orientation", "XYZ"), source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     exposure_start = _get(data, "exposure_start", src)
@@ -489,6 +512,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     elif readout is None and "frame_readout_time" in log.meta:
         # Gyroflow's gcsv header states it (milliseconds) for the camera that wrote the log
         readout = _get(log.meta, "frame_readout_time", gpath) * 1e-3
+        if not 0 <= readout <= MAX_READOUT_TIME:
+            raise InputError(gpath, f"the gcsv header's frame_readout_time (ms) must be 0 to "
+                                    f"{MAX_READOUT_TIME * 1e3:g}, got "
+                                    f"{log.meta['frame_readout_time']}; or give readout_time")
         if report:
             report(f"readout_time = {readout:.6g} s (from the gcsv header's frame_readout_time)")
     readout = 0.0 if readout is None else readout

@@ -64,6 +64,10 @@ __all__ = [
 FORMATS = ("gcsv", "csv", "android")
 #: A median rate above this (rad/s) almost surely means deg/s read as rad/s.
 IMPLAUSIBLE_MEDIAN_RATE = 35.0
+#: A log's median rate above this (rad/s, 115 deg/s) is a fast pan from start to end: where
+#: no unit was stated, deg/s read as rad/s is likelier (a hand-held phone's median is
+#: 0.05-0.7 rad/s; the same in deg/s reads as 3-40).
+FAST_MEDIAN_RATE = 2.0
 
 
 @dataclass(frozen=True)
@@ -265,19 +269,34 @@ def _guess_format(path: str) -> str:
     first = [ln for ln in _read_lines(path) if ln.strip() and not ln.lstrip().startswith("#")][:1]
     if first and first[0].strip().upper() in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
         return "gcsv"
-    if first and len(first[0].split()) == 5 and all(is_number(v) for v in first[0].split()):
-        return "android"
+    values = first[0].split() if first else []
+    if len(values) >= 2 and values[0].isdigit() and all(is_number(v) for v in values):
+        return "android"        # "type timestamp_ns values...", whichever sensor comes first
     return "csv"
 
 
 def _read_lines(path: str) -> list[str]:
+    """The lines of a text log: UTF-8 (a byte-order mark dropped), UTF-16 with its
+    byte-order mark (as Windows tools save "Unicode text"), else Windows-1252 (a European
+    spreadsheet's export, whose ``°/s`` is one byte). Numbers and the names that matter are
+    ASCII in all three; a file with NUL bytes and no UTF-16 mark is not text."""
     try:
-        with open(path, encoding="utf-8-sig") as fh:      # a byte-order mark is not text
-            return fh.read().splitlines()
-    except UnicodeDecodeError:
-        raise InputError(path, "not a text file") from None
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except OSError as exc:
         raise InputError(path, f"cannot read ({exc.strerror})") from None
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return raw.decode("utf-16").splitlines()
+        except UnicodeDecodeError:
+            raise InputError(path, "not a text file (a UTF-16 mark, then bytes that are "
+                                   "not UTF-16)") from None
+    if b"\x00" in raw:
+        raise InputError(path, "not a text file (it holds NUL bytes)")
+    try:
+        return raw.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError:
+        return raw.decode("cp1252", errors="replace").splitlines()
 
 
 def read_gcsv(path: str | os.PathLike) -> GyroLog:
@@ -313,33 +332,41 @@ def read_gcsv(path: str | os.PathLike) -> GyroLog:
     if not (np.isfinite(tscale) and tscale > 0 and np.isfinite(gscale) and gscale > 0):
         raise InputError(path, f"tscale and gscale must be positive numbers, got {tscale!r} "
                                f"and {gscale!r}")
-    rows = _parse_numeric_rows(path, lines[start + 1:], len(columns), first_line=start + 2,
-                               sep=",")
+    rows = _parse_numeric_rows(path, lines[start + 1:], [0] + gi, first_line=start + 2,
+                               sep=",", names=columns)
     t = rows[:, 0] * tscale
-    w = rows[:, gi] * gscale
+    w = rows[:, 1:] * gscale
     meta = {k: v for k, v in header.items() if k not in ("tscale", "gscale")}
     axes = parse_axes(header.get("orientation", "XYZ"), source=f"{path} (orientation header)")
     _validate(t, w, path)                 # before the rotation: a NaN must not reach it
     return GyroLog(t, w @ axes.T, path, meta)
 
 
-def _parse_numeric_rows(path: str, lines: list[str], ncol: int, *, first_line: int,
-                        sep: str | None) -> np.ndarray:
+def _parse_numeric_rows(path: str, lines: list[str], columns: list[int], *, first_line: int,
+                        sep: str | None, names: list[str] | None = None) -> np.ndarray:
+    """The values of ``columns`` (indices) on each non-blank line, as float64 rows; other
+    columns are not read (a logger's date or label column may hold text). ``names`` (the
+    header) name a column whose value is not a number."""
     out = []
+    need = max(columns) + 1
     last = max((k for k, line in enumerate(lines) if line.strip()), default=-1)
     for k, line in enumerate(lines):
         if not line.strip():
             continue
         parts = line.split(sep) if sep else line.split()
         try:
-            if len(parts) < ncol:
-                raise InputError(path, f"line {first_line + k}: expected {ncol} values, "
+            if len(parts) < need:
+                raise InputError(path, f"line {first_line + k}: expected {need} values, "
                                        f"got {len(parts)}")
-            try:
-                out.append([parse_number(p, decimal_comma=sep == ";") for p in parts[:ncol]])
-            except ValueError:
-                raise InputError(path, f"line {first_line + k}: not a number in "
-                                       f"{line!r}") from None
+            row = []
+            for c in columns:
+                try:
+                    row.append(parse_number(parts[c], decimal_comma=sep == ";"))
+                except ValueError:
+                    what = f"column {names[c]!r}" if names else f"value {c + 1}"
+                    raise InputError(path, f"line {first_line + k}: {what} is not a number "
+                                           f"({parts[c].strip()!r})") from None
+            out.append(row)
         except InputError:
             if k == last and out:      # a logger stopped in the middle of its last line
                 break
@@ -416,42 +443,65 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     if all(is_number(h) for h in header):
         raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
 
-    def col(c) -> int:
-        if isinstance(c, int) or (isinstance(c, str) and c.isdigit()):
+    def col(c, what: str) -> int:
+        if isinstance(c, (int, np.integer)) and not isinstance(c, (bool, np.bool_)):
             i = int(c)
-            if i >= len(header):
-                raise InputError(path, f"column {i} does not exist (header has {len(header)})")
-            return i
-        if c not in header:
-            raise InputError(path, f"no column named {c!r} (columns: {', '.join(header)})")
-        return header.index(c)
+        elif isinstance(c, str) and c.isdigit():
+            i = int(c)
+        elif isinstance(c, str):
+            if c not in header:
+                raise InputError(path, f"no column named {c!r} (columns: {', '.join(header)})")
+            return header.index(c)
+        else:
+            raise InputError(path, f"{what} must name a column (its name, or its index from "
+                                   f"0), got {c!r}")
+        if not 0 <= i < len(header):
+            raise InputError(path, f"column {i} does not exist (header has {len(header)}, "
+                                   "counted from 0)")
+        return i
 
-    ti = default_time_column(header) if time_column is None else col(time_column)
+    first_row = next((ln for ln in lines[1:] if ln.strip()), "")
+    ti = (default_time_column(header, first_row.split(delimiter)) if time_column is None
+          else col(time_column, "time_column"))
     if rate_columns is None:
         ri = default_rate_columns(path, header, ti)
     else:
-        if len(rate_columns) != 3:
+        if isinstance(rate_columns, str) or len(rate_columns) != 3:
             raise InputError(path, "rate_columns must name exactly three columns")
-        ri = [col(c) for c in rate_columns]
-    tu = time_unit or unit_from_name(header[ti], TIME_UNITS)
+        ri = [col(c, "rate_columns") for c in rate_columns]
+        if len(set(ri)) < 3 or ti in ri:
+            raise InputError(path, "rate_columns must be three different columns, other than "
+                                   f"the time column; got {', '.join(header[i] for i in ri)} "
+                                   f"(time: {header[ti]})")
+    for name, given, known in (("time_unit", time_unit, TIME_UNITS),
+                               ("rate_unit", rate_unit, RATE_UNITS)):
+        if given is not None and not isinstance(given, str):
+            raise InputError(path, f"{name} must be one of {', '.join(known)}, got {given!r}")
+    named_tu = unit_from_name(header[ti], TIME_UNITS)
+    tu = time_unit or named_tu
     if tu is not None and tu not in TIME_UNITS:
         raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
-    ru = rate_unit or unit_from_name(header[ri[0]], RATE_UNITS)
+    named_ru = unit_from_name(header[ri[0]], RATE_UNITS)
+    ru = rate_unit or named_ru
     if ru is None and bracketed_unit(header[ri[0]]) is not None:
         raise InputError(path, f"column {header[ri[0]]!r} states a unit that is neither "
                                "rad/s nor deg/s; give it (--rate-unit rad/s|deg/s)")
-    ru = ru or "rad/s"
-    if ru not in RATE_UNITS:
+    if ru is not None and ru not in RATE_UNITS:
         raise InputError(path, f"unknown rate unit {ru!r} (known: rad/s, deg/s)")
-    ncol = max([ti] + ri) + 1
-    rows = _parse_numeric_rows(path, lines[1:], ncol, first_line=skip + 2, sep=delimiter)
+    for name, given, stated, column in (("time unit", time_unit, named_tu, header[ti]),
+                                        ("rate unit", rate_unit, named_ru, header[ri[0]])):
+        if given is not None and stated is not None and given != stated:
+            warnings.warn(f"{path}: the {name} given, {given}, overrides the {stated} that "
+                          f"column {column!r} states", stacklevel=3)
+    rows = _parse_numeric_rows(path, lines[1:], [ti] + ri, first_line=skip + 2,
+                               sep=delimiter, names=header)     # time, x, y, z
     meta = {}
     if tu is None and not looks_like_time(header[ti]):
         raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
                                "does not say it holds times; give the unit (--time-unit "
                                "s|ms|us|ns) or name the column (gyro.time_column)")
     if tu is None:
-        tu, interval = time_unit_from_interval(rows[:, ti])
+        tu, interval = time_unit_from_interval(rows[:, 0])
         if tu is None:
             raise InputError(path, f"time unit of column {header[ti]!r} unknown (its median "
                                    f"sample interval, {interval:.6g}, fits no gyro rate from "
@@ -459,8 +509,19 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                                    f"{GUESSED_RATE_RANGE[1] / 1e3:g} kHz in any unit); "
                                    "give it (--time-unit s|ms|us|ns)")
         meta["time_unit_from"] = f"the median sample interval, {interval:.6g} {tu}"
-    return GyroLog(rows[:, ti] * TIME_UNITS[tu], rows[:, ri] * RATE_UNITS[ru], path,
-                   {"time_unit": tu, "rate_unit": ru, **meta})
+    if ru is None:
+        ru = "rad/s"
+        meta["rate_unit_from"] = "assumed: the column names state no unit"
+    log = GyroLog(rows[:, 0] * TIME_UNITS[tu], rows[:, 1:] * RATE_UNITS[ru], path,
+                  {"time_unit": tu, "rate_unit": ru, **meta})
+    if "rate_unit_from" in meta:
+        med = float(np.median(np.linalg.norm(log.omega, axis=1)))
+        if med > FAST_MEDIAN_RATE:
+            warnings.warn(f"{path}: rates read as rad/s (the column names state no unit), "
+                          f"and their median over the whole log, {med:.2f} rad/s, is a fast "
+                          "pan throughout; if they are deg/s, give --rate-unit deg/s "
+                          "(gyro.rate_unit)", stacklevel=3)
+    return log
 
 
 #: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.
@@ -471,19 +532,19 @@ def read_android_events(path: str | os.PathLike) -> GyroLog:
     """Read an Android sensor-event dump (``type timestamp_ns x y z``; gyro = type 4).
 
     Rates are rad/s in Android device axes (x right, y up, z out of the screen in the
-    device's natural orientation); map them with an explicit axis mapping.
+    device's natural orientation); map them with an explicit axis mapping. Lines of other
+    sensors (any number of values) and ``#`` comments are skipped.
     """
     path = os.fspath(path)
     lines = _read_lines(path)
     rows = []
     for k, line in enumerate(lines, start=1):
         parts = line.split()
-        if not parts or parts[0].startswith("#"):
+        if not parts or parts[0] != "4":      # comments, other sensors (of any length)
             continue
         if len(parts) != 5:
-            raise InputError(path, f"line {k}: expected 'type timestamp_ns x y z'")
-        if parts[0] != "4":
-            continue
+            raise InputError(path, f"line {k}: a gyroscope event (type 4) must read "
+                                   f"'4 timestamp_ns x y z', got {len(parts)} values")
         try:
             rows.append([float(p) for p in parts[1:]])
         except ValueError:

@@ -101,10 +101,12 @@ def time_unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
 
 
 #: What may come before a rate column's axis letter (lower case, letters only): ``x``,
-#: ``wx``, ``gx``, ``gyro_x``, ``gyroX``, ``omega_x``, ``rotationRateX``,
+#: ``wx``, ``gx``, ``gyro_x``, ``gyroX``, ``omega_x``, ``rotationRateX``, ``gyroRotationX``
+#: (the iOS SensorLog app),
 #: ``angular_velocity_x`` (an accelerometer's ``ax`` or ``acc_x`` is none of them).
 _RATE_PREFIXES = frozenset({"", "w", "g", "gyr", "gyro", "gyroscope", "omega", "rot",
-                            "rotation", "rotationrate", "rate", "angularvelocity", "angvel"})
+                            "rotation", "rotationrate", "rate", "angularvelocity", "angvel",
+                            "gyrorotation", "gyrorotationrate"})
 #: What may follow the axis letter instead: ``x_gyro``, ``xGyro``, ``x_rate``.
 _RATE_SUFFIXES = frozenset({"gyr", "gyro", "gyroscope", "omega", "rate", "rot"})
 
@@ -137,12 +139,24 @@ def looks_like_time(name: str) -> bool:
             or any(w in low for w in ("time", "stamp", "elapsed", "second")))
 
 
-def default_time_column(header: list[str]) -> int:
+def default_time_column(header: list[str], first_row: list[str] | None = None) -> int:
     """The first column, unless its name is not a time's and another's is (an index column
-    first, as pandas writes: ``,t_s,wx,wy,wz`` or ``sample,time,x,y,z``)."""
-    if looks_like_time(header[0]):
+    first, as pandas writes: ``,t_s,wx,wy,wz`` or ``sample,time,x,y,z``). With the values
+    of the first data row, a column named as a time whose value there is not a number (a
+    logger's ``loggingTime(txt)`` date) is passed over for the next one."""
+    def numeric(i: int) -> bool:
+        if first_row is None or i >= len(first_row):
+            return True
+        try:
+            parse_number(first_row[i], decimal_comma=True)
+            return True
+        except ValueError:
+            return False
+
+    times = [i for i, h in enumerate(header) if looks_like_time(h)]
+    if 0 in times and numeric(0):
         return 0
-    return next((i for i, h in enumerate(header) if looks_like_time(h)), 0)
+    return next((i for i in times if numeric(i)), 0)
 
 
 def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
