@@ -377,3 +377,60 @@ def test_a_camera_error_from_an_option_names_the_option(capture_dir, capsys):
     msg = _run_error(["psf", "--capture", str(capture_dir / "cap.json"), "--fx", "3.9",
                       "--at", "0,0", "-o", str(capture_dir / "p.npy")], capsys)
     assert "cap.json with --fx: camera: focal length fx=3.9" in msg and "in mm or 35 mm" in msg
+
+
+@pytest.mark.parametrize("command", [
+    ["deblur", "b.png", "-o", "cap.png"],
+    ["deblur", "b.png", "-o", "out.png", "--save-psf", "cap.png"],
+    ["deblur", "b.png", "-o", "log.tif", "--mode", "invariant"],
+    ["simulate", "sharp.jpg", "-o", "cap.png"],
+    ["psf", "--at", "10,20", "-o", "cap.png"],
+])
+def test_no_command_writes_over_its_capture_or_gyro_log(capture_dir, capsys, command):
+    """The capture description and its log are inputs as much as the photo, even with
+    ``--overwrite`` and names that look like outputs."""
+    d = capture_dir
+    main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o", str(d / "b.png")])
+    (d / "log.tif").write_bytes((d / "gyro.gcsv").read_bytes())
+    doc = json.loads((d / "cap.json").read_text())
+    doc["gyro"]["path"] = "log.tif"
+    (d / "cap.png").write_text(json.dumps(doc))
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()}
+    args = [str(d / a) if a.endswith((".png", ".jpg", ".tif")) else a for a in command]
+    msg = _run_error(args + ["--capture", str(d / "cap.png"), "--overwrite"], capsys)
+    assert "is one of the command's inputs" in msg
+    assert {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()} == before
+
+
+def test_a_photo_too_small_for_the_invariant_mode_is_named(capture_dir, capsys):
+    d = capture_dir
+    write_photo(d / "strip.png", np.full((7, 100, 3), 0.5, np.float32))
+    doc = json.loads((d / "cap.json").read_text())
+    doc["camera"] = {"fx": 20.0}                    # the photo's size and centre
+    (d / "strip.json").write_text(json.dumps(doc))
+    msg = _run_error(["deblur", str(d / "strip.png"), "--capture", str(d / "strip.json"),
+                      "--mode", "invariant", "-o", str(d / "o.png")], capsys)
+    assert "strip.png: the image has only 7 rows; need at least 16" in msg
+
+
+def test_simulate_blurs_light_brighter_than_white_and_refuses_16_bit_jpeg_first(capture_dir,
+                                                                                capsys):
+    import tifffile
+    d = capture_dir
+    scene = read_photo(d / "sharp.jpg").pixels
+    for level in (1.0, 8.0):
+        lit = scene.copy()
+        lit[90:94, 120:124] = level                  # a lamp
+        tifffile.imwrite(d / f"lamp{level:g}.tif", lit, photometric="rgb", metadata=None)
+        assert main(["simulate", str(d / f"lamp{level:g}.tif"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / f"b{level:g}.tif"), "--transfer", "linear"]) == 0
+    assert "samples up to 8 (white = 1)" in capsys.readouterr().out
+    dim, bright = (read_photo(d / f"b{v}.tif").pixels for v in ("1", "8"))
+    assert bright.max() <= 1.0
+    # 8x the light spreads a blurred streak that clips where 1x stays below white
+    assert (bright[80:105, 105:140] >= 0.999).sum() > 2 * (dim[80:105, 105:140] >= 0.999).sum()
+    msg = _run_error(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                      "-o", str(d / "x.jpg"), "--bit-depth", "16"], capsys)
+    assert "x.jpg: JPEG stores 8 bits per sample" in msg
+    assert not (d / "x.jpg").exists()

@@ -531,3 +531,57 @@ def test_photo_is_frozen_with_identity_equality():
     assert photo == photo and photo != like() and hash(photo) == hash(photo)
     with pytest.raises(ValueError):
         like(bit_depth=12)
+
+
+def test_a_scene_keeps_light_above_white(tmp_path):
+    rgb = np.stack([np.array([[-1.0, 0.25, 8.0]], np.float32)] * 3, axis=-1)
+    tifffile.imwrite(tmp_path / "hdr.tif", rgb, photometric="rgb", metadata=None)
+    with pytest.warns(UserWarning, match="3 float samples below 0 are clipped \\(range -1 to 8\\)$"):
+        scene = read_photo(tmp_path / "hdr.tif", scene=True)
+    assert np.allclose(scene.pixels[0, :, 0], [0.0, 0.25, 8.0])
+    with pytest.warns(UserWarning, match=r"6 float samples outside \[0, 1\]"):
+        assert read_photo(tmp_path / "hdr.tif").pixels.max() == 1.0
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+def test_tiff_extra_samples_become_straight_alpha_or_are_dropped(tmp_path, dtype):
+    top = 1.0 if dtype == np.float32 else np.iinfo(dtype).max
+    colour = np.random.default_rng(1).uniform(0.1, 1.0, (6, 8, 3))
+    alpha = np.tile(np.linspace(0.25, 1.0, 8), (6, 1))[..., None]
+    enc = (lambda a: a.astype(dtype)) if dtype == np.float32 else \
+        (lambda a: np.rint(a * top).astype(dtype))
+    # an unspecified extra sample is no alpha: the photo is RGB
+    tifffile.imwrite(tmp_path / "x.tif", enc(np.concatenate([colour, alpha], -1)),
+                     photometric="rgb", extrasamples=["unspecified"], metadata=None)
+    assert read_photo(tmp_path / "x.tif").pixels.shape == (6, 8, 3)
+    # premultiplied (associated) alpha: the colours come back straight
+    tifffile.imwrite(tmp_path / "a.tif", enc(np.concatenate([colour * alpha, alpha], -1)),
+                     photometric="rgb", extrasamples=["assocalpha"], metadata=None)
+    px = read_photo(tmp_path / "a.tif").pixels
+    assert px.shape == (6, 8, 4)
+    assert np.allclose(px[..., :3], colour, atol=6 / 255 if dtype == np.uint8 else 1e-3)
+    assert np.allclose(px[..., 3:], alpha, atol=1 / 255)
+    # two extra samples, alpha first: RGBA; the second is dropped
+    tifffile.imwrite(tmp_path / "b.tif", enc(np.concatenate([colour, alpha, alpha], -1)),
+                     photometric="rgb", extrasamples=["unassalpha", "unspecified"],
+                     metadata=None)
+    assert np.allclose(read_photo(tmp_path / "b.tif").pixels[..., 3:], alpha, atol=1 / 255)
+
+
+def test_an_exif_block_too_long_for_a_jpeg_loses_its_maker_notes(tmp_path):
+    exif = Image.Exif()
+    exif[0x010F] = "Maker"
+    exif[0x0112] = 6                                   # orientation: kept
+    exif.get_ifd(0x8769)[0x927C] = b"M" * 70000        # a maker's notes: 70 KB
+    Image.fromarray(np.full((8, 8, 3), 100, np.uint8)).save(tmp_path / "in.png",
+                                                             exif=exif.tobytes())
+    photo = read_photo(tmp_path / "in.png")
+    assert len(photo.exif) > 65533
+    with pytest.warns(UserWarning, match="more than a JPEG holds .* without its MakerNote"):
+        write_photo(tmp_path / "out.jpg", photo.pixels, like=photo)
+    with Image.open(tmp_path / "out.jpg") as im:
+        kept = im.getexif()
+        assert kept[0x010F] == "Maker" and kept[0x0112] == 6
+        assert 0x927C not in kept.get_ifd(0x8769)
+    write_photo(tmp_path / "out.png", photo.pixels, like=photo)    # a PNG keeps it all
+    assert read_photo(tmp_path / "out.png").exif == photo.exif

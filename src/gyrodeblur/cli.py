@@ -189,9 +189,19 @@ def _write_picture(path: str, rgb_uint8: np.ndarray, overwrite: bool) -> None:
     write_photo(path, rgb_uint8.astype(np.float32) / 255.0, overwrite=overwrite)
 
 
-def _check_output(path: str, like, overwrite: bool, image: bool = True, inputs=()) -> None:
+def _check_output(path: str, like, overwrite: bool, image: bool = True, inputs=(),
+                  bit_depth: int | None = None) -> None:
     from .imageio import check_destination
-    check_destination(path, like, overwrite, image=image, inputs=inputs)
+    check_destination(path, like, overwrite, image=image, inputs=inputs, bit_depth=bit_depth)
+
+
+def _check_not_over_capture(cap, overwrite: bool, *outputs) -> None:
+    """Refuse outputs that are the capture description or its gyro log (known only once
+    the capture is loaded), ``--overwrite`` or not."""
+    inputs = [p for p in (cap.source, cap.log.source) if p]
+    for out in outputs:
+        if out:
+            _check_output(out, None, overwrite, image=False, inputs=inputs)
 
 
 def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
@@ -230,6 +240,7 @@ def cmd_psf(args, say) -> None:
     from .psfplot import field_image, psf_image
 
     cap = _load_capture(args, say=say)
+    _check_not_over_capture(cap, args.overwrite, args.output)
     if (args.at is None) == (args.grid is None):
         raise InputError("--at/--grid", "give exactly one of --at X,Y or --grid RxC")
     out = args.output
@@ -281,14 +292,19 @@ def cmd_simulate(args, say) -> None:
     from .simulate import quantize_8bit, simulate_blur
     from .tonecurve import get_transfer_curve
 
-    given = read_photo(args.sharp)
-    _check_output(args.output, given, args.overwrite)
+    given = read_photo(args.sharp, scene=True)
+    _check_output(args.output, given, args.overwrite, bit_depth=args.bit_depth)
+    brightest = float(split_alpha(given.pixels)[0].max())
+    if brightest > 1:
+        say(f"{args.sharp}: samples up to {brightest:.3g} (white = 1) are light brighter than "
+            "the clip level: blurred as they are, clipped after the blur")
     photo = replace(given, pixels=to_sensor_layout(given.pixels, args.photo_rotation))
     if args.snr_db is not None and not np.isfinite(args.snr_db):
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
     if args.seed is not None and args.seed < 0:
         raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
     cap = _load_capture(args, photo, say)
+    _check_not_over_capture(cap, args.overwrite, args.output)
     curve = get_transfer_curve(args.transfer)
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
@@ -360,6 +376,7 @@ def cmd_deblur(args, say) -> None:
             from .calibrate_cli import fixed_parameters
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
+        _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf)
         if args.refine:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates

@@ -585,6 +585,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     """
     t0 = time.perf_counter()
     image = check_image(image, "photo", max_value=PHOTO_MAX)
+    patch_grid(image.shape[:2], (1, 1), 0.0)        # a photo too small for any mode: said
     if not isinstance(capture, Capture):
         raise TypeError(f"capture must be a Capture (see gyrodeblur.capture.load_capture), "
                         f"got {type(capture).__name__}")

@@ -133,13 +133,17 @@ class Photo:
 # --------------------------------------------------------------------------- reading
 
 
-def read_photo(path: str | os.PathLike) -> Photo:
+def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     """Read a JPEG, PNG or TIFF photo (8 or 16 bits) into float32 pixels in ``[0, 1]``.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file. The format is found from the content, not the extension.
+    scene : bool
+        Read a scene to blur (:func:`gyrodeblur.simulate.simulate_blur`) rather than a
+        photo: a float TIFF's samples above 1 are kept, as light brighter than the clip
+        level (white = 1), rather than clipped with a warning.
 
     Returns
     -------
@@ -170,7 +174,7 @@ def read_photo(path: str | os.PathLike) -> Photo:
         raise InputError(p, f"image too large to read safely ({exc})") from None
     except _DECODE_ERRORS as exc:
         raise InputError(p, f"cannot decode the image ({_reason(exc)})") from None
-    pixels, bit_depth = _to_float(p, ints)
+    pixels, bit_depth = _to_float(p, ints, keep_bright=scene)
     return Photo(pixels=pixels, bit_depth=bit_depth, format=fmt, path=p,
                  exif=_normalise_exif(exif), icc_profile=icc or None)
 
@@ -407,10 +411,12 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
             raise InputError(path, f"unsupported TIFF colour model {name}")
         arr = page.asarray()
         axes = page.axes
+        extra = [int(e) for e in (page.extrasamples or ())]
         icc_tag = page.tags.get(34675)
         icc = bytes(icc_tag.value) if icc_tag is not None else None
     if arr.ndim == 3 and axes.startswith("S"):
         arr = np.moveaxis(arr, 0, -1)
+    arr = _with_plain_alpha(arr, extra)
     if arr.ndim == 3 and arr.shape[-1] == 1:
         arr = arr[..., 0]
     if arr.ndim == 3 and arr.shape[-1] == 2:
@@ -420,8 +426,33 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
     return arr, icc
 
 
-def _to_float(path: str, arr: np.ndarray) -> tuple[np.ndarray, int]:
-    """Integer samples -> float32 in [0, 1] and the bit depth they had."""
+def _with_plain_alpha(arr: np.ndarray, extra: list[int]) -> np.ndarray:
+    """A TIFF's samples with its extra samples (TIFF tag 338: 0 unspecified, 1
+    associated alpha, 2 unassociated alpha) made what the rest of the module expects:
+    colours, then at most one straight (unassociated) alpha. An unspecified sample is
+    no alpha and is dropped, as are any after the first extra one; premultiplied colours
+    are divided by their alpha (the file is written back with unassociated alpha)."""
+    if arr.ndim != 3 or not extra or len(extra) >= arr.shape[-1]:
+        return arr
+    colours = arr.shape[-1] - len(extra)
+    if extra[0] not in (1, 2):
+        return arr[..., :colours]
+    arr = arr[..., :colours + 1]
+    if extra[0] == 1:
+        c = arr[..., :colours].astype(np.float64)
+        a = arr[..., colours:].astype(np.float64)
+        top = 1.0 if arr.dtype.kind == "f" else float(np.iinfo(arr.dtype).max)
+        straight = np.divide(c * top, a, out=np.zeros_like(c), where=a > 0)
+        straight = np.minimum(straight, top)
+        if arr.dtype.kind != "f":
+            straight = np.rint(straight)
+        arr = np.concatenate([straight.astype(arr.dtype), arr[..., colours:]], axis=-1)
+    return arr
+
+
+def _to_float(path: str, arr: np.ndarray, keep_bright: bool = False) -> tuple[np.ndarray, int]:
+    """Integer samples -> float32 in [0, 1] and the bit depth they had (float samples
+    above 1 kept with ``keep_bright``)."""
     if arr.dtype == np.uint8:
         return arr.astype(np.float32) / np.float32(255), 8
     if arr.dtype == np.uint16:
@@ -432,18 +463,20 @@ def _to_float(path: str, arr: np.ndarray) -> tuple[np.ndarray, int]:
         a = arr.astype(np.float32)
         finite = np.isfinite(a)
         bad = int(a.size - np.count_nonzero(finite))
-        over = int(np.count_nonzero(finite & ((a > 1) | (a < 0))))
+        top = np.inf if keep_bright else 1.0
+        over = int(np.count_nonzero(finite & ((a > top) | (a < 0))))
         if bad or over:
             what = []
             if over:
-                what.append(f"{over} float samples outside [0, 1] are clipped (range "
+                where = "below 0" if keep_bright else "outside [0, 1]"
+                what.append(f"{over} float samples {where} are clipped (range "
                             f"{a[finite].min():.3g} to {a[finite].max():.3g})")
             if bad:
                 what.append(f"{bad} NaN or infinite samples are read as 0 (+inf as 1)")
-            warnings.warn(f"{path}: " + "; ".join(what) + ": scale a scene-linear or HDR "
-                          "image to [0, 1] first", stacklevel=2)
+            advice = "" if keep_bright else ": scale a scene-linear or HDR image to [0, 1] first"
+            warnings.warn(f"{path}: " + "; ".join(what) + advice, stacklevel=2)
         out = np.nan_to_num(a, nan=0.0, posinf=1.0, neginf=0.0)
-        return np.clip(out, 0.0, 1.0), 16
+        return np.clip(out, 0.0, top), 16
     kind = {"i": "signed integers", "u": "unsigned integers"}.get(arr.dtype.kind, str(arr.dtype))
     raise InputError(path, f"unsupported samples ({8 * arr.dtype.itemsize}-bit {kind}); "
                      "use 8 or 16 bits")
@@ -458,6 +491,36 @@ def _normalise_exif(block: bytes | None) -> bytes | None:
         return None
     block = bytes(block)
     return block if block.startswith(_EXIF_HEADER) else _EXIF_HEADER + block
+
+
+#: The largest EXIF block (``Exif\0\0`` header included) a JPEG's APP1 segment holds.
+_JPEG_MAX_EXIF = 65533
+#: Exif tags a JPEG's EXIF may lose when the block is too long: MakerNote, UserComment.
+_BULKY_EXIF_TAGS = (0x927C, 0x9286)
+
+
+def _exif_for_jpeg(block: bytes, path: str) -> bytes | None:
+    """An EXIF ``block`` too long for a JPEG, without its bulky tags (a maker's notes), or
+    ``None`` when that is not enough; either is warned of."""
+    try:
+        exif = _load_exif(block[len(_EXIF_HEADER):])
+        ifd = exif.get_ifd(_EXIF_IFD)
+        dropped = [t for t in _BULKY_EXIF_TAGS if t in ifd]
+        for t in dropped:
+            del ifd[t]
+        smaller = _normalise_exif(exif.tobytes())
+    except Exception:                  # a block Pillow cannot rewrite
+        smaller, dropped = None, []
+    if smaller is not None and dropped and len(smaller) <= _JPEG_MAX_EXIF:
+        names = {0x927C: "MakerNote", 0x9286: "UserComment"}
+        warnings.warn(f"{path}: the EXIF block ({len(block)} bytes) is more than a JPEG "
+                      f"holds ({_JPEG_MAX_EXIF}); written without its "
+                      f"{' and '.join(names[t] for t in dropped)}", stacklevel=3)
+        return smaller
+    warnings.warn(f"{path}: the EXIF block ({len(block)} bytes) is more than a JPEG holds "
+                  f"({_JPEG_MAX_EXIF}); written without EXIF (a PNG or TIFF keeps it)",
+                  stacklevel=3)
+    return None
 
 
 def _pillow_exif(im: Image.Image) -> bytes | None:
@@ -659,6 +722,8 @@ def write_photo(
     icc = like.icc_profile if like is not None else None
     if icc and not _icc_fits(icc, channels):
         icc = None
+    if fmt == "JPEG" and exif and len(exif) > _JPEG_MAX_EXIF:
+        exif = _exif_for_jpeg(exif, p)
     writer = {"JPEG": _write_jpeg, "PNG": _write_png, "TIFF": _write_tiff}[fmt]
     _atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality)))
     return p
@@ -697,7 +762,8 @@ def _format_of(path: str) -> str:
 
 
 def check_destination(path: str | os.PathLike, like: Photo | None = None,
-                      overwrite: bool = False, *, image: bool = True, inputs=()) -> None:
+                      overwrite: bool = False, *, image: bool = True, inputs=(),
+                      bit_depth: int | None = None) -> None:
     """Check, before any work, that :func:`write_photo` may write ``path``.
 
     Parameters
@@ -714,19 +780,22 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     inputs : iterable of str or os.PathLike
         Other files the command reads (photos, capture descriptions, gyro logs), which
         are never overwritten either, ``overwrite`` or not.
+    bit_depth : {8, 16}, optional
+        The bit depth asked for (16 is refused for a JPEG here, before the work).
 
     Raises
     ------
     InputError
         Unknown extension, missing folder, ``path`` is a folder, the input photo or
         another input, it exists and ``overwrite`` is false, or it is a JPEG and ``like``
-        has an alpha channel.
+        has an alpha channel or ``bit_depth`` is 16.
     """
     path = os.fspath(path)
     if os.path.isdir(path):
         raise InputError(path, "is a folder; name the output file")
     if image:
         fmt = _format_of(path)
+        _choose_bit_depth(path, fmt, bit_depth, like)
         if fmt == "JPEG" and like is not None and like.pixels.ndim == 3 \
                 and like.pixels.shape[2] == 4:
             raise InputError(path, "JPEG cannot store the photo's alpha channel; write .png "
