@@ -1,4 +1,5 @@
 import json
+import os
 import warnings
 
 import numpy as np
@@ -341,3 +342,37 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     said.clear()
     load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"}, report=said.append)
     assert said == []
+
+
+def test_a_capture_saved_anywhere_loads_again(capture_files, tmp_path_factory):
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import read_gyro_log
+
+    d, _ = capture_files
+    cap = load_capture(d / "cap.json")
+    elsewhere = tmp_path_factory.mktemp("out") / "sub"
+    elsewhere.mkdir()
+    cap.save(elsewhere / "c.json")                     # the log's path is made relative there
+    again = load_capture(elsewhere / "c.json")
+    assert os.path.samefile(again.log.source, cap.log.source)
+    assert {k: v for k, v in again.to_dict().items() if k != "gyro"} == \
+        {k: v for k, v in cap.to_dict().items() if k != "gyro"}
+    # made in code from a CSV read with options: format and units are written too
+    rows = "\n".join(f"{1000 + k / 200:.3f},0.01,0.3,-0.02" for k in range(400))
+    (d / "g.csv").write_text("t,gx,gy,gz\n" + rows + "\n")
+    made = Capture(1001.0, 0.03, 0.0, cap.camera, read_gyro_log(d / "g.csv", "csv", time_unit="s"))
+    made.save(elsewhere / "made.json")
+    assert np.array_equal(load_capture(elsewhere / "made.json").log.t, made.log.t)
+    in_memory = Capture(1001.0, 0.03, 0.0, cap.camera, GyroLog(made.log.t, made.log.omega))
+    with pytest.raises(InputError, match="no file to refer to"):
+        in_memory.save(elsewhere / "x.json")
+
+
+def test_a_capture_keeps_its_own_copy_of_the_axis_matrix(capture_files):
+    from gyrodeblur.capture import Capture
+    d, _ = capture_files
+    cap = load_capture(d / "cap.json")
+    m = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])
+    made = Capture(cap.exposure_start, cap.exposure_time, 0.0, cap.camera, cap.log, axes=m)
+    m[0, 0] = -1.0                                      # now a reflection
+    assert np.linalg.det(made.axes) == pytest.approx(1.0)

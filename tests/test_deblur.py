@@ -374,3 +374,30 @@ def test_alignment_warp_reports_the_samples_it_mirrors_and_the_solver_skips_them
     assert seen == [True, True, None, True], seen
     with pytest.raises(ValueError, match="unknown must be a boolean mask"):
         deconvolve_patchwise(out, patches, [np.ones((1, 1))] * 4, record, unknown=outside[1:])
+
+
+def test_an_alpha_channel_is_passed_through_and_leaves_the_colours_alone(make_capture):
+    """The README's API example hands ``read_photo(...).pixels`` to ``deblur``: an RGBA
+    file's alpha is a mask, as on the command line, not a fourth colour."""
+    from gyrodeblur.deblur import deblur_blind, deblur_with_psfs
+    from gyrodeblur.errors import InputError
+
+    cap = make_capture([0.0, 0.4, 0.1], width=96, height=64, f=100.0)
+    rng = np.random.default_rng(4)
+    rgb = simulate_blur(rng.uniform(0.1, 0.9, (64, 96, 3)).astype(np.float32), cap)
+    alpha = np.indices((64, 96)).sum(0)[..., None] % 2 * np.float32(1.0)   # a checkerboard
+    rgba = np.concatenate([rgb, alpha], axis=2)
+    for run in (lambda im: deblur(im, cap, grid=(2, 2)),
+                lambda im: deblur_blind(im, 9)[0]):
+        out = run(rgba)
+        assert out.shape == rgba.shape and np.array_equal(out[..., 3:], alpha)
+        assert np.array_equal(out[..., :3], run(rgb))
+    patches = patch_grid((64, 96), (1, 2), 0.25)
+    k = np.zeros((5, 5), np.float32)
+    k[2, 1:4] = 1 / 3
+    with pytest.raises(InputError, match="PSF 2 must have a positive finite sum"):
+        deblur_with_psfs(rgba, patches, [k, np.zeros((5, 5))])
+    with pytest.raises(InputError, match="1 PSFs for 2 patches"):
+        deblur_with_psfs(rgba, patches, [k])
+    with pytest.raises(InputError, match="values up to 2[0-9][0-9]; expected"):
+        deblur_with_psfs(rgb * 255, patches, [k, k])

@@ -68,3 +68,18 @@ def test_noise_snr_and_quantisation(scene):
     assert q.min() >= 0 and q.max() <= 1
     assert np.allclose(q * 255, np.round(q * 255), atol=1e-4)
     assert np.array_equal(add_noise(scene, 30, seed=1), add_noise(scene, 30, seed=1))
+
+
+def test_alpha_is_not_blurred_and_bad_arguments_are_refused(make_capture, scene):
+    cap = make_capture([0.0, 0.5, 0.0])
+    alpha = np.zeros((240, 320, 1), np.float32)
+    alpha[:, 160:] = 1.0
+    out = simulate_blur(np.concatenate([scene, alpha], axis=2), cap, snr_db=30, seed=2,
+                        quantize=True)
+    assert np.array_equal(out[..., 3:], alpha)
+    assert np.array_equal(out[..., :3], simulate_blur(scene, cap, snr_db=30, seed=2,
+                                                      quantize=True))
+    for bad in ({"n_samples": -3}, {"n_samples": 0}, {"n_samples": 2.5}, {"n_samples": True},
+                {"snr_db": float("nan")}):
+        with pytest.raises(ValueError, match=f"{next(iter(bad))} must be"):
+            simulate_blur(scene, cap, **bad)

@@ -71,7 +71,7 @@ def parse_axes(spec, *, source: str | None = "orientation") -> np.ndarray:
             raise InputError(source, f"axis mapping {spec!r} {why}")
         return m
     try:
-        m = np.asarray(spec, dtype=np.float64)
+        m = np.array(spec, dtype=np.float64)      # a copy: the caller's array may change
     except (TypeError, ValueError):
         raise InputError(source, f"axis mapping {spec!r} is neither letters nor a 3x3 "
                                  "matrix") from None

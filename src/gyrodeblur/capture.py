@@ -193,6 +193,9 @@ class Capture:
         """The JSON description (``gyro_path`` overrides the stored relative path)."""
         c = self.camera
         gyro = dict(self.gyro_spec)
+        if not gyro and "time_unit" in self.log.meta:     # a capture made in code, of a CSV
+            gyro = {"format": "csv", "time_unit": self.log.meta["time_unit"],
+                    "rate_unit": self.log.meta["rate_unit"]}
         if gyro_path is not None:
             gyro["path"] = gyro_path
         letters = axes_to_letters(self.axes)
@@ -212,10 +215,42 @@ class Capture:
         }
 
     def save(self, path: str | os.PathLike, gyro_path: str | None = None) -> None:
-        """Write the JSON description to ``path`` (``gyro.path`` kept relative)."""
+        """Write the JSON description to ``path``.
+
+        ``gyro.path`` is ``gyro_path`` if given, else the log the capture was read from
+        (:attr:`GyroLog.source`), relative to ``path``'s folder (absolute if it was given
+        so), so that :func:`load_capture` of the file finds it wherever it is written.
+
+        Raises
+        ------
+        InputError
+            The log was made in memory (no file) and ``gyro_path`` is not given.
+        """
+        path = os.fspath(path)
+        if gyro_path is None:
+            gyro_path = self._gyro_path_from(os.path.dirname(os.path.abspath(path)))
         with open(path, "w", encoding="utf-8") as fh:
             json.dump(self.to_dict(gyro_path), fh, indent=2)
             fh.write("\n")
+
+    def _gyro_path_from(self, folder: str) -> str:
+        stored, opened = self.gyro_spec.get("path"), self.log.source
+        if stored is not None and os.path.isabs(os.path.expanduser(os.fspath(stored))):
+            return os.fspath(stored)
+        if opened and os.path.isfile(opened):
+            where = os.path.abspath(opened)
+            try:                                 # relative unless only the root is shared
+                shared = os.path.commonpath([where, folder])
+            except ValueError:                   # another drive (Windows)
+                return where
+            if shared == os.path.dirname(shared):
+                return where
+            return os.path.relpath(where, folder)
+        if stored is not None:
+            return os.fspath(stored)
+        raise InputError(self.source, "the capture's gyro log has no file to refer to (it was "
+                                      "made in memory): write it (gyrodeblur.gyrolog."
+                                      "write_gcsv) and give gyro_path")
 
 
 def estimate_bias_outside(log: GyroLog, axes: np.ndarray, t0: float, t1: float,
@@ -483,7 +518,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise InputError(src, "missing gyro.path (or --gyro)")
     if not isinstance(gyro_d["path"], (str, os.PathLike)):
         raise InputError(src, f"gyro.path must be a file path (a string), got {gyro_d['path']!r}")
-    gpath = os.path.join(base, os.path.expanduser(os.fspath(gyro_d["path"])))
+    gpath = os.path.normpath(os.path.join(base, os.path.expanduser(os.fspath(gyro_d["path"]))))
     fmt = gyro_d.get("format")
     csv_opts = {k: gyro_d[k] for k in CSV_OPTION_KEYS if k in gyro_d}
     rc = csv_opts.get("rate_columns")

@@ -20,7 +20,7 @@ import numpy as np
 
 from .capture import Capture
 from .errors import InputError
-from .images import PHOTO_MAX, check_image
+from .images import PHOTO_MAX, check_image, check_psf, join_alpha, split_alpha
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
@@ -463,9 +463,11 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     Parameters
     ----------
     image : ndarray (H, W) or (H, W, C), float in [0, 1]
+        A fourth channel is alpha, a mask: passed through untouched, and the colours
+        are deblurred as without it.
     patches : list of Patch
     psfs : list of ndarray
-        One PSF per patch.
+        One PSF per patch (odd sides; normalised to sum 1).
     method : str
         A key of :data:`METHODS` (default :data:`DEFAULT_METHOD`).
     transfer : {"srgb", "linear"}
@@ -485,7 +487,12 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
     curve = get_transfer_curve(transfer)
-    encoded = check_image(image)
+    checked = check_image(image, "photo", max_value=PHOTO_MAX)
+    encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
+    patches, psfs = list(patches), list(psfs)
+    if len(psfs) != len(patches):
+        raise InputError(None, f"{len(psfs)} PSFs for {len(patches)} patches: give one each")
+    psfs = [check_psf(k, f"PSF {i + 1}") for i, k in enumerate(psfs)]
     img = curve.decode(encoded)
     deconvolve = METHODS[method](img, encoded=encoded, **options)
     unknown = None
@@ -514,7 +521,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     out = curve.encode(out)
     if clip:
         _clip_rows(out, 0.0, 1.0)
-    return out
+    return out if alpha is None else join_alpha(out, alpha)
 
 
 def _takes_unknown(deconvolve) -> bool:
@@ -548,7 +555,9 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     ----------
     image : ndarray (H, W) or (H, W, C)
         The blurred photo, float32 in [0, 1]. Its size may differ from the capture's
-        camera by a common scale (the intrinsics are rescaled).
+        camera by a common scale (the intrinsics are rescaled). A fourth channel is
+        alpha, passed through untouched (as :func:`~gyrodeblur.imageio.read_photo` gives
+        an RGBA file).
     capture : Capture
         Exposure timing, intrinsics and gyro log.
     mode : {"variant", "invariant"}
@@ -618,7 +627,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     Parameters
     ----------
     image : ndarray (H, W) or (H, W, C)
-        The blurred photo, float32 in [0, 1].
+        The blurred photo, float32 in [0, 1] (a fourth channel is alpha, passed through).
     kernel_size : int
         Side of the kernel support, px (odd; a little more than the blur's extent).
     grid : (rows, cols)
@@ -657,7 +666,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
 
     image = check_image(image, "photo", max_value=PHOTO_MAX)
     H, W = image.shape[:2]
-    lin = get_transfer_curve(transfer).decode(image)
+    lin = get_transfer_curve(transfer).decode(split_alpha(image)[0])     # not the mask
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
     patches = patch_grid((H, W), grid, overlap)
     if len(patches) > 1 and kernel_size >= min(patches[0].shape) // 2:

@@ -325,7 +325,13 @@ def psf_extent(psf: np.ndarray, rel_threshold: float = 1e-3) -> int:
 def psf_field(capture: Capture, points, *, grid: tuple | None = None,
               max_step: float = MAX_STEP_PX) -> PSFField:
     """PSFs at ``points`` (``(N, 2)`` x, y pixels). See :func:`render_psf`."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        pts = np.empty((0, 3))
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise InputError(None, f"points must be (N, 2) pixel positions (x, y), got "
+                               f"{np.shape(points) if pts.size else points!r}")
     return PSFField(pts, [render_psf(capture, x, y, max_step=max_step) for x, y in pts], grid)
 
 
@@ -380,7 +386,8 @@ def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
         Mean displacement (dx, dy) in pixels at each grid point.
     """
     cam = capture.camera
-    if not (np.isfinite(step) and step >= 1) or isinstance(n, bool) or not (
+    if isinstance(step, bool) or not isinstance(step, (int, float, np.number)) \
+            or not (np.isfinite(step) and step >= 1) or isinstance(n, bool) or not (
             isinstance(n, (int, np.integer)) and n >= 1):
         raise InputError(None, f"displacement_field needs step >= 1 px and n >= 1 time steps, "
                                f"got step={step!r}, n={n!r}")

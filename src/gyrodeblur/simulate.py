@@ -13,7 +13,7 @@ import numpy as np
 from scipy import ndimage
 
 from .capture import Capture
-from .images import check_image
+from .images import check_image, join_alpha, split_alpha
 from .psf import check_blur_span
 
 __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
@@ -60,7 +60,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     sharp : ndarray (H, W) or (H, W, C)
         The scene as seen at the reference orientation, float in [0, 1] (values above 1
         are allowed, e.g. for light sources that saturate only after blurring). Its size
-        must match ``capture.camera`` (use ``capture.scaled_to``).
+        must match ``capture.camera`` (use ``capture.scaled_to``). A fourth channel is
+        alpha, a mask: returned untouched (not blurred, noised or quantised).
     capture : Capture
     snr_db : float, optional
         Add Gaussian noise with standard deviation ``std(blurred) / 10**(snr_db / 20)``.
@@ -91,12 +92,17 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     """
     if order not in (1, 3):
         raise ValueError(f"order must be 1 (bilinear) or 3 (cubic spline), got {order!r}")
-    img = check_image(sharp, "sharp image")
+    if n_samples is not None and (isinstance(n_samples, bool) or not isinstance(
+            n_samples, (int, np.integer)) or n_samples < 1):
+        raise ValueError(f"n_samples must be a positive whole number or None, got {n_samples!r}")
+    if snr_db is not None and not np.isfinite(float(snr_db)):
+        raise ValueError(f"snr_db must be a finite number of dB or None, got {snr_db!r}")
+    img, alpha = split_alpha(check_image(sharp, "sharp image"))   # alpha: a mask, kept
     H, W = img.shape[:2]
     cam = capture.camera
     if (W, H) != (cam.width, cam.height):
         raise ValueError(f"image is {W}x{H} but the capture's camera is {cam.width}x{cam.height}")
-    n = n_samples or warp_samples(capture)
+    n = int(n_samples) if n_samples is not None else warp_samples(capture)
     planes = img.reshape(H, W, -1)
     acc = np.zeros_like(planes)
     if order > 1:                    # spline coefficients, once (sampled unfiltered below)
@@ -119,7 +125,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         out = add_noise(out, snr_db, seed)
     if quantize:
         out = quantize_8bit(out)
-    return out.astype(np.float32, copy=False)
+    return join_alpha(out.astype(np.float32, copy=False), alpha)
 
 
 def add_noise(image: np.ndarray, snr_db: float, seed: int | None = None) -> np.ndarray:

@@ -17,6 +17,7 @@ patch tiler can use ``functools.partial(sparse_deconvolve, noise_sigma=s)``.
 from __future__ import annotations
 
 import functools
+import numbers
 import threading
 import warnings
 from dataclasses import dataclass, replace
@@ -233,6 +234,11 @@ def sparse_deconvolve(
     """
     g = check_image(image)
     h = check_psf(psf)
+    for name, value in (("exponent", exponent), ("iterations", iterations),
+                        ("noise_sigma", noise_sigma), ("saturation_level", saturation_level),
+                        ("weight", weight)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+            raise ValueError(f"{name} must be a number, got {value!r}")
     if not 0 < exponent <= 1:
         raise ValueError(f"exponent must be in (0, 1], got {exponent}")
     if iterations < 0:
