@@ -370,3 +370,19 @@ def test_attribute_gap_calibrates_with_one_parameter_known_and_with_one_unknown(
         assert row["gap_if_only_db"] == pytest.approx(
             {"offset": 1.0, "bias": 0.0, "readout": 0.0, "focal": 0.0, "axes": 0.0})
         assert row["errors_if_only"]["offset"] == {"offset_error_ms": pytest.approx(10.0)}
+
+
+def test_jpeg_noise_quick(tmp_path):
+    """A JPEG deconvolved for its compression error as well as the noise its pixels show
+    beats the measured level alone; a PNG is left as it was."""
+    _need_shared()
+    out = tmp_path / "jpeg.json"
+    assert _load("jpeg_noise").main(["--quick", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert [row["fitted_on"] for row in r["rows"]] == [True, False]
+    for row in r["rows"]:
+        png, jpg = row["variants"]["png"], row["variants"]["q90"]
+        assert png["sigma_raised"] == png["sigma_measured"]
+        assert jpg["sigma_raised"] > jpg["sigma_measured"]
+        assert jpg["psnr_raised"] > jpg["psnr_measured"] + 0.2
+    assert set(r["summary"]) == {"png_fitted_on", "png_held_out", "q90_fitted_on", "q90_held_out"}

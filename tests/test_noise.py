@@ -84,3 +84,33 @@ def test_bad_input(bad):
 
 def test_doctests():
     assert doctest.testmod(noise_mod).failed == 0
+
+
+def test_a_jpeg_noise_level_adds_a_share_of_its_quantisation_error():
+    from gyrodeblur.noise import JPEG_QUANTISATION_SHARE, jpeg_noise_sigma
+    ones = [1] * 64                                         # quality 100
+    added = np.sqrt(JPEG_QUANTISATION_SHARE / 12) / 255
+    assert jpeg_noise_sigma(0.0, ones) == pytest.approx(added)
+    assert jpeg_noise_sigma(0.003, ones) == pytest.approx(np.hypot(0.003, added))
+    steps = np.arange(1, 65)                                # coarser steps: more
+    assert jpeg_noise_sigma(0.0, steps) == pytest.approx(
+        np.sqrt(JPEG_QUANTISATION_SHARE * np.mean(steps ** 2.0) / 12) / 255)
+    with pytest.raises(ValueError, match="64 positive quantisation steps"):
+        jpeg_noise_sigma(0.001, [1] * 63)
+
+
+def test_a_photos_noise_level_reads_its_jpeg_tables(tmp_path):
+    from PIL import Image
+    from gyrodeblur.imageio import read_photo
+    from gyrodeblur.noise import jpeg_noise_sigma, photo_noise_sigma
+    rng = np.random.default_rng(0)
+    img = np.clip(0.5 + 0.01 * rng.standard_normal((64, 64, 3)), 0, 1)
+    ints = (img * 255).round().astype(np.uint8)
+    Image.fromarray(ints).save(tmp_path / "a.png")
+    Image.fromarray(ints).save(tmp_path / "a.jpg", quality=80)
+    png, jpg = read_photo(tmp_path / "a.png"), read_photo(tmp_path / "a.jpg")
+    assert png.quantization is None and photo_noise_sigma(png) == estimate_noise_sigma(png.pixels)
+    assert sorted(jpg.quantization) == [0, 1] and len(jpg.quantization[0]) == 64
+    assert photo_noise_sigma(jpg) == pytest.approx(
+        jpeg_noise_sigma(estimate_noise_sigma(jpg.pixels), jpg.quantization[0]))
+    assert photo_noise_sigma(jpg) > 1.5 * estimate_noise_sigma(jpg.pixels)

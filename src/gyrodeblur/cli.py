@@ -357,6 +357,12 @@ def cmd_deblur(args, say) -> None:
     progress = _Progress("deblurring", args.quiet)
     h, w = photo.pixels.shape[:2]
     colour, alpha = split_alpha(photo.pixels)
+    if method == "sparse" and "noise_sigma" not in options and photo.quantization:
+        from .noise import estimate_noise_sigma, photo_noise_sigma
+        options["noise_sigma"] = photo_noise_sigma(photo)
+        say(f"JPEG: deconvolved for noise of {255 * options['noise_sigma']:.2f} levels (its "
+            f"pixels show {255 * estimate_noise_sigma(colour):.2f}; the compression's "
+            "error counts as noise too; --noise-sigma sets it)")
     t0 = time.perf_counter()
     if args.blind:
         from .deblur import deblur_blind
@@ -490,7 +496,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "BENCHMARKS.md for the trade)")
     s.add_argument("--noise-sigma", type=float, default=None,
                    help="sparse method: noise std of the photo in [0, 1] units, which sets the "
-                        "prior weight (default: measured on the photo)")
+                        "prior weight (default: measured on the photo; for a JPEG, raised by "
+                        "a share of its quantisation error)")
     s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
     s.add_argument("--kernel-size", type=int, default=None,

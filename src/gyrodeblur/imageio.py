@@ -109,6 +109,10 @@ class Photo:
         EXIF block, ``b"Exif\\0\\0"`` + TIFF-structured data (see the module notes).
     icc_profile : bytes or None
         Embedded ICC colour profile, unchanged.
+    quantization : dict or None
+        A JPEG's quantisation tables as stored (table id -> 64 steps in 8-bit levels,
+        zigzag order; 0 is the luma table), else ``None``. The compression's error and
+        the noise it removed depend on them (:func:`gyrodeblur.noise.photo_noise_sigma`).
 
     Notes
     -----
@@ -122,6 +126,7 @@ class Photo:
     path: str | None = None
     exif: bytes | None = None
     icc_profile: bytes | None = None
+    quantization: dict | None = None
 
     def __post_init__(self):
         if self.bit_depth not in (8, 16):
@@ -163,7 +168,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     if os.path.isdir(p):
         raise InputError(p, "is a folder, not an image file")
     try:
-        fmt, ints, exif, icc = _decode(p)
+        fmt, ints, exif, icc, tables = _decode(p)
     except InputError:
         raise
     except PermissionError:
@@ -176,18 +181,19 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
         raise InputError(p, f"cannot decode the image ({_reason(exc)})") from None
     pixels, bit_depth = _to_float(p, ints, keep_bright=scene)
     return Photo(pixels=pixels, bit_depth=bit_depth, format=fmt, path=p,
-                 exif=_normalise_exif(exif), icc_profile=icc or None)
+                 exif=_normalise_exif(exif), icc_profile=icc or None, quantization=tables)
 
 
-def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None]:
-    """(format, samples, EXIF block, ICC profile) of a file; decoder errors propagate."""
+def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict | None]:
+    """(format, samples, EXIF block, ICC profile, JPEG quantisation tables) of a file;
+    decoder errors propagate."""
     try:
         im = Image.open(p)
     except UnidentifiedImageError:
         if not _is_tiff(p):
             raise
         ints, icc = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot open
-        return "TIFF", ints, None, icc
+        return "TIFF", ints, None, icc, None
     with im:
         fmt = {"MPO": "JPEG"}.get(im.format, im.format)
         if fmt not in ("JPEG", "PNG", "TIFF"):
@@ -202,7 +208,10 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None]:
                               "is read", stacklevel=2)
             ints = _read_pillow_pixels(p, im)
             exif, icc = _pillow_exif(im), im.info.get("icc_profile")
-    return fmt, ints, exif, icc
+    tables = None
+    if fmt == "JPEG" and getattr(im, "quantization", None):
+        tables = {int(k): [int(q) for q in v] for k, v in im.quantization.items()}
+    return fmt, ints, exif, icc, tables
 
 
 def _reason(exc: BaseException) -> str:
