@@ -456,3 +456,33 @@ def test_a_jpeg_is_deconvolved_for_its_compression_error_as_well(capture_dir, ca
     gain = (psnr(read_photo(d / "raised.png").pixels, sharp, border=16)
             - psnr(read_photo(d / "shown.png").pixels, sharp, border=16))
     assert gain > 0.3, gain
+
+
+def test_a_photo_given_twice_and_a_bad_grid_are_refused_before_any_calibration(capture_dir,
+                                                                               capsys,
+                                                                               monkeypatch):
+    import shutil
+
+    import gyrodeblur.calibrate
+    import gyrodeblur.calibrate_cli
+
+    def no_calibration(*args, **kwargs):
+        raise AssertionError("calibrated before the inputs were checked")
+
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", no_calibration)
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", no_calibration)
+    d = capture_dir
+    main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o", str(d / "b.png")])
+    shutil.copy(d / "b.png", d / "copy.png")
+    capsys.readouterr()
+    cap = str(d / "cap.json")
+    msg = _run_error(["calibrate", str(d / "b.png"), str(d / "b.png"), "--capture", cap,
+                      "-o", str(d / "o.json")], capsys)
+    assert "b.png: is " in msg and "given already" in msg
+    msg = _run_error(["calibrate", str(d / "b.png"), str(d / "copy.png"), "--capture", cap,
+                      "-o", str(d / "o.json")], capsys)
+    assert "copy.png: holds the same pixels as" in msg
+    msg = _run_error(["deblur", str(d / "b.png"), "--capture", cap, "--refine", "--grid",
+                      "100x100", "-o", str(d / "o.png")], capsys)
+    assert "--grid" in msg
+    assert not (d / "o.json").exists() and not (d / "o.png").exists()

@@ -74,6 +74,23 @@ def fixed_parameters(args) -> set[str]:
     return fix
 
 
+def _refuse_repeats(paths, photos) -> None:
+    """One photo given twice would count its evidence twice: every uncertainty shrinks by
+    sqrt 2 and the mapping's margin doubles with nothing learnt. Refused, whether the same
+    file or a copy (the same pixels: two exposures never are)."""
+    import hashlib
+    seen = {}
+    for path, photo in zip(paths, photos):
+        key = hashlib.sha1(np.ascontiguousarray(photo.pixels).tobytes()).hexdigest()
+        key = (photo.pixels.shape, key)
+        if key in seen:
+            same = os.path.exists(path) and os.path.samefile(path, seen[key])
+            raise InputError(path, f"{'is' if same else 'holds the same pixels as'} "
+                                   f"{seen[key]}, given already: one photo counted twice "
+                                   "would seem twice as sure")
+        seen[key] = path
+
+
 def calibrate_command(args, say, load_capture) -> None:
     """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json`.
 
@@ -93,6 +110,7 @@ def calibrate_command(args, say, load_capture) -> None:
     # before reading anything; the inputs are checked once the captures name their logs
     check_destination(args.output, None, args.overwrite, image=False, inputs=args.photos)
     photos = [read_photo(p) for p in args.photos]
+    _refuse_repeats(args.photos, photos)
     photos = [replace(ph, pixels=to_sensor_layout(ph.pixels, deg)) for ph, deg in zip(photos, turns)]
     given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
     paths = [c for entry in given for c in entry.split(",") if c] or given[:1]

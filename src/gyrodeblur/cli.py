@@ -356,6 +356,9 @@ def cmd_deblur(args, say) -> None:
     grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
     progress = _Progress("deblurring", args.quiet)
     h, w = photo.pixels.shape[:2]
+    if isinstance(grid, tuple):            # refused now, not after a calibration (--refine)
+        from .tiling import patch_grid
+        patch_grid((h, w), grid, overlap)
     colour, alpha = split_alpha(photo.pixels)
     if method == "sparse" and "noise_sigma" not in options and photo.quantization:
         from .noise import estimate_noise_sigma, photo_noise_sigma
