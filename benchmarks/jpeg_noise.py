@@ -3,9 +3,9 @@
 JPEG's quantisation removes most of the fine noise that
 :func:`gyrodeblur.noise.estimate_noise_sigma` measures, while the error it leaves is
 amplified by the deconvolution like noise. So a JPEG is deconvolved for the measured level
-raised by a share of its quantisation error (:func:`gyrodeblur.noise.jpeg_noise_sigma`,
-share :data:`gyrodeblur.noise.JPEG_QUANTISATION_SHARE`). This benchmark compares that with
-the measured level alone.
+raised for its quantisation error (:func:`gyrodeblur.noise.jpeg_noise_sigma`, scale
+:data:`gyrodeblur.noise.JPEG_NOISE_SCALE`). This benchmark compares that with the measured
+level alone.
 
 Protocol: each sharp photo (longer side ``--max-size``) blurred by the project's forward
 model (a window of the shared hand-held gyro log, 15-35 ms exposure, rolling shutter,
@@ -16,7 +16,7 @@ warping; 40 dB noise, 8-bit), saved as PNG and as Pillow JPEGs of quality 95, 90
 * ``raised``: :func:`gyrodeblur.noise.photo_noise_sigma` (the default now; a PNG's is
   the measured level).
 
-PSNR is the chapter's (8-bit sRGB, 5 % border). The share was fitted (session 23) on six of
+PSNR is the chapter's (8-bit sRGB, 5 % border). The scale was fitted (session 23) on six of
 the shared photos (:data:`FITTED_ON`); the others are reported apart, as held out.
 
 Usage::
@@ -49,7 +49,7 @@ from gyrodeblur.imageio import read_photo  # noqa: E402
 from gyrodeblur.metrics import default_border, psnr  # noqa: E402
 from gyrodeblur.noise import estimate_noise_sigma, photo_noise_sigma  # noqa: E402
 
-#: The photos the share was fitted on (session 23's scratch measurement).
+#: The photos the scale was fitted on (session 23's scratch measurement).
 FITTED_ON = ("lai_manmade_01", "lai_natural_02", "lai_natural_03", "lai_people_01",
              "lai_saturated_01", "lai_text_01")
 QUALITIES = (95, 90, 80)

@@ -86,15 +86,14 @@ def test_doctests():
     assert doctest.testmod(noise_mod).failed == 0
 
 
-def test_a_jpeg_noise_level_adds_a_share_of_its_quantisation_error():
-    from gyrodeblur.noise import JPEG_QUANTISATION_SHARE, jpeg_noise_sigma
+def test_a_jpeg_noise_level_grows_with_the_root_of_its_quantisation_error():
+    from gyrodeblur.noise import JPEG_NOISE_SCALE, jpeg_noise_sigma
     ones = [1] * 64                                         # quality 100
-    added = np.sqrt(JPEG_QUANTISATION_SHARE / 12) / 255
+    added = np.sqrt(JPEG_NOISE_SCALE * np.sqrt(1 / 12) / 255)
     assert jpeg_noise_sigma(0.0, ones) == pytest.approx(added)
     assert jpeg_noise_sigma(0.003, ones) == pytest.approx(np.hypot(0.003, added))
-    steps = np.arange(1, 65)                                # coarser steps: more
-    assert jpeg_noise_sigma(0.0, steps) == pytest.approx(
-        np.sqrt(JPEG_QUANTISATION_SHARE * np.mean(steps ** 2.0) / 12) / 255)
+    # steps four times coarser: twice the level, not four times
+    assert jpeg_noise_sigma(0.0, [4] * 64) == pytest.approx(2 * added)
     with pytest.raises(ValueError, match="64 positive quantisation steps"):
         jpeg_noise_sigma(0.001, [1] * 63)
 

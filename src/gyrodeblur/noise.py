@@ -11,15 +11,18 @@ import numpy as np
 import scipy.ndimage as ndi
 
 __all__ = ["estimate_noise_sigma", "jpeg_noise_sigma", "photo_noise_sigma",
-           "JPEG_QUANTISATION_SHARE"]
+           "JPEG_NOISE_SCALE"]
 
-#: Share of a JPEG's quantisation error variance (luma steps ``Q``: ``mean(Q^2) / 12``)
-#: that the deconvolution must be regularised for as if it were noise. Measured (session
-#: 23, scratch, see BENCHMARKS section 2): six Lai photos, blurred by warping at 40 and
-#: 30 dB and saved at quality 80-95 (4:2:0 and 4:4:4), deblurred with the sparse method
-#: over a grid of noise levels; the best share was 0.61 over all of them, 0.34-0.76
-#: leaving one photo out, and it held at quality 97 and 100, not fitted.
-JPEG_QUANTISATION_SHARE = 0.6
+#: Scale (``[0, 1]`` units: 1.7 8-bit levels) of the level a JPEG is deconvolved for:
+#: ``sigma^2 = estimate^2 + JPEG_NOISE_SCALE * q``, ``q = sqrt(mean(Q^2) / 12) / 255`` the
+#: rms error of the luma steps ``Q``. Measured (session 23, scratch; see BENCHMARKS section
+#: 2): six Lai photos blurred by warping at 40 and 30 dB, saved at quality 80-95 (4:2:0 and
+#: 4:4:4), deblurred with the sparse method over a grid of levels. The best level grew
+#: about 1.4x per doubling of the table, as ``sqrt(q)``, not as ``q``: a coarser table
+#: zeroes more coefficients, whose error is less than a step's. The scale fitted on the
+#: six was 0.0065 (0.0043-0.0093 leaving one photo out); ``benchmarks/jpeg_noise.py``
+#: checks it on the six other shared photos.
+JPEG_NOISE_SCALE = 0.0065
 
 #: Median of |N(0, 1)| is 0.6745; 1 / 0.6745 turns a median absolute value into a sigma.
 _MAD_TO_SIGMA = 1.482602218505602
@@ -136,16 +139,17 @@ def _subsample(img: np.ndarray, max_pixels: int) -> np.ndarray:
 
 
 def jpeg_noise_sigma(estimate: float, luma_table) -> float:
-    """The noise level to deconvolve a JPEG with: the measured ``estimate`` raised by the
+    """The noise level to deconvolve a JPEG with: the measured ``estimate`` raised for the
     compression's own error.
 
     JPEG quantises each 8x8 block's DCT coefficients (an orthonormal transform) with the
-    steps of ``luma_table``; a coefficient's error is up to uniform over a step, variance
-    ``Q^2 / 12`` (8-bit levels). The quantisation zeroes the fine noise that
-    :func:`estimate_noise_sigma` measures (on a quality-95 photo it reads about half the
-    noise, on a page of text next to none), while what it leaves is an error the
-    deconvolution amplifies like noise. So ``sigma = sqrt(estimate^2 + s mean(Q^2) / 12)``,
-    ``s`` = :data:`JPEG_QUANTISATION_SHARE`, in the photo's ``[0, 1]`` units.
+    steps of ``luma_table``; a coefficient kept has an error up to uniform over its step,
+    ``Q^2 / 12`` (8-bit levels), one zeroed has its own, smaller value. The quantisation
+    removes the fine noise that :func:`estimate_noise_sigma` measures (on a quality-95
+    photo it reads about half the noise, on a page of text next to none), while the error
+    it leaves is amplified by the deconvolution like noise. So
+    ``sigma = sqrt(estimate^2 + JPEG_NOISE_SCALE * q)``, ``q = sqrt(mean(Q^2) / 12) / 255``
+    (:data:`JPEG_NOISE_SCALE`, measured), in the photo's ``[0, 1]`` units.
 
     Parameters
     ----------
@@ -154,11 +158,12 @@ def jpeg_noise_sigma(estimate: float, luma_table) -> float:
     luma_table : sequence of 64 numbers
         The luma quantisation steps, 8-bit levels (``Photo.quantization[0]``).
     """
-    q = np.asarray(luma_table, np.float64)
-    if q.size != 64 or not np.all(np.isfinite(q)) or np.any(q <= 0):
-        raise ValueError(f"luma_table must be 64 positive quantisation steps, got {q.size} values")
-    share = JPEG_QUANTISATION_SHARE * float(np.mean(q ** 2)) / 12.0 / 255.0 ** 2
-    return float(np.sqrt(float(estimate) ** 2 + share))
+    steps = np.asarray(luma_table, np.float64)
+    if steps.size != 64 or not np.all(np.isfinite(steps)) or np.any(steps <= 0):
+        raise ValueError(f"luma_table must be 64 positive quantisation steps, got "
+                         f"{steps.size} values")
+    q = float(np.sqrt(np.mean(steps ** 2) / 12.0)) / 255.0
+    return float(np.sqrt(float(estimate) ** 2 + JPEG_NOISE_SCALE * q))
 
 
 def photo_noise_sigma(photo, pixels: np.ndarray | None = None) -> float:
