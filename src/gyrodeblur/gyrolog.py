@@ -446,7 +446,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     def col(c, what: str) -> int:
         if isinstance(c, (int, np.integer)) and not isinstance(c, (bool, np.bool_)):
             i = int(c)
-        elif isinstance(c, str) and c.isdigit():
+        elif isinstance(c, str) and c.isascii() and c.isdigit():
             i = int(c)
         elif isinstance(c, str):
             if c not in header:
