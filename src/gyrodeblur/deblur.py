@@ -467,7 +467,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         are deblurred as without it.
     patches : list of Patch
     psfs : list of ndarray
-        One PSF per patch (odd sides; normalised to sum 1).
+        One PSF per patch (odd sides, a positive sum; each method normalises it).
     method : str
         A key of :data:`METHODS` (default :data:`DEFAULT_METHOD`).
     transfer : {"srgb", "linear"}
@@ -492,7 +492,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     patches, psfs = list(patches), list(psfs)
     if len(psfs) != len(patches):
         raise InputError(None, f"{len(psfs)} PSFs for {len(patches)} patches: give one each")
-    psfs = [check_psf(k, f"PSF {i + 1}") for i, k in enumerate(psfs)]
+    for i, k in enumerate(psfs):      # checked here, before any work; used as given
+        check_psf(k, f"PSF {i + 1}")
     img = curve.decode(encoded)
     deconvolve = METHODS[method](img, encoded=encoded, **options)
     unknown = None
