@@ -125,14 +125,18 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
 
 
 def test_cli_calibrate_turns_each_photo_back(cli_dir, capsys):
-    """--photo-rotation per photo: a session with a portrait export of the same frame
+    """--photo-rotation per photo: a session with a portrait export of its second frame
     calibrates exactly as the two frames in the sensor's layout."""
     from gyrodeblur.imageio import read_photo, write_photo
 
     d = cli_dir
-    write_photo(d / "turned.png", np.rot90(read_photo(d / "blurred.png").pixels, -1), bit_depth=8)
+    first = read_photo(d / "blurred.png").pixels
+    noise = np.random.default_rng(7).normal(0, 2 / 255, first.shape).astype(np.float32)
+    second = np.clip(first + noise, 0, 1)                    # another exposure of the scene
+    write_photo(d / "second.png", second, bit_depth=8)
+    write_photo(d / "turned.png", np.rot90(read_photo(d / "second.png").pixels, -1), bit_depth=8)
     common = ["--capture", str(d / "cap.json"), "--fix", "bias,readout,focal,axes"]
-    assert main(["calibrate", str(d / "blurred.png"), str(d / "blurred.png"), *common,
+    assert main(["calibrate", str(d / "blurred.png"), str(d / "second.png"), *common,
                  "-o", str(d / "out" / "same.json")]) == 0
     assert main(["calibrate", str(d / "blurred.png"), str(d / "turned.png"), *common,
                  "--photo-rotation", "0,90", "-o", str(d / "out" / "turned.json")]) == 0

@@ -110,13 +110,13 @@ def calibrate_command(args, say, load_capture) -> None:
     # before reading anything; the inputs are checked once the captures name their logs
     check_destination(args.output, None, args.overwrite, image=False, inputs=args.photos)
     photos = [read_photo(p) for p in args.photos]
-    _refuse_repeats(args.photos, photos)
     photos = [replace(ph, pixels=to_sensor_layout(ph.pixels, deg)) for ph, deg in zip(photos, turns)]
     given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
     paths = [c for entry in given for c in entry.split(",") if c] or given[:1]
     if len(paths) not in (1, len(photos)):
         raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
                                       "photos: give one, or one per photo (comma-separated)")
+    _refuse_repeats(args.photos, photos)
     if len(paths) == 1 and len(photos) > 1:
         say(f"note: all {len(photos)} photos take their exposure start from {paths[0]}; give "
             "one capture per photo (--capture a.json,b.json,... or --capture repeated) if "
