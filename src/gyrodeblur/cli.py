@@ -499,8 +499,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "BENCHMARKS.md for the trade)")
     s.add_argument("--noise-sigma", type=float, default=None,
                    help="sparse method: noise std of the photo in [0, 1] units, which sets the "
-                        "prior weight (default: measured on the photo; for a JPEG, raised by "
-                        "a share of its quantisation error)")
+                        "prior weight (default: measured on the photo; for a JPEG, raised "
+                        "for its quantisation error)")
     s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
     s.add_argument("--kernel-size", type=int, default=None,
