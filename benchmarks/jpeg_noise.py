@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
             for name, file in files.items():
                 photo = read_photo(file)
                 measured = estimate_noise_sigma(photo.pixels)
-                raised = photo_noise_sigma(photo)
+                raised = photo_noise_sigma(photo, measured=measured)
                 with _common.quiet():
                     p_meas = psnr(sharp, deblur(photo.pixels, case.capture,
                                                 noise_sigma=measured), border)

@@ -134,16 +134,9 @@ def calibrate_command(args, say, load_capture) -> None:
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
         say(line)
-    # the log as it was opened (relative to the capture's folder, or to the working
-    # directory when --gyro named it), written relative to the output's folder
-    gyro_rel = caps[0].gyro_spec.get("path")
-    opened = caps[0].log.source
-    if gyro_rel is not None and not os.path.isabs(gyro_rel) and opened:
-        gyro_rel = os.path.relpath(os.path.abspath(opened),
-                                   os.path.dirname(os.path.abspath(args.output)))
-    tmp = args.output + ".part"
+    tmp = args.output + ".part"     # beside the output: the log's path is written from there
     try:
-        res.capture.save(tmp, gyro_path=gyro_rel)
+        res.capture.save(tmp)
         os.replace(tmp, args.output)
     finally:
         if os.path.exists(tmp):

@@ -362,9 +362,10 @@ def cmd_deblur(args, say) -> None:
     colour, alpha = split_alpha(photo.pixels)
     if method == "sparse" and "noise_sigma" not in options and photo.quantization:
         from .noise import estimate_noise_sigma, photo_noise_sigma
-        options["noise_sigma"] = photo_noise_sigma(photo)
+        shown = estimate_noise_sigma(colour)
+        options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
         say(f"JPEG: deconvolved for noise of {255 * options['noise_sigma']:.2f} levels (its "
-            f"pixels show {255 * estimate_noise_sigma(colour):.2f}; the compression's "
+            f"pixels show {255 * shown:.2f}; the compression's "
             "error counts as noise too; --noise-sigma sets it)")
     t0 = time.perf_counter()
     if args.blind:

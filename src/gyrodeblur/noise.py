@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.ndimage as ndi
 
+from .images import split_alpha
+
 __all__ = ["estimate_noise_sigma", "jpeg_noise_sigma", "photo_noise_sigma",
            "JPEG_NOISE_SCALE"]
 
@@ -166,18 +168,15 @@ def jpeg_noise_sigma(estimate: float, luma_table) -> float:
     return float(np.sqrt(float(estimate) ** 2 + JPEG_NOISE_SCALE * q))
 
 
-def photo_noise_sigma(photo, pixels: np.ndarray | None = None) -> float:
+def photo_noise_sigma(photo, measured: float | None = None) -> float:
     """The noise level to deconvolve a photo from :func:`gyrodeblur.imageio.read_photo`
     with: :func:`estimate_noise_sigma` of its colour channels (alpha left out), raised by
     :func:`jpeg_noise_sigma` for a JPEG with quantisation tables.
 
-    ``pixels`` (optional): the photo's pixels as they will be deconvolved (e.g. turned
-    to the sensor's layout), if not ``photo.pixels``. Pass the result as the sparse
-    method's ``noise_sigma`` (``deblur(..., noise_sigma=...)``).
+    ``measured`` (optional): that estimate, when the caller has it already. Pass the
+    result as the sparse method's ``noise_sigma`` (``deblur(..., noise_sigma=...)``).
     """
-    px = photo.pixels if pixels is None else pixels
-    colour = px[..., :3] if px.ndim == 3 and px.shape[2] == 4 else px
-    sigma = estimate_noise_sigma(colour)
+    sigma = estimate_noise_sigma(split_alpha(photo.pixels)[0]) if measured is None else measured
     tables = getattr(photo, "quantization", None)
     if photo.format == "JPEG" and tables and 0 in tables:
         sigma = jpeg_noise_sigma(sigma, tables[0])

@@ -328,10 +328,11 @@ def psf_field(capture: Capture, points, *, grid: tuple | None = None,
     try:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
-        pts = np.empty((0, 3))
-    if pts.ndim != 2 or pts.shape[1] != 2:
         raise InputError(None, f"points must be (N, 2) pixel positions (x, y), got "
-                               f"{np.shape(points) if pts.size else points!r}")
+                               f"{points!r}") from None
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise InputError(None, f"points must be (N, 2) pixel positions (x, y), got shape "
+                               f"{pts.shape}")
     return PSFField(pts, [render_psf(capture, x, y, max_step=max_step) for x, y in pts], grid)
 
 
