@@ -486,3 +486,93 @@ def test_a_photo_given_twice_and_a_bad_grid_are_refused_before_any_calibration(c
                       "100x100", "-o", str(d / "o.png")], capsys)
     assert "--grid" in msg
     assert not (d / "o.json").exists() and not (d / "o.png").exists()
+
+
+def test_a_linear_photo_is_deblurred_through_the_curve_its_icc_profile_declares(capture_dir,
+                                                                                capsys):
+    """A 16-bit PNG of linear light with a linear ICC profile (a raw converter's export),
+    blurred by warping the linear scene: by default it is deconvolved as linear (the profile
+    says so, and the tool says it read that), which restores it better than taking it as
+    sRGB-encoded; the output keeps the profile. ``simulate`` reads the profile alike."""
+    from iccprofiles import curv_gamma, curv_identity, make_icc
+
+    from gyrodeblur.capture import load_capture
+    from gyrodeblur.imageio import Photo
+    from gyrodeblur.metrics import psnr
+    from gyrodeblur.simulate import simulate_blur
+    from gyrodeblur.tonecurve import srgb_to_linear
+    d = capture_dir
+    scene = srgb_to_linear(read_photo(d / "sharp.jpg").pixels)
+    linear_icc = make_icc(curv_identity(), name="Linear Rec709")
+    blurred = simulate_blur(scene, load_capture(d / "cap.json"), snr_db=45, seed=2)
+    write_photo(d / "lin.png", blurred, bit_depth=16,
+                like=Photo(blurred, 16, "PNG", icc_profile=linear_icc))
+    assert main(["deblur", str(d / "lin.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "auto.png")]) == 0
+    assert "'Linear Rec709') declares a linear transfer curve" in capsys.readouterr().out
+    assert main(["deblur", str(d / "lin.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "as_srgb.png"), "--transfer", "srgb"]) == 0
+    out = read_photo(d / "auto.png")
+    assert out.icc_profile == linear_icc and out.bit_depth == 16
+    gain = (psnr(out.pixels, scene, border=16)
+            - psnr(read_photo(d / "as_srgb.png").pixels, scene, border=16))
+    assert gain > 3.0, gain                         # 9.2 dB when written
+    # simulate: a gamma-1.8 photo is blurred in the light its profile decodes it to
+    g18 = make_icc(curv_gamma(1.8), name="ProPhoto-like")
+    gamma = np.float32(461 / 256)                   # 1.8 as the profile's 8.8 bits hold it
+    sharp18 = scene ** (1 / gamma)
+    write_photo(d / "g18.png", sharp18, bit_depth=16, like=Photo(sharp18, 16, "PNG",
+                                                                 icc_profile=g18))
+    assert main(["simulate", str(d / "g18.png"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "g18_blurred.png")]) == 0
+    expected = np.clip(simulate_blur(read_photo(d / "g18.png").pixels ** gamma,
+                                     load_capture(d / "cap.json")), 0, 1) ** (1 / gamma)
+    got = read_photo(d / "g18_blurred.png").pixels
+    assert np.abs(got - expected).max() < 2e-5      # 16-bit rounding
+
+
+def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir, capsys,
+                                                                    monkeypatch):
+    """``calibrate`` takes each photo's curve from its profile (or ``--transfer``), and
+    ``deblur --refine`` calibrates through the curve it deblurs with (it used sRGB's)."""
+    from iccprofiles import curv_identity, make_icc
+
+    import gyrodeblur.calibrate
+    import gyrodeblur.calibrate_cli
+    from gyrodeblur.imageio import Photo
+    from gyrodeblur.tonecurve import LINEAR, SRGB
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def spy(images, captures, **kwargs):
+        seen.append(kwargs["transfer"])
+        raise Stop
+
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", spy)
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", spy)
+    d = capture_dir
+    cap = str(d / "cap.json")
+    main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "a.png"),
+          "--seed", "1", "--snr-db", "40"])
+    a = read_photo(d / "a.png").pixels
+    b = np.clip(a + 0.01, 0, 1)
+    write_photo(d / "b.png", b, bit_depth=16, like=Photo(b, 16, "PNG",
+                                                         icc_profile=make_icc(curv_identity())))
+    with pytest.raises(Stop):
+        main(["calibrate", str(d / "a.png"), str(d / "b.png"), "--capture", cap,
+              "-o", str(d / "o.json")])
+    assert seen[-1] == [SRGB, LINEAR]
+    with pytest.raises(Stop):
+        main(["calibrate", str(d / "a.png"), str(d / "b.png"), "--capture", cap,
+              "-o", str(d / "o.json"), "--transfer", "srgb"])
+    assert seen[-1] == [SRGB, SRGB]
+    with pytest.raises(Stop):
+        main(["deblur", str(d / "a.png"), "--capture", cap, "--refine", "--transfer",
+              "linear", "-o", str(d / "o.png")])
+    assert seen[-1] is LINEAR
+    msg = _run_error(["calibrate", str(d / "a.png"), "--capture", cap, "-o", str(d / "o.json"),
+                      "--transfer", "gamma"], capsys)
+    assert "--transfer: unknown transfer curve 'gamma' (known: auto, linear" in msg

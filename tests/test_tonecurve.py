@@ -1,4 +1,5 @@
-"""Tests for gyrodeblur.tonecurve: the IEC 61966-2-1 sRGB curve and the curve lookup."""
+"""Tests for gyrodeblur.tonecurve: the IEC 61966-2-1 sRGB curve, the curve lookup, and the
+parametric, sampled and per-channel curves colour profiles declare."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ import pytest
 
 import gyrodeblur.tonecurve as tc
 from gyrodeblur.errors import InputError
-from gyrodeblur.tonecurve import (LINEAR, SRGB, TransferCurve, get_transfer_curve,
-                                  linear_to_srgb, srgb_to_linear)
+from gyrodeblur.tonecurve import (LINEAR, SRGB, ParametricCurve, PerChannelCurve,
+                                  TableCurve, TransferCurve, get_transfer_curve,
+                                  linear_to_srgb, matches_curve, srgb_to_linear)
 
 
 def test_round_trips():
@@ -73,6 +75,74 @@ def test_unknown_curve_is_an_input_error():
         get_transfer_curve("gamma", source="photo.tif")
     with pytest.raises(ValueError):     # InputError is a ValueError
         get_transfer_curve("")
+
+
+def test_a_parametric_curve_with_srgb_s_constants_is_srgb():
+    curve = ParametricCurve(2.4, 1 / 1.055, 0.055 / 1.055, 1 / 12.92, 0.04045)
+    v = np.linspace(-0.3, 1.4, 20001, dtype=np.float32)      # overshoots included
+    assert np.abs(curve.decode(v) - srgb_to_linear(v)).max() < 2e-6
+    assert np.abs(curve.encode(srgb_to_linear(v)) - v).max() < 2e-6
+
+
+def test_a_gamma_keeps_overshoots_with_odd_symmetry():
+    curve = ParametricCurve(2.2)
+    v = np.float32([-0.5, -0.1, 0.0, 0.3, 1.0, 1.2])
+    lin = curve.decode(v)
+    np.testing.assert_allclose(lin, np.sign(v) * np.abs(v) ** 2.2, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(curve.encode(lin), v, atol=1e-6)
+    assert lin.dtype == np.float32 and curve.decode(np.ones((3, 2, 3))).shape == (3, 2, 3)
+
+
+def test_a_curve_with_a_black_offset_keeps_its_own_segments():
+    """ICC function 4 with f > 0 (black lifted): below 0 the linear segment continues
+    rather than mirroring (a mirror would jump at 0)."""
+    curve = ParametricCurve(2.0, 1.0, 0.0, 0.05, 0.1, 0.0, 0.005)   # continuous at 0.1
+    v = np.float32([-0.1, 0.0, 0.05, 0.5])
+    np.testing.assert_allclose(curve.decode(v), [0.0, 0.005, 0.0075, 0.25], atol=1e-6)
+    np.testing.assert_allclose(curve.encode(curve.decode(v)), v, atol=1e-6)
+
+
+def test_invalid_parametric_curves_are_refused():
+    for bad in (dict(g=0.0), dict(g=2.2, a=-1.0), dict(g=np.nan), dict(g=2.2, c=-0.1)):
+        with pytest.raises(ValueError):
+            ParametricCurve(**bad)
+
+
+def test_a_table_curve_interpolates_and_inverts():
+    samples = np.linspace(0, 1, 33) ** 2
+    samples[10] = samples[9] - 0.01                      # a dip: made non-decreasing
+    curve = TableCurve(samples)
+    assert np.all(np.diff(curve.samples) >= 0)
+    v = np.linspace(-0.1, 1.1, 1201, dtype=np.float32)
+    lin = curve.decode(v)
+    assert np.all(np.diff(lin) >= -1e-7)
+    np.testing.assert_allclose(curve.decode(np.float32([0.5, 1.0])), [0.25, 1.0], atol=1e-6)
+    up = np.diff(lin) > 1e-7
+    rises = np.concatenate([[True], up]) & np.concatenate([up, [True]])  # not in the flat
+    np.testing.assert_allclose(curve.encode(lin)[rises], v[rises], atol=1e-5)
+    flat = (v > 9 / 32 + 1e-3) & (v < 10 / 32 - 1e-3)
+    np.testing.assert_allclose(curve.encode(lin[flat]), 10 / 32, atol=1e-6)  # its end
+    with pytest.raises(ValueError):
+        TableCurve([0.5])
+
+
+def test_per_channel_curves_and_pickling():
+    """Each channel through its own curve; a grey image through the green one. Curves
+    pickle (worker processes may receive them)."""
+    import pickle
+    curve = PerChannelCurve(LINEAR, SRGB, ParametricCurve(2.0).transfer_curve()).transfer_curve()
+    v = np.full((1, 1, 3), 0.5, np.float32)
+    np.testing.assert_allclose(curve.decode(v)[0, 0], [0.5, srgb_to_linear(np.float32(0.5)), 0.25],
+                               rtol=1e-5)
+    np.testing.assert_allclose(curve.decode(np.float32([[0.5]])), srgb_to_linear(np.float32([[0.5]])))
+    again = pickle.loads(pickle.dumps(curve))
+    np.testing.assert_array_equal(again.encode(again.decode(v)), curve.encode(curve.decode(v)))
+
+
+def test_matching_a_reference_curve():
+    table = TableCurve(srgb_to_linear(np.linspace(0, 1, 1024))).transfer_curve()
+    assert matches_curve(table, SRGB) and not matches_curve(table, LINEAR)
+    assert not matches_curve(ParametricCurve(2.2).transfer_curve(), SRGB)
 
 
 def test_doctests():

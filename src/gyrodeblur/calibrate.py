@@ -226,7 +226,7 @@ _CANDIDATES = 5            # mappings refined at full working scale (+ the best'
 
 
 def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
-              transfer: str = "srgb", n_patches: int | None = None, say=None,
+              transfer="srgb", n_patches: int | None = None, say=None,
               mappings=None, downscale: float = 1.0,
               workers: int | None = None) -> CalibrationResult:
     """Estimate time offset, gyro bias, readout time, focal scale and axis mapping.
@@ -245,8 +245,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         Parameters not to estimate, from :data:`PARAMETERS` (a string: comma-separated).
     offset_range : float
         Seconds searched on each side of the given time offset.
-    transfer : str
-        Transfer curve of the photos' values (``"srgb"`` or ``"linear"``).
+    transfer : str or TransferCurve, or a list of them
+        Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
+        :class:`~gyrodeblur.tonecurve.TransferCurve`, e.g. from
+        :func:`gyrodeblur.icc.photo_transfer_curve`): one for all photos, or one each.
     n_patches : int, optional
         Patches in all (spread over the photos, and over each frame; rounded up to a
         whole number per photo, at least 3). Default: 9 per photo, or 18 shared out when
@@ -297,8 +299,13 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         images, work_caps = _shrunk_photos(images, captures, downscale)
     if n_patches is None:
         n_patches = min(_N_PATCHES * len(images), _MAX_PATCHES)
-    photos = [CalibrationPhoto(img, cap, transfer, i)
-              for i, (img, cap) in enumerate(zip(images, work_caps))]
+    transfers = (list(transfer) if isinstance(transfer, (list, tuple))
+                 else [transfer] * len(images))
+    if len(transfers) != len(images):
+        raise InputError("--transfer", f"{len(transfers)} transfer curves for {len(images)} "
+                                       "photos: give one, or one per photo")
+    photos = [CalibrationPhoto(img, cap, curve, i)
+              for i, (img, cap, curve) in enumerate(zip(images, work_caps, transfers))]
     search = SearchSpace(photos, fix, offset_range)
     c0 = photos[0].cap
     notes: list[str] = []

@@ -29,7 +29,7 @@ _SATURATED_MAX = 0.3
 class CalibrationPhoto:
     """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
 
-    def __init__(self, image, capture: Capture, transfer: str, index: int):
+    def __init__(self, image, capture: Capture, transfer, index: int):
         img = check_image(image, f"photo {index + 1}", max_value=PHOTO_MAX)
         if img.ndim == 3 and img.shape[2] == 4:
             img = img[..., :3]

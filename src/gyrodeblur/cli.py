@@ -204,6 +204,22 @@ def _check_not_over_capture(cap, overwrite: bool, *outputs) -> None:
             _check_output(out, None, overwrite, image=False, inputs=inputs)
 
 
+def _add_transfer_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--transfer", default="auto",
+                   help="transfer curve of the pixel values, undone for the work and reapplied: "
+                        "auto (default: the curve the photo's ICC profile declares, e.g. "
+                        "linear or gamma 2.2; sRGB without a profile), srgb or linear")
+
+
+def _transfer_curve(photo, args, say):
+    """The photo's transfer curve as ``--transfer`` asks, saying where ``auto`` found it."""
+    from .icc import photo_transfer_curve
+    curve, note = photo_transfer_curve(photo, args.transfer)
+    if note:
+        say(note)
+    return curve
+
+
 def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
     what = ("degrees clockwise the photos' pixels were turned from the sensor's layout, one "
             "for all or one per photo, comma-separated" if per_photo else
@@ -290,7 +306,6 @@ def _atomic_npy(path: str, array: np.ndarray) -> None:
 def cmd_simulate(args, say) -> None:
     from .imageio import read_photo, write_photo
     from .simulate import quantize_8bit, simulate_blur
-    from .tonecurve import get_transfer_curve
 
     given = read_photo(args.sharp, scene=True)
     _check_output(args.output, given, args.overwrite, bit_depth=args.bit_depth)
@@ -305,7 +320,7 @@ def cmd_simulate(args, say) -> None:
         raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
     cap = _load_capture(args, photo, say)
     _check_not_over_capture(cap, args.overwrite, args.output)
-    curve = get_transfer_curve(args.transfer)
+    curve = _transfer_curve(given, args, say)
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
     blurred = curve.encode(simulate_blur(curve.decode(colour), cap, snr_db=args.snr_db,
@@ -360,6 +375,7 @@ def cmd_deblur(args, say) -> None:
         from .tiling import patch_grid
         patch_grid((h, w), grid, overlap)
     colour, alpha = split_alpha(photo.pixels)
+    curve = _transfer_curve(given, args, say)
     if method == "sparse" and "noise_sigma" not in options and photo.quantization:
         from .noise import estimate_noise_sigma, photo_noise_sigma
         shown = estimate_noise_sigma(colour)
@@ -377,7 +393,7 @@ def cmd_deblur(args, say) -> None:
         kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
         restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
                                        overlap=overlap, method=args.method,
-                                       transfer=args.transfer, progress=progress, **options)
+                                       transfer=curve, progress=progress, **options)
         mode_txt = "blind"
         grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
     else:
@@ -391,13 +407,13 @@ def cmd_deblur(args, say) -> None:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates
             res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
-                            workers=args.workers)
+                            workers=args.workers, transfer=curve)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
         restored, report = deblur(colour, cap, mode=args.mode, grid=grid,
                                   overlap=overlap, method=args.method,
-                                  transfer=args.transfer, progress=progress,
+                                  transfer=curve, progress=progress,
                                   return_report=True, **options)
         field = report.field
         mode_txt = args.mode
@@ -471,7 +487,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sampling of the sharp photo between pixels: cubic spline (default; a "
                         "band-limited scene) or bilinear (for hard lights far above the clip "
                         "level, which a spline rings around; the synthesis before session 17)")
-    s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
+    _add_transfer_option(s)
     s.add_argument("--bit-depth", type=int, choices=(8, 16), help="output bit depth (default: the input's)")
     _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
@@ -502,7 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sparse method: noise std of the photo in [0, 1] units, which sets the "
                         "prior weight (default: measured on the photo; for a JPEG, raised "
                         "for its quantisation error)")
-    s.add_argument("--transfer", default="srgb", help="transfer curve of the pixel values: srgb or linear")
+    _add_transfer_option(s)
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
     s.add_argument("--kernel-size", type=int, default=None,
                    help=f"blind kernel size, px (odd; default {BLIND_KERNEL_SIZE})")
@@ -542,6 +558,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
     s.add_argument("--workers", type=int, default=None, metavar="N", help=WORKERS_HELP)
+    _add_transfer_option(s)
     _add_rotation_option(s, per_photo=True)
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s, required=True, per_photo=True)

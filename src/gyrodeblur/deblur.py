@@ -25,7 +25,7 @@ from .psf import PSFField, displacement_field, psf_extent, psf_variation, render
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
                      deconvolve_patchwise, patch_grid)
-from .tonecurve import get_transfer_curve
+from .tonecurve import TransferCurve, get_transfer_curve
 from .wiener import DEFAULT_PHI, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
@@ -456,7 +456,7 @@ def _linear_weights(t: np.ndarray, n: int) -> np.ndarray:
 
 
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
-                     transfer: str = "srgb", clip: bool = True, progress=None,
+                     transfer: str | TransferCurve = "srgb", clip: bool = True, progress=None,
                      displacement=None, **options) -> np.ndarray:
     """Deconvolve ``image`` patch by patch with given PSFs (no gyro needed).
 
@@ -470,8 +470,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         One PSF per patch (odd sides, a positive sum; each method normalises it).
     method : str
         A key of :data:`METHODS` (default :data:`DEFAULT_METHOD`).
-    transfer : {"srgb", "linear"}
-        The photo's transfer curve: undone before deconvolution, reapplied after.
+    transfer : {"srgb", "linear"} or TransferCurve
+        The photo's transfer curve: undone before deconvolution, reapplied after
+        (:func:`gyrodeblur.icc.photo_transfer_curve` gives the one a photo's ICC profile
+        declares).
     clip : bool
         Clip the result to [0, 1] (default; values outside are ringing or overshoot).
     displacement : (ys, xs, d), optional
@@ -548,7 +550,7 @@ _OTHER_DEFAULTS = {"grid": "auto", "align": True}
 def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
            grid=None, overlap: float = DEFAULT_OVERLAP, method: str | None = None,
            align: bool | None = None,
-           transfer: str = "srgb", clip: bool = True, progress=None,
+           transfer: str | TransferCurve = "srgb", clip: bool = True, progress=None,
            return_report: bool = False, **options):
     """Remove camera-shake blur from ``image`` using the motion in ``capture``.
 
@@ -576,8 +578,10 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
         Overlap between neighbouring patches, fraction of the patch size (default 0.25).
     method : str
         Deconvolution method, a key of :data:`METHODS`.
-    transfer : {"srgb", "linear"}
-        Transfer curve of the photo's values; deconvolution runs in linear light.
+    transfer : {"srgb", "linear"} or TransferCurve
+        Transfer curve of the photo's values; deconvolution runs in linear light
+        (:func:`gyrodeblur.icc.photo_transfer_curve` gives the one a photo's ICC profile
+        declares).
     clip : bool
         Clip the output to [0, 1].
     progress : callable(done, total), optional
@@ -615,7 +619,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
 
 def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
                  overlap: float = DEFAULT_OVERLAP, method: str | None = None,
-                 transfer: str = "srgb", max_pixels: int = 1_000_000, clip: bool = True,
+                 transfer: str | TransferCurve = "srgb", max_pixels: int = 1_000_000, clip: bool = True,
                  progress=None, **options):
     """Deblur without a gyro log: estimate the blur from the photo, then deconvolve.
 

@@ -10,6 +10,12 @@ Both functions implement the exact piecewise sRGB curve of IEC 61966-2-1:1999, o
 trip is exact to ~1e-7). Values outside ``[0, 1]`` are accepted: the linear segment is
 extended below 0 (odd symmetry) and the power segment above 1, so an overshoot survives a
 round trip instead of being silently clipped.
+
+Other curves, as colour profiles declare them (:mod:`gyrodeblur.icc` reads them from a
+photo's ICC profile): :class:`ParametricCurve` (a pure gamma, or ICC's parametric
+functions, Adobe RGB's gamma 2.2 and ProPhoto's 1.8 among them), :class:`TableCurve` (a
+sampled curve) and :class:`PerChannelCurve` (one curve per colour channel), each turned
+into a :class:`TransferCurve` by its ``transfer_curve`` method.
 """
 
 from __future__ import annotations
@@ -29,6 +35,10 @@ __all__ = [
     "SRGB",
     "LINEAR",
     "get_transfer_curve",
+    "ParametricCurve",
+    "TableCurve",
+    "PerChannelCurve",
+    "matches_curve",
 ]
 
 # IEC 61966-2-1 constants. The encoding threshold 0.0031308 and the decoding threshold
@@ -134,6 +144,24 @@ def _identity(image: np.ndarray) -> np.ndarray:
     return np.asarray(image, dtype=np.float32)
 
 
+def _elementwise(image, fn) -> np.ndarray:
+    """``fn`` (float32 rows in, float32 rows out) over an image, in row bands on all cores."""
+    x = np.asarray(image, dtype=np.float32)
+    if not x.flags.c_contiguous:
+        x = np.ascontiguousarray(x)
+    out = np.empty_like(x)
+    if x.size == 0:
+        return out
+    rows_x = x.reshape(1, -1) if x.ndim == 0 else x.reshape(x.shape[0], -1)
+    rows_out = out.reshape(rows_x.shape)
+
+    def band(r0: int, r1: int) -> None:
+        rows_out[r0:r1] = fn(rows_x[r0:r1])
+
+    for_row_bands(band, rows_x.shape[0])
+    return out
+
+
 @dataclass(frozen=True)
 class TransferCurve:
     """A named pair of functions: ``decode`` (encoded -> linear) and ``encode`` (inverse).
@@ -159,6 +187,198 @@ SRGB = TransferCurve("srgb", srgb_to_linear, linear_to_srgb)
 LINEAR = TransferCurve("linear", _identity, _identity)
 
 _CURVES = {"srgb": SRGB, "linear": LINEAR, "none": LINEAR}
+
+
+@dataclass(frozen=True)
+class ParametricCurve:
+    r"""A decoding curve of ICC's parametric form (ICC.1:2010, section 10.18, function 4).
+
+    .. math::
+        L = \begin{cases} (aV + b)^g + e & V \ge d \\ cV + f & V < d \end{cases}
+
+    ``ParametricCurve(g)`` is a pure gamma (``L = V^g``); ICC's functions 0-3 are this
+    form with some parameters zero (:func:`gyrodeblur.icc.parametric_curve`). ``V`` and
+    ``L`` in ``[0, 1]``, the encoded value and linear light. The power's base is taken as
+    0 where ``aV + b`` is negative.
+
+    Outside ``[0, 1]`` (an overshoot of the deconvolution): a curve through the origin is
+    extended with odd symmetry, as :func:`srgb_to_linear` is; one with an offset (``e``
+    or ``f`` shifting black) keeps its own segments.
+    """
+
+    g: float
+    a: float = 1.0
+    b: float = 0.0
+    c: float = 0.0
+    d: float = 0.0
+    e: float = 0.0
+    f: float = 0.0
+
+    def __post_init__(self):
+        if not all(np.isfinite(v) for v in (self.g, self.a, self.b, self.c, self.d, self.e,
+                                             self.f)):
+            raise ValueError(f"curve parameters must be finite: {self}")
+        if not (self.g > 0 and self.a > 0 and self.c >= 0):
+            raise ValueError(f"not an increasing curve (needs g > 0, a > 0, c >= 0): {self}")
+
+    @property
+    def _odd(self) -> bool:
+        return abs(float(self._decode64(np.zeros(1))[0])) < 1e-7
+
+    def _decode64(self, v: np.ndarray) -> np.ndarray:
+        base = np.maximum(self.a * v + self.b, 0.0)
+        return np.where(v >= self.d, base ** self.g + self.e, self.c * v + self.f)
+
+    def decode(self, image) -> np.ndarray:
+        """Encoded values -> linear light (float32, any shape)."""
+        g, a, b, c, d, e, f = (np.float32(v) for v in (self.g, self.a, self.b, self.c,
+                                                        self.d, self.e, self.f))
+        odd = self._odd
+
+        def rows(v):
+            x = np.abs(v) if odd else v
+            with np.errstate(invalid="ignore"):
+                y = np.power(np.maximum(a * x + b, np.float32(0)), g) + e
+            y = np.where(x >= d, y, c * x + f)
+            return np.copysign(y, v) if odd else y
+
+        return _elementwise(image, rows)
+
+    def encode(self, image) -> np.ndarray:
+        """Linear light -> encoded values (float32, any shape); inverse of :meth:`decode`."""
+        g, a, b, c, d, e, f = (np.float32(v) for v in (self.g, self.a, self.b, self.c,
+                                                        self.d, self.e, self.f))
+        odd = self._odd
+        y_d = np.float32(self._decode64(np.array([self.d]))[0])   # where the segments meet
+
+        def rows(v):
+            y = np.abs(v) if odd else v
+            x = (np.power(np.maximum(y - e, np.float32(0)), np.float32(1 / self.g)) - b) / a
+            if c > 0:
+                x = np.where(y >= y_d, x, (y - f) / c)
+            else:                    # a flat foot: every value below it encodes as d
+                x = np.where(y >= y_d, x, d)
+            return np.copysign(x, v) if odd else x
+
+        return _elementwise(image, rows)
+
+    def transfer_curve(self, name: str | None = None) -> TransferCurve:
+        """This curve as a :class:`TransferCurve` (named ``gamma G`` for a pure gamma)."""
+        pure = (self.a, self.b, self.c, self.d, self.e, self.f) == (1, 0, 0, 0, 0, 0)
+        label = name or (f"gamma {self.g:.3g}" if pure else f"parametric (gamma {self.g:.3g})")
+        return TransferCurve(label, self.decode, self.encode)
+
+
+@dataclass(frozen=True, eq=False)
+class TableCurve:
+    """A decoding curve sampled at evenly spaced encoded values (an ICC ``curv`` table).
+
+    Parameters
+    ----------
+    samples : array_like, shape (N,), N >= 2
+        Linear light at encoded values ``0, 1/(N-1), ..., 1``, non-decreasing (a table
+        that dips is made non-decreasing). Between samples the curve is linear, and so is
+        its extension outside ``[0, 1]`` (the end segments continued).
+    """
+
+    samples: np.ndarray
+
+    def __post_init__(self):
+        s = np.asarray(self.samples, dtype=np.float64).ravel()
+        if s.size < 2 or not np.all(np.isfinite(s)):
+            raise ValueError("a table curve needs at least 2 finite samples")
+        object.__setattr__(self, "samples", np.maximum.accumulate(s))
+
+    def decode(self, image) -> np.ndarray:
+        """Encoded values -> linear light (float32, any shape)."""
+        s = self.samples.astype(np.float32)
+        n = s.size
+
+        def rows(v):
+            t = v * np.float32(n - 1)
+            i = np.clip(np.floor(t), 0, n - 2).astype(np.intp)
+            return s[i] + (t - i) * (s[i + 1] - s[i])
+
+        return _elementwise(image, rows)
+
+    def encode(self, image) -> np.ndarray:
+        """Linear light -> encoded values (float32, any shape); inverse of :meth:`decode`
+        (the value of a flat stretch of the table encodes as the stretch's end)."""
+        s = self.samples
+        xs = np.linspace(0.0, 1.0, s.size)
+        rise = np.flatnonzero(np.diff(s) > 0)
+        step = 1.0 / (s.size - 1)
+        # beyond the table: its first and last rising segments continued
+        lo = step / (s[rise[0] + 1] - s[rise[0]]) if rise.size else 0.0
+        hi = step / (s[rise[-1] + 1] - s[rise[-1]]) if rise.size else 0.0
+
+        def rows(v):
+            y = v.astype(np.float64)
+            # np.interp takes the last of equal samples: a flat stretch maps to its end
+            x = np.interp(y, s, xs)
+            x = np.where(y < s[0], (y - s[0]) * lo, x)
+            x = np.where(y > s[-1], 1.0 + (y - s[-1]) * hi, x)
+            return x.astype(np.float32)
+
+        return _elementwise(image, rows)
+
+    def transfer_curve(self, name: str | None = None) -> TransferCurve:
+        """This curve as a :class:`TransferCurve`."""
+        return TransferCurve(name or f"table of {self.samples.size}", self.decode, self.encode)
+
+
+@dataclass(frozen=True)
+class PerChannelCurve:
+    """One curve per colour channel (red, green, blue), for profiles whose channels differ.
+
+    On an image without three channels the green curve is used for every value.
+    """
+
+    red: TransferCurve
+    green: TransferCurve
+    blue: TransferCurve
+
+    def _apply(self, image, which: str) -> np.ndarray:
+        x = np.asarray(image, dtype=np.float32)
+        curves = (self.red, self.green, self.blue)
+        if x.ndim != 3 or x.shape[2] != 3:
+            return getattr(self.green, which)(x)
+        out = np.empty(x.shape, np.float32)
+        for ch, curve in enumerate(curves):
+            out[..., ch] = getattr(curve, which)(np.ascontiguousarray(x[..., ch]))
+        return out
+
+    def decode(self, image) -> np.ndarray:
+        """Encoded RGB -> linear light, each channel by its own curve (float32)."""
+        return self._apply(image, "decode")
+
+    def encode(self, image) -> np.ndarray:
+        """Linear RGB -> encoded values; inverse of :meth:`decode` (float32)."""
+        return self._apply(image, "encode")
+
+    def transfer_curve(self, name: str | None = None) -> TransferCurve:
+        """This curve as a :class:`TransferCurve`."""
+        label = name or f"per channel ({self.red.name}, {self.green.name}, {self.blue.name})"
+        return TransferCurve(label, self.decode, self.encode)
+
+
+def matches_curve(curve: TransferCurve, reference: TransferCurve, *,
+                  tolerance: float = 0.25 / 255) -> bool:
+    """Whether ``curve`` decodes like ``reference`` to within ``tolerance`` of an encoded
+    value (default: a quarter of an 8-bit level) over ``[0, 1]``: the reference, exact and
+    faster, can stand in for it.
+
+    Examples
+    --------
+    >>> matches_curve(ParametricCurve(2.4, 1 / 1.055, 0.055 / 1.055, 1 / 12.92, 0.04045)
+    ...               .transfer_curve(), SRGB)
+    True
+    >>> matches_curve(ParametricCurve(2.2).transfer_curve(), SRGB)
+    False
+    """
+    v = np.linspace(0.0, 1.0, 1025, dtype=np.float32)
+    back = reference.encode(np.clip(curve.decode(v), 0.0, None))
+    return bool(np.max(np.abs(back - v)) <= tolerance)
 
 
 def get_transfer_curve(name: str | TransferCurve, source: str | None = "--transfer") -> TransferCurve:
