@@ -130,3 +130,18 @@ def test_the_photo_s_curve_and_what_is_said_of_it():
     # a name given is taken as given, whatever the profile says
     assert photo_transfer_curve(_photo(lin), "srgb") == (SRGB, None)
     assert photo_transfer_curve(_photo(lcms), "linear") == (LINEAR, None)
+
+
+def test_a_png_s_file_gamma_stands_in_for_a_profile():
+    def png(gamma, icc=None):
+        photo = _photo(icc)
+        return Photo(photo.pixels, 16, "PNG", path="p.png", icc_profile=icc, png_gamma=gamma)
+
+    curve, note = photo_transfer_curve(png(1.0))
+    assert curve is LINEAR and "file gamma 1" in note
+    assert photo_transfer_curve(png(0.45455)) == (SRGB, None)      # libpng's sRGB gamma
+    curve, note = photo_transfer_curve(png(1 / 1.8))
+    assert curve.name == "gamma 1.8" and "gAMA" in note
+    # a profile, where there is one, says more than the gAMA chunk
+    lcms = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
+    assert photo_transfer_curve(png(1.0, lcms)) == (SRGB, None)

@@ -585,3 +585,24 @@ def test_an_exif_block_too_long_for_a_jpeg_loses_its_maker_notes(tmp_path):
         assert 0x927C not in kept.get_ifd(0x8769)
     write_photo(tmp_path / "out.png", photo.pixels, like=photo)    # a PNG keeps it all
     assert read_photo(tmp_path / "out.png").exif == photo.exif
+
+
+@pytest.mark.parametrize("bit_depth", [8, 16])
+def test_a_png_file_gamma_is_read_and_written_back(tmp_path, bit_depth):
+    """``gAMA`` is kept (a linear PNG must not come out looking like sRGB), unless an
+    ``sRGB`` chunk says what the gamma means."""
+    from PIL import PngImagePlugin
+    info = PngImagePlugin.PngInfo()
+    info.add(b"gAMA", (100000).to_bytes(4, "big"))
+    Image.fromarray(np.full((4, 5, 3), 100, np.uint8)).save(tmp_path / "lin.png", pnginfo=info)
+    photo = read_photo(tmp_path / "lin.png")
+    assert photo.png_gamma == 1.0
+    write_photo(tmp_path / "out.png", photo.pixels, like=photo, bit_depth=bit_depth)
+    with Image.open(tmp_path / "out.png") as im:
+        assert im.info.get("gamma") == 1.0
+    assert read_photo(tmp_path / "out.png").png_gamma == 1.0
+    srgb = PngImagePlugin.PngInfo()
+    srgb.add(b"sRGB", b"\0")
+    srgb.add(b"gAMA", (45455).to_bytes(4, "big"))
+    Image.fromarray(np.full((4, 5, 3), 100, np.uint8)).save(tmp_path / "srgb.png", pnginfo=srgb)
+    assert read_photo(tmp_path / "srgb.png").png_gamma is None

@@ -12,7 +12,10 @@ of an 8-bit level is replaced by the exact :data:`~gyrodeblur.tonecurve.SRGB`
 ``transfer="srgb"`` gives.
 
 Profiles built on lookup tables only (``A2B0``, no TRC tags) declare no curve this module
-reads; :func:`photo_transfer_curve` then assumes sRGB and says so. Colour (the primaries)
+reads; :func:`photo_transfer_curve` then assumes sRGB and says so. A PNG without a profile
+may state its file gamma instead (``gAMA``; :attr:`gyrodeblur.imageio.Photo.png_gamma`):
+1.0 is linear, and 1/2.2 (what libpng writes beside an ``sRGB`` chunk, and what viewers
+show as sRGB) is taken as sRGB; any other is a pure gamma. Colour (the primaries)
 is not converted: blur mixes light of each channel with itself, so only the curve matters.
 """
 
@@ -29,6 +32,9 @@ __all__ = ["profile_transfer_curve", "profile_description", "parametric_curve",
 
 #: The ``transfer`` name that means "the photo's ICC profile's curve, sRGB without one".
 AUTO = "auto"
+#: A PNG file gamma within this relative distance of 1/2.2 is sRGB's (0.45455 is written
+#: for sRGB; a pure 2.2 gamma differs from sRGB's curve by about a level in the shadows)
+_SRGB_FILE_GAMMA_TOLERANCE = 0.01
 
 _HEADER = 128
 # parameters of ICC's parametric functions 0-4 (ICC.1:2010, table 65)
@@ -217,6 +223,14 @@ def photo_transfer_curve(photo, requested: str | TransferCurve = AUTO
     where = photo.path or "the photo"
     icc = photo.icc_profile
     override = "--transfer srgb or linear sets it"
+    gamma = getattr(photo, "png_gamma", None)
+    if not icc and gamma:
+        if abs(gamma * 2.2 - 1) <= _SRGB_FILE_GAMMA_TOLERANCE:
+            return SRGB, None
+        curve = _known(ParametricCurve(1 / gamma).transfer_curve())
+        return curve, (f"{where}: its gAMA chunk (file gamma {gamma:.5g}) declares a "
+                       f"{curve.name} transfer curve, undone for the work in linear light "
+                       f"({override})")
     if not icc:
         if photo.format == "TIFF" and photo.bit_depth == 16:
             return SRGB, (f"{where}: no ICC profile: its values are taken as sRGB-encoded "

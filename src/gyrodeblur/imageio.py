@@ -26,8 +26,12 @@ Conventions
   byte for byte. TIFF files keep EXIF in their own tags, so for TIFF the block is
   rebuilt from the descriptive IFD0 tags (Make, Model, Orientation, ...) and the Exif and
   GPS sub-directories. XMP, IPTC and PNG text chunks are not carried.
+* A PNG's ``gAMA`` chunk (the file gamma, how the values were encoded) is kept in
+  ``Photo.png_gamma`` unless an ``sRGB`` chunk says the file is sRGB; the transfer curve
+  is read from it where no ICC profile says otherwise (:mod:`gyrodeblur.icc`).
 
-Writing: JPEG stores EXIF (APP1) and ICC (APP2); PNG stores ``eXIf`` and ``iCCP``; TIFF
+Writing: JPEG stores EXIF (APP1) and ICC (APP2); PNG stores ``eXIf``, ``iCCP`` and the
+input's ``gAMA``; TIFF
 stores the ICC profile (tag 34675) and EXIF as IFD0 tags plus Exif/GPS sub-IFDs. Values
 are clipped to ``[0, 1]`` and rounded to the nearest integer. Files are written to a
 temporary file in the destination folder and moved into place with :func:`os.replace`.
@@ -57,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import tifffile
-from PIL import Image, TiffImagePlugin, UnidentifiedImageError
+from PIL import Image, PngImagePlugin, TiffImagePlugin, UnidentifiedImageError
 
 from gyrodeblur.errors import InputError
 
@@ -113,6 +117,10 @@ class Photo:
         A JPEG's quantisation tables as stored (table id -> 64 steps in 8-bit levels,
         zigzag order; 0 is the luma table), else ``None``. The compression's error and
         the noise it removed depend on them (:func:`gyrodeblur.noise.photo_noise_sigma`).
+    png_gamma : float or None
+        A PNG's file gamma (its ``gAMA`` chunk: encoded = linear ** ``png_gamma``, e.g.
+        1.0 for linear data, 0.45455 as written beside sRGB), where it has no ``sRGB``
+        chunk; else ``None``.
 
     Notes
     -----
@@ -127,6 +135,7 @@ class Photo:
     exif: bytes | None = None
     icc_profile: bytes | None = None
     quantization: dict | None = None
+    png_gamma: float | None = None
 
     def __post_init__(self):
         if self.bit_depth not in (8, 16):
@@ -168,7 +177,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     if os.path.isdir(p):
         raise InputError(p, "is a folder, not an image file")
     try:
-        fmt, ints, exif, icc, tables = _decode(p)
+        fmt, ints, exif, icc, tables, gamma = _decode(p)
     except InputError:
         raise
     except PermissionError:
@@ -181,19 +190,21 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
         raise InputError(p, f"cannot decode the image ({_reason(exc)})") from None
     pixels, bit_depth = _to_float(p, ints, keep_bright=scene)
     return Photo(pixels=pixels, bit_depth=bit_depth, format=fmt, path=p,
-                 exif=_normalise_exif(exif), icc_profile=icc or None, quantization=tables)
+                 exif=_normalise_exif(exif), icc_profile=icc or None, quantization=tables,
+                 png_gamma=gamma)
 
 
-def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict | None]:
-    """(format, samples, EXIF block, ICC profile, JPEG quantisation tables) of a file;
-    decoder errors propagate."""
+def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict | None,
+                             float | None]:
+    """(format, samples, EXIF block, ICC profile, JPEG quantisation tables, PNG file
+    gamma) of a file; decoder errors propagate."""
     try:
         im = Image.open(p)
     except UnidentifiedImageError:
         if not _is_tiff(p):
             raise
         ints, icc = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot open
-        return "TIFF", ints, None, icc, None
+        return "TIFF", ints, None, icc, None, None
     with im:
         fmt = {"MPO": "JPEG"}.get(im.format, im.format)
         if fmt not in ("JPEG", "PNG", "TIFF"):
@@ -211,7 +222,11 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
     tables = None
     if fmt == "JPEG" and getattr(im, "quantization", None):
         tables = {int(k): [int(q) for q in v] for k, v in im.quantization.items()}
-    return fmt, ints, exif, icc, tables
+    gamma = None
+    if fmt == "PNG" and "srgb" not in im.info:
+        g = im.info.get("gamma")
+        gamma = float(g) if isinstance(g, (int, float)) and 0 < g < 10 else None
+    return fmt, ints, exif, icc, tables, gamma
 
 
 def _reason(exc: BaseException) -> str:
@@ -733,7 +748,11 @@ def write_photo(
         icc = None
     if fmt == "JPEG" and exif and len(exif) > _JPEG_MAX_EXIF:
         exif = _exif_for_jpeg(exif, p)
-    writer = {"JPEG": _write_jpeg, "PNG": _write_png, "TIFF": _write_tiff}[fmt]
+    if fmt == "PNG":
+        gamma = like.png_gamma if like is not None else None
+        _atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma))
+        return p
+    writer = {"JPEG": _write_jpeg, "TIFF": _write_tiff}[fmt]
     _atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality)))
     return p
 
@@ -876,16 +895,25 @@ def _write_jpeg(f, ints, *, exif, icc, quality) -> None:
     Image.fromarray(ints).save(f, format="JPEG", **options)
 
 
-def _write_png(f, ints, *, exif, icc, quality) -> None:
+def _write_png(f, ints, *, exif, icc, gamma=None) -> None:
     if ints.dtype == np.uint16:
-        _write_png16(f, ints, exif=exif, icc=icc)
+        _write_png16(f, ints, exif=exif, icc=icc, gamma=gamma)
         return
     options = {"compress_level": 6}
     if exif:
         options["exif"] = exif
     if icc:
         options["icc_profile"] = icc
+    if gamma:
+        info = PngImagePlugin.PngInfo()
+        info.add(b"gAMA", _png_gamma_bytes(gamma))
+        options["pnginfo"] = info
     Image.fromarray(ints).save(f, format="PNG", **options)
+
+
+def _png_gamma_bytes(gamma: float) -> bytes:
+    """A ``gAMA`` chunk's data: the file gamma times 100000, unsigned 32-bit."""
+    return struct.pack(">I", int(round(gamma * 100000)))
 
 
 def _png_chunk(tag: bytes, data: bytes) -> bytes:
@@ -925,7 +953,7 @@ def _png_filter(rows: np.ndarray, prior: np.ndarray, bpp: int) -> np.ndarray:
     return np.concatenate([best.astype(np.uint8)[:, None], chosen], axis=1)
 
 
-def _write_png16(f, ints: np.ndarray, *, exif, icc) -> None:
+def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None) -> None:
     """16-bit grey, RGB or RGBA PNG with numpy + zlib (Pillow cannot write 16-bit colour)."""
     height, width = ints.shape[:2]
     channels = 1 if ints.ndim == 2 else ints.shape[2]
@@ -933,6 +961,8 @@ def _write_png16(f, ints: np.ndarray, *, exif, icc) -> None:
     raw = np.ascontiguousarray(ints, dtype=">u2").view(np.uint8).reshape(height, -1)
     f.write(b"\x89PNG\r\n\x1a\n")
     f.write(_png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 16, colour_type, 0, 0, 0)))
+    if gamma:                                        # before PLTE/IDAT, as the spec wants
+        f.write(_png_chunk(b"gAMA", _png_gamma_bytes(gamma)))
     if icc:
         f.write(_png_chunk(b"iCCP", b"ICC Profile\x00\x00" + zlib.compress(icc)))
     if exif:
