@@ -93,6 +93,41 @@ def test_grid_coarsens_for_huge_psfs():
     assert field.grid != (6, 8) and notes
 
 
+def test_coarsening_skips_grids_too_fine_for_the_worst_psf(monkeypatch):
+    """The grid reached is the first, stepping one row and column at a time, whose windows
+    hold the PSFs; grids whose windows are smaller than the worst PSF already seen are not
+    rendered (a 2000 x 20 strip rendered 80 grids of PSFs to reach 1 x 1)."""
+    import gyrodeblur.deblur as deblur_mod
+    t = np.arange(0, 0.3, 0.005)
+    cap = Capture(0.05, 0.05, 0.0, Camera.centred(2000, 20, 1600.0),
+                  GyroLog(t, np.tile([0.3, 0.5, 0.1], (t.size, 1))))
+    renders = []
+    real = deblur_mod.render_psf
+    monkeypatch.setattr(deblur_mod, "render_psf",
+                        lambda *a, **k: renders.append(1) or real(*a, **k))
+    with pytest.warns(UserWarning, match="grid coarsened from 1x"):
+        patches, field, _ = plan_psf_field(cap, (20, 2000), grid=(1, 40))
+    assert field.grid == (1, 1) and len(renders) == 40 + 1
+    # and where a finer grid fits, it is the one single steps reach: the first grid of
+    # (6, 8), (5, 7), ... that plan_psf_field keeps as given
+    import warnings
+    cap2 = Capture(0.05, 0.05, 0.0, Camera.centred(320, 240, 300.0),
+                   GyroLog(t, np.tile([0.0, 3.0, 0.0], (t.size, 1))))
+    with pytest.warns(UserWarning):
+        _, field2, _ = plan_psf_field(cap2, (240, 320), grid=(6, 8))
+    for k in range(6):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            try:
+                plan_psf_field(cap2, (240, 320), grid=(6 - k, 8 - k))
+            except UserWarning:
+                continue
+        assert field2.grid == (6 - k, 8 - k) != (1, 1)
+        break
+    else:
+        raise AssertionError("no grid of the sequence fits")
+
+
 def test_auto_grid_keeps_the_psf_change_across_a_patch_within_its_tolerance(make_capture):
     # A roll about the optical axis: every PSF is an arc whose length grows with the
     # distance from the centre, so the PSF changes by about ``variation`` px per px.

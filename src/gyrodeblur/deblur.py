@@ -226,6 +226,11 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
         if worst <= max_fraction * side or (rows, cols) == (1, 1):
             break
         rows, cols = max(1, rows - 1), max(1, cols - 1)
+        # grids whose windows are still smaller than this worst PSF are not rendered (a
+        # 2000 x 20 strip stepped through 80 of them, 80 PSFs each)
+        while ((rows, cols) != (1, 1) and max_fraction
+               * min(patch_grid((H, W), (rows, cols), overlap)[0].shape) < worst):
+            rows, cols = max(1, rows - 1), max(1, cols - 1)
     if (rows, cols) != first:
         msg = (f"grid coarsened from {first[0]}x{first[1]} to {rows}x{cols}: PSFs up to "
                f"{worst} px do not fit patches of the finer grid")
