@@ -365,6 +365,10 @@ def test_mismatched_inputs(case):
         calibrate([blurred, blurred], [true, true, true])
     with pytest.raises(InputError):
         calibrate([], true)
+    # the same photo twice, as one array or as a copy, would count its evidence twice
+    for second in (blurred, blurred.copy()):
+        with pytest.raises(InputError, match="photos 1 and 2 hold the same pixels"):
+            calibrate([blurred, second], [true, true])
 
 
 # ----------------------------------------------------------------------------- CLI

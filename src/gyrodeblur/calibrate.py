@@ -283,6 +283,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         raise TypeError("captures must be a Capture or a list of them, one per photo")
     if len(captures) != len(images):
         raise InputError("--capture", f"{len(images)} photos but {len(captures)} captures")
+    _refuse_repeated_images(images)
     fix = checked_fix(fix)
     say_ = say or (lambda msg: None)
     if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
@@ -485,6 +486,20 @@ def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarra
 def _is_count(value) -> bool:
     """Whether ``value`` is a whole number >= 1 (an int, not a bool)."""
     return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= 1
+
+
+def _refuse_repeated_images(images) -> None:
+    """The same photo twice (the same array, or equal pixels: two exposures never are)
+    would count its evidence twice and seem twice as sure."""
+    import hashlib
+    seen = {}
+    for k, img in enumerate(images):
+        a = np.asarray(img)
+        key = (a.shape, a.dtype.str, hashlib.sha1(np.ascontiguousarray(a).tobytes()).hexdigest())
+        if key in seen:
+            raise InputError(None, f"photos {seen[key] + 1} and {k + 1} hold the same pixels: "
+                                   "one photo counted twice would seem twice as sure")
+        seen[key] = k
 
 
 def _shrunk_photos(images, captures, factor: float):
