@@ -142,3 +142,70 @@ def test_a_calibration_is_the_same_with_one_worker_or_two(monkeypatch, tmp_path)
     assert np.array_equal(a.bias, b.bias) and np.array_equal(a.axes, b.axes)
     assert one.notes[:-1] == two.notes[:-1] and one.ranking == two.ranking
     assert repr(one.estimates) == repr(two.estimates)
+
+
+_SLEEPING_CALLER = r"""
+import os, signal, sys, time
+sys.path.insert(0, {tests!r})
+from test_calibration_workers import _Fit
+from gyrodeblur.calibration_workers import StepRunner
+
+class Stop(BaseException):
+    pass
+
+def stop(signum, frame):
+    raise Stop
+
+class Sleepy(_Fit):
+    def nap(self, folder, k):
+        open(os.path.join(folder, f"worker{{k}}-{{os.getpid()}}"), "w").close()
+        time.sleep(60)
+        return k
+
+signal.signal(signal.SIGTERM, stop)
+try:
+    StepRunner(Sleepy(), 2).map("nap", [({folder!r}, 1), ({folder!r}, 2)])
+except Stop:
+    sys.exit(143)
+"""
+
+
+def _gone(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            return any(line.split()[1:2] == ["Z"] for line in f if line.startswith("State:"))
+    except FileNotFoundError:
+        return True
+
+
+@forks
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGKILL"])
+def test_workers_do_not_outlive_a_caller_that_is_stopped(tmp_path, how):
+    """A batch system's timeout: the caller is terminated (its SIGTERM handler raises, as
+    the CLI's does) or killed outright while its workers run long steps. The workers go
+    with it (killed, or by the kernel when their parent dies), rather than waiting for
+    tasks forever with the caller's pipes open; the terminated caller does not wait for
+    their steps either."""
+    import signal
+    import subprocess
+    import time
+    script = _SLEEPING_CALLER.format(tests=os.path.dirname(__file__), folder=str(tmp_path))
+    child = subprocess.Popen([sys.executable, "-c", script])
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.iterdir())) < 2:
+            assert time.monotonic() < deadline and child.poll() is None, "no workers started"
+            time.sleep(0.05)
+        workers = [int(p.name.split("-")[1]) for p in tmp_path.iterdir()]
+        t0 = time.monotonic()
+        child.send_signal(getattr(signal, how))
+        rc = child.wait(timeout=20)
+        assert time.monotonic() - t0 < 10                 # not the steps' 60 s
+        assert rc == (143 if how == "SIGTERM" else -signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while not all(_gone(p) for p in workers):
+            assert time.monotonic() < deadline, "workers outlived their caller"
+            time.sleep(0.05)
+    finally:
+        if child.poll() is None:
+            child.kill()

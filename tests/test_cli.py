@@ -1,6 +1,7 @@
 """The command line: happy paths, metadata pass-through, and one-line errors with exit 2."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -576,3 +577,79 @@ def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir,
     msg = _run_error(["calibrate", str(d / "a.png"), "--capture", cap, "-o", str(d / "o.json"),
                       "--transfer", "gamma"], capsys)
     assert "--transfer: unknown transfer curve 'gamma' (known: auto, linear" in msg
+
+
+def test_sigterm_while_writing_leaves_no_file_and_exits_143(capture_dir):
+    """SIGTERM (a batch system's stop) is handled like Ctrl-C: the temporary file being
+    written is removed, no output appears, one line is said, exit status 143."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    d = capture_dir
+    script = (
+        "import sys, time\n"
+        "import gyrodeblur.imageio as io\n"
+        "def slow(f, ints, **kw):\n"
+        "    f.write(b'partial'); f.flush(); time.sleep(60)\n"
+        "io._write_png = slow\n"
+        "from gyrodeblur.cli import main\n"
+        f"sys.exit(main(['simulate', {str(d / 'sharp.jpg')!r}, '--capture', "
+        f"{str(d / 'cap.json')!r}, '-o', {str(d / 'out.png')!r}]))\n")
+    before = set(d.iterdir())
+    child = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not any(p.name.endswith(".tmp") for p in d.iterdir()):
+            assert time.monotonic() < deadline and child.poll() is None, "never wrote"
+            time.sleep(0.05)
+        child.send_signal(signal.SIGTERM)
+        _, err = child.communicate(timeout=20)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    assert child.returncode == 143
+    assert err.strip().splitlines()[-1] == "gyrodeblur: terminated; nothing written"
+    assert set(d.iterdir()) == before
+
+
+def test_outputs_are_all_written_or_none(capture_dir, capsys, monkeypatch):
+    """A PSF drawing that cannot be written takes the new photo with it (exit 2, nothing
+    written); a folder that refuses files is said before the work; the .npy of ``psf``
+    is written through a temporary file of its own, leaving others' files alone."""
+    import gyrodeblur.cli as cli
+    from gyrodeblur.errors import InputError
+    d = capture_dir
+    cap = str(d / "cap.json")
+    main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "b.png")])
+
+    def refuse(path, *args):
+        raise InputError(path, "cannot write the file: No space left on device")
+
+    monkeypatch.setattr(cli, "_write_picture", refuse)
+    capsys.readouterr()
+    msg = _run_error(["deblur", str(d / "b.png"), "--capture", cap, "-o", str(d / "o.png"),
+                      "--grid", "2x2", "--save-psf", str(d / "field.png")], capsys)
+    assert "field.png: cannot write" in msg
+    assert not (d / "o.png").exists() and not (d / "field.png").exists()
+    monkeypatch.undo()
+    # a folder that refuses new files (sysfs does, even for root): said before the work
+    from gyrodeblur.atomicfile import check_writable
+    try:
+        check_writable("/sys/out.png")
+    except InputError:
+        import gyrodeblur.deblur as deblur_mod
+
+        def no_work(*args, **kwargs):
+            raise AssertionError("deblurred before the output folder was checked")
+
+        monkeypatch.setattr(deblur_mod, "deblur", no_work)
+        msg = _run_error(["deblur", str(d / "b.png"), "--capture", cap, "-o",
+                          "/sys/out.png"], capsys)
+        assert "/sys/out.png: cannot write in folder /sys" in msg
+        monkeypatch.undo()
+    (d / "p.npy.part.npy").write_bytes(b"someone else's")
+    assert main(["psf", "--capture", cap, "--at", "10,20", "-o", str(d / "p.npy")]) == 0
+    assert (d / "p.npy.part.npy").read_bytes() == b"someone else's"
+    assert np.load(d / "p.npy").ndim == 2
+    assert not [p for p in d.iterdir() if p.name.endswith((".tmp", ".probe"))]

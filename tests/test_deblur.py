@@ -436,3 +436,30 @@ def test_an_alpha_channel_is_passed_through_and_leaves_the_colours_alone(make_ca
         deblur_with_psfs(rgba, patches, [k])
     with pytest.raises(InputError, match="values up to 2[0-9][0-9]; expected"):
         deblur_with_psfs(rgb * 255, patches, [k, k])
+
+
+def test_clip_false_keeps_the_overshoot_with_every_method(cases):
+    """``clip=False`` returns the deconvolution's values as they are (the sparse method
+    clipped each patch itself whatever ``clip`` said); ``clip=True`` keeps [0, 1]."""
+    _, sharp, blurred, cap = cases[0]
+    bright = np.clip(blurred * 0.3 + 0.7, 0, 1)          # near white: overshoots above 1
+    for method in ("sparse", "wiener"):
+        free = deblur(bright, cap, method=method, grid=(2, 2), clip=False)
+        kept = deblur(bright, cap, method=method, grid=(2, 2))
+        assert free.max() > 1.0 and 0.0 <= kept.min() and kept.max() <= 1.0, method
+
+
+def test_the_alignment_grid_is_interpolated_bilinearly():
+    """The warp's sample map: bilinear interpolation of the displacement grid, in a fixed
+    order of two-tap sums (no matrix product, whose result depends on BLAS threads)."""
+    from gyrodeblur.deblur import _interpolate_grid, _linear_taps
+    rng = np.random.default_rng(3)
+    grid = rng.normal(0, 3, (5, 7)).astype(np.float32)
+    ty, tx = np.linspace(-0.5, 4.5, 23), np.linspace(0, 6, 31)     # clamped at the ends
+    got = _interpolate_grid(grid, _linear_taps(ty, 5), _linear_taps(tx, 7))
+    from scipy.interpolate import RegularGridInterpolator
+    ref = RegularGridInterpolator((np.arange(5), np.arange(7)), grid.astype(np.float64))
+    yy, xx = np.meshgrid(np.clip(ty, 0, 4), tx, indexing="ij")
+    np.testing.assert_allclose(got, ref((yy, xx)), atol=1e-5)
+    one = _interpolate_grid(grid[:1, :1], _linear_taps(ty, 1), _linear_taps(tx, 1))
+    np.testing.assert_array_equal(one, np.full((23, 31), grid[0, 0]))

@@ -74,9 +74,15 @@ def test_method_options_are_checked_before_any_work(image):
         deblur(image, cap, phi=0.01)                 # a Wiener option, given to sparse
     with pytest.raises(TypeError):
         deblur(image, cap, method="wiener", grid=(2, 2), iterations=3)
-    for kw in ({"noise_sigma": np.nan}, {"noise_sigma": -1.0}, {"weight": np.inf}):
-        with pytest.raises(ValueError):
+    for kw in ({"noise_sigma": np.nan}, {"noise_sigma": -1.0}, {"weight": np.inf},
+               {"iterations": 2.5}, {"iterations": -1}):
+        with pytest.raises(InputError, match="method 'sparse'"):   # a ValueError too
             deblur(image, cap, grid=(2, 2), **kw)
+    # the README example's noise_sigma, with the method switched to Wiener: said plainly
+    with pytest.raises(TypeError, match="noise_sigma for method 'wiener' \\(known: phi\\)"):
+        deblur(image, cap, method="wiener", grid=(2, 2), noise_sigma=0.01)
+    with pytest.raises(InputError, match="--phi"):
+        deblur(image, cap, method="wiener", grid=(2, 2), phi=-1.0)
 
 
 @pytest.mark.parametrize("grid", [(2, 2, 2), (2.5, 3.7), (True, True), (2,), 2.5, ("a", "b")])

@@ -141,11 +141,5 @@ def calibrate_command(args, say, load_capture) -> None:
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
         say(line)
-    tmp = args.output + ".part"     # beside the output: the log's path is written from there
-    try:
-        res.capture.save(tmp)
-        os.replace(tmp, args.output)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    res.capture.save(args.output)       # whole or not at all
     say(f"wrote {args.output}")

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
 import warnings
 from concurrent.futures import ProcessPoolExecutor
@@ -83,9 +84,35 @@ def _run_step(fit, method: str, args: tuple) -> _Done:
         fit.say = held[3]
 
 
-def _start_worker() -> None:
+def _start_worker(parent: int) -> None:
     fit = _BATCH[0]
     fit.fine.fft_threads = fit.coarse.fft_threads = 1      # the workers share the CPUs
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)         # not the CLI's handler
+    _die_with_parent(parent)
+
+
+def _die_with_parent(parent: int) -> None:
+    """Have the kernel kill this worker when the process that forked it dies (Linux's
+    ``PR_SET_PDEATHSIG``): a caller killed mid-calibration (a batch system's timeout)
+    must not leave its workers waiting for tasks forever, holding its pipes open."""
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)           # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):                    # not Linux's libc: best effort
+        return
+    if os.getppid() != parent:                           # it died before the prctl
+        os._exit(1)
+
+
+def _kill_workers(pool) -> None:
+    """Stop a pool's workers now (the caller is being interrupted: their steps are not
+    wanted, and a shutdown would wait for them)."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            proc.kill()
+        except (OSError, AttributeError):
+            pass
 
 
 def _worker(k: int):
@@ -111,6 +138,23 @@ class StepRunner:
         self.fit = fit
         self.workers = max(1, int(workers))
 
+    @staticmethod
+    def _map_in_workers(n: int, arglist, done: list) -> None:
+        """The batch's steps in ``n`` forked workers, results into ``done``; interrupted
+        (Ctrl-C, SIGTERM) or failing here, the workers are killed rather than waited for."""
+        pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
+                                   initializer=_start_worker, initargs=(os.getpid(),))
+        try:
+            for k, d in enumerate(pool.map(_worker, range(len(arglist)))):
+                done[k] = d
+        except BrokenProcessPool:
+            raise
+        except BaseException:
+            _kill_workers(pool)
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
     def map(self, method: str, arglist) -> list:
         """``[fit.method(*args) for args in arglist]``, the steps side by side when there
         are workers; their messages, basins and evaluation counts are added to the fit's
@@ -124,10 +168,7 @@ class StepRunner:
             try:
                 with warnings.catch_warnings():    # fork() with the FFT's threads idle
                     warnings.simplefilter("ignore", DeprecationWarning)
-                    with ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
-                                             initializer=_start_worker) as pool:
-                        for k, d in enumerate(pool.map(_worker, range(len(arglist)))):
-                            done[k] = d
+                    self._map_in_workers(n, arglist, done)
             except BrokenProcessPool:    # a worker died (killed, out of memory): the
                 pass                     # steps it left undone run here
             finally:

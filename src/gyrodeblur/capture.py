@@ -215,7 +215,7 @@ class Capture:
         }
 
     def save(self, path: str | os.PathLike, gyro_path: str | None = None) -> None:
-        """Write the JSON description to ``path``.
+        """Write the JSON description to ``path`` (whole or not at all).
 
         ``gyro.path`` is ``gyro_path`` if given, else the log the capture was read from
         (:attr:`GyroLog.source`), relative to ``path``'s folder (absolute if it was given
@@ -226,12 +226,12 @@ class Capture:
         InputError
             The log was made in memory (no file) and ``gyro_path`` is not given.
         """
+        from .atomicfile import atomic_write
         path = os.fspath(path)
         if gyro_path is None:
             gyro_path = self._gyro_path_from(os.path.dirname(os.path.abspath(path)))
-        with open(path, "w", encoding="utf-8") as fh:
-            json.dump(self.to_dict(gyro_path), fh, indent=2)
-            fh.write("\n")
+        text = json.dumps(self.to_dict(gyro_path), indent=2) + "\n"
+        atomic_write(path, lambda f: f.write(text.encode("utf-8")))
 
     def _gyro_path_from(self, folder: str) -> str:
         stored, opened = self.gyro_spec.get("path"), self.log.source

@@ -166,10 +166,12 @@ def _load_capture(args, photo=None, say=None):
 
 
 class _Progress:
-    """A progress bar on stderr, shown only once a run has taken more than a second."""
+    """A progress bar on stderr, shown only once a run has taken more than a second, and
+    only on a terminal (a log file gets no carriage-return lines)."""
 
     def __init__(self, label: str, quiet: bool):
-        self.label, self.quiet, self.t0, self.shown = label, quiet, time.perf_counter(), False
+        self.label, self.t0, self.shown = label, time.perf_counter(), False
+        self.quiet = quiet or not _is_terminal(sys.stderr)
 
     def __call__(self, done: int, total: int) -> None:
         if self.quiet or (not self.shown and time.perf_counter() - self.t0 < 1.0):
@@ -182,6 +184,13 @@ class _Progress:
     def close(self) -> None:
         if self.shown:
             sys.stderr.write("\n")
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
 
 
 def _write_picture(path: str, rgb_uint8: np.ndarray, overwrite: bool) -> None:
@@ -294,13 +303,8 @@ def cmd_psf(args, say) -> None:
 
 
 def _atomic_npy(path: str, array: np.ndarray) -> None:
-    tmp = path + ".part.npy"
-    try:
-        np.save(tmp, array)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    from .atomicfile import atomic_write
+    atomic_write(path, lambda f: np.save(f, array))
 
 
 def cmd_simulate(args, say) -> None:
@@ -419,11 +423,18 @@ def cmd_deblur(args, say) -> None:
         mode_txt = args.mode
         grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
     progress.close()
+    drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
+               if args.save_psf else None)
+    new_output = not os.path.lexists(args.output)
     write_photo(args.output, to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
                 like=given, overwrite=args.overwrite)
     if args.save_psf:
-        _write_picture(args.save_psf, to_photo_layout(field_image(field, w, h),
-                                                       args.photo_rotation), args.overwrite)
+        try:
+            _write_picture(args.save_psf, drawing, args.overwrite)
+        except BaseException:        # all outputs or none (a photo it replaced is gone)
+            if new_output:
+                os.remove(args.output)
+            raise
     e = field.extents
     gh, gw = given.pixels.shape[:2]
     say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
@@ -536,7 +547,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
     _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--quiet", action="store_true", help="no progress bar (none is drawn where stderr is not a terminal)")
     _add_capture_options(s)
     s.set_defaults(func=cmd_deblur)
 
@@ -584,6 +595,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"gyrodeblur: warning: {message}\n")
 
     warnings.showwarning = warn
+    previous = _on_sigterm(_terminate)
     try:
         args.func(args, say)
     except InputError as exc:
@@ -594,7 +606,33 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("gyrodeblur: interrupted; nothing written\n")
         return 130
+    except _Terminated:
+        sys.stderr.write("gyrodeblur: terminated; nothing written\n")
+        return 143
+    finally:
+        _on_sigterm(previous)
     return 0
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised where the program is, so that temporary files are removed and
+    worker processes stopped on the way out (as for Ctrl-C)."""
+
+
+def _terminate(signum, frame):
+    raise _Terminated
+
+
+def _on_sigterm(handler):
+    """Install ``handler`` for SIGTERM and return the one before (``None`` where signals
+    cannot be set: outside the main thread)."""
+    import signal
+    if handler is None:
+        return None
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:           # not the main thread of the interpreter
+        return None
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -9,6 +9,7 @@ whole photo (to estimate e.g. its noise level once) and its options into a
 from __future__ import annotations
 
 import inspect
+import numbers
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -34,25 +35,41 @@ __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHOD
 Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
-def _wiener_factory(image: np.ndarray, *, phi: float = DEFAULT_PHI,
-                    encoded: np.ndarray | None = None) -> Deconvolver:
+def _wiener_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
+                    clip: bool = True, **options) -> Deconvolver:
+    """The chapter's Wiener filter (eq. 6.18); its one option is ``phi``."""
+    unknown = sorted(set(options) - {"phi"})
+    if unknown:                      # e.g. the sparse method's noise_sigma
+        raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'wiener' "
+                        "(known: phi)")
+    phi = options.get("phi", DEFAULT_PHI)
+    if isinstance(phi, bool) or not isinstance(phi, numbers.Real) or not 0 <= phi < np.inf:
+        raise InputError("--phi", f"must be a number >= 0, got {phi!r}")
     return partial(wiener_deconvolve, phi=phi)
 
 
 def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
-                    noise_sigma: float | None = None, **options) -> Deconvolver:
+                    noise_sigma: float | None = None, clip: bool = True,
+                    **options) -> Deconvolver:
     """Sparse-prior (TV) ADMM deconvolution; the noise level is measured once on the
-    photo as encoded (where sensor noise is roughly uniform), not in linear light."""
+    photo as encoded (where sensor noise is roughly uniform), not in linear light.
+    Options are checked here, before any work (not from inside a worker thread)."""
     from .noise import estimate_noise_sigma
-    from .sparse import sparse_deconvolve
-    known = set(inspect.signature(sparse_deconvolve).parameters) - {"image", "psf", "unknown"}
+    from .sparse import check_sparse_options, sparse_deconvolve
+    known = (set(inspect.signature(sparse_deconvolve).parameters)
+             - {"image", "psf", "unknown", "clip"})
     unknown = sorted(set(options) - known)
-    if unknown:                      # refused now, not from inside a worker thread
+    if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'sparse' "
                         f"(known: {', '.join(sorted(known))})")
+    try:
+        check_sparse_options(noise_sigma=noise_sigma, **{k: v for k, v in options.items()
+                                                         if k != "workers"})
+    except ValueError as exc:
+        raise InputError(None, f"method 'sparse': {exc}") from None
     if noise_sigma is None:
         noise_sigma = estimate_noise_sigma(image if encoded is None else encoded)
-    return partial(sparse_deconvolve, noise_sigma=noise_sigma, **options)
+    return partial(sparse_deconvolve, noise_sigma=noise_sigma, clip=clip, **options)
 
 
 #: name -> factory(image, **options) -> deconvolve(sub_image, psf). ``image`` is the
@@ -304,8 +321,10 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     img = np.asarray(image, np.float32)
     planes = img[..., None] if img.ndim == 2 else img
     H, W, C = planes.shape
-    # Bilinear interpolation of the grid as two small matrix products per band.
-    ax = _linear_weights(np.arange(W) * ((len(xs) - 1) / max(xs[-1], 1)), len(xs)).T
+    # Bilinear interpolation of the grid, rows then columns, as two-tap sums in a fixed
+    # order: the same result to the last bit whatever the machine's thread count (a BLAS
+    # matrix product here made the output depend on it)
+    ax = _linear_taps(np.arange(W) * ((len(xs) - 1) / max(xs[-1], 1)), len(xs))
     fields = [np.ascontiguousarray(d[..., k], dtype=np.float32) for k in (0, 1)]
     out = np.empty((H, W, C), np.float32)
     outside = np.zeros((H, W), bool) if return_outside else None
@@ -320,10 +339,10 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     rows, cols = _WARP_TILE
     for r0 in range(0, H, rows):
         r1 = min(H, r0 + rows)
-        ay = _linear_weights(np.arange(r0, r1) * ((len(ys) - 1) / max(ys[-1], 1)), len(ys))
-        map_x = (ay @ fields[0]) @ ax
+        ay = _linear_taps(np.arange(r0, r1) * ((len(ys) - 1) / max(ys[-1], 1)), len(ys))
+        map_x = _interpolate_grid(fields[0], ay, ax)
         map_x += np.arange(W, dtype=np.float32)[None, :]
-        map_y = (ay @ fields[1]) @ ax
+        map_y = _interpolate_grid(fields[1], ay, ax)
         map_y += np.arange(r0, r1, dtype=np.float32)[:, None]
         if outside is not None:
             outside[r0:r1] = ((map_x < -0.5) | (map_x > W - 0.5)
@@ -446,18 +465,22 @@ def _source_window(positions: np.ndarray, size: int) -> tuple[int, int]:
     return max(0, lo), min(size, hi)
 
 
-def _linear_weights(t: np.ndarray, n: int) -> np.ndarray:
-    """(len(t), n) float32 matrix of linear-interpolation weights at grid coordinates ``t``
-    (clamped to ``[0, n - 1]``), so that ``weights @ values`` interpolates."""
+def _linear_taps(t: np.ndarray, n: int):
+    """Linear interpolation at grid coordinates ``t`` (clamped to ``[0, n - 1]``) of a
+    grid of ``n`` values: the two indices and their float32 weights."""
     t = np.clip(np.asarray(t, np.float64), 0, n - 1)
-    i0 = np.minimum(np.floor(t).astype(int), max(n - 2, 0))
+    i0 = np.minimum(np.floor(t).astype(np.intp), max(n - 2, 0))
     f = (t - i0).astype(np.float32)
-    w = np.zeros((t.size, n), np.float32)
-    rows = np.arange(t.size)
-    w[rows, i0] = 1 - f
-    if n > 1:
-        w[rows, i0 + 1] += f
-    return w
+    return i0, np.minimum(i0 + 1, n - 1), 1 - f, f
+
+
+def _interpolate_grid(values: np.ndarray, rows, cols) -> np.ndarray:
+    """Bilinear interpolation of a (ny, nx) grid at the taps of :func:`_linear_taps`
+    (``rows`` down, ``cols`` across): float32, (len rows, len cols)."""
+    i0, i1, w0, w1 = rows
+    by_row = values[i0] * w0[:, None] + values[i1] * w1[:, None]
+    j0, j1, u0, u1 = cols
+    return by_row[:, j0] * u0 + by_row[:, j1] * u1
 
 
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
@@ -502,7 +525,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     for i, k in enumerate(psfs):      # checked here, before any work; used as given
         check_psf(k, f"PSF {i + 1}")
     img = curve.decode(encoded)
-    deconvolve = METHODS[method](img, encoded=encoded, **options)
+    factory = METHODS[method]
+    if "clip" in inspect.signature(factory).parameters:   # the method clips (or not) itself
+        options = {**options, "clip": clip}
+    deconvolve = factory(img, encoded=encoded, **options)
     unknown = None
     if displacement is not None:
         box = max(p.shape[0] * p.shape[1] for p in psfs)

@@ -34,7 +34,8 @@ Writing: JPEG stores EXIF (APP1) and ICC (APP2); PNG stores ``eXIf``, ``iCCP`` a
 input's ``gAMA``; TIFF
 stores the ICC profile (tag 34675) and EXIF as IFD0 tags plus Exif/GPS sub-IFDs. Values
 are clipped to ``[0, 1]`` and rounded to the nearest integer. Files are written to a
-temporary file in the destination folder and moved into place with :func:`os.replace`.
+temporary file in the destination folder and moved into place
+(:mod:`gyrodeblur.atomicfile`).
 
 Decoders: JPEG and PNG are read with Pillow. Pillow cannot hold 16-bit colour, so
 16-bit RGB(A) PNGs are read by letting Pillow's decoder run twice, once keeping the high
@@ -51,7 +52,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import secrets
 import struct
 import sys
 import warnings
@@ -63,6 +63,7 @@ import numpy as np
 import tifffile
 from PIL import Image, PngImagePlugin, TiffImagePlugin, UnidentifiedImageError
 
+from gyrodeblur.atomicfile import atomic_write, check_writable
 from gyrodeblur.errors import InputError
 
 __all__ = ["Photo", "read_photo", "write_photo", "check_destination", "exif_capture_hints",
@@ -750,10 +751,10 @@ def write_photo(
         exif = _exif_for_jpeg(exif, p)
     if fmt == "PNG":
         gamma = like.png_gamma if like is not None else None
-        _atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma))
+        atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma))
         return p
     writer = {"JPEG": _write_jpeg, "TIFF": _write_tiff}[fmt]
-    _atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality)))
+    atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality)))
     return p
 
 
@@ -814,9 +815,9 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     Raises
     ------
     InputError
-        Unknown extension, missing folder, ``path`` is a folder, the input photo or
-        another input, it exists and ``overwrite`` is false, or it is a JPEG and ``like``
-        has an alpha channel or ``bit_depth`` is 16.
+        Unknown extension, missing or unwritable folder, ``path`` is a folder, the input
+        photo or another input, it exists and ``overwrite`` is false, or it is a JPEG and
+        ``like`` has an alpha channel or ``bit_depth`` is 16.
     """
     path = os.fspath(path)
     if os.path.isdir(path):
@@ -838,6 +839,7 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
             raise InputError(path, "is one of the command's inputs; choose another output file")
     if os.path.lexists(path) and not overwrite:
         raise InputError(path, "exists; pass --overwrite to replace it")
+    check_writable(path)
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -864,26 +866,6 @@ def _icc_fits(icc: bytes, channels: int) -> bool:
     if space == b"RGB ":
         return channels in (3, 4)
     return False
-
-
-def _atomic_write(path: str, write) -> None:
-    """Run ``write(file)`` on a temporary file beside ``path``, then move it into place."""
-    folder, name = os.path.split(os.path.abspath(path))
-    tmp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
-    try:
-        with open(tmp, "xb+") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(exc, OSError) and exc.errno is not None:
-            raise InputError(path, f"cannot write the file: {exc.strerror}") from exc
-        raise
 
 
 def _write_jpeg(f, ints, *, exif, icc, quality) -> None:

@@ -31,7 +31,7 @@ from .images import check_image, check_psf
 from .noise import estimate_noise_sigma
 from .packedfft import pack_spectrum, packed_irfft2, packed_multiply, packed_rfft2
 
-__all__ = ["sparse_deconvolve", "regularization_weight"]
+__all__ = ["sparse_deconvolve", "regularization_weight", "check_sparse_options"]
 
 #: Regularisation weight per unit noise, ``weight = C * sigma**(2 - p)`` (see
 #: :func:`regularization_weight`). Tuned on 8-bit sRGB photos (scikit-image/Lai sets, camera
@@ -104,6 +104,32 @@ def regularization_weight(noise_sigma: float, exponent: float = 1.0) -> float:
     """
     c = _WEIGHT_PER_SIGMA.get(float(exponent), _WEIGHT_PER_SIGMA_DEFAULT)
     return float(c * max(float(noise_sigma), _SIGMA_FLOOR) ** (2.0 - exponent))
+
+
+def check_sparse_options(*, exponent: float = 1.0, iterations: int = 6,
+                         noise_sigma: float | None = None,
+                         saturation_level: float | None = 0.98,
+                         weight: float | None = None, **others) -> None:
+    """Check :func:`sparse_deconvolve`'s numeric options (ValueError naming the bad one).
+
+    The other options (``others``) are not numeric and are not looked at.
+    """
+    for name, value in (("exponent", exponent), ("iterations", iterations),
+                        ("noise_sigma", noise_sigma), ("saturation_level", saturation_level),
+                        ("weight", weight)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+    if not 0 < exponent <= 1:
+        raise ValueError(f"exponent must be in (0, 1], got {exponent}")
+    if not isinstance(iterations, numbers.Integral) or iterations < 0:
+        raise ValueError(f"iterations must be a whole number >= 0, got {iterations!r}")
+    if noise_sigma is not None and not (np.isfinite(noise_sigma) and 0 <= noise_sigma < 1):
+        raise ValueError(f"noise_sigma must be in [0, 1) (pixel-value units), got {noise_sigma!r}")
+    if saturation_level is not None and not (np.isfinite(saturation_level)
+                                             and 0 < saturation_level <= 1):
+        raise ValueError(f"saturation_level must be in (0, 1] or None, got {saturation_level!r}")
+    if weight is not None and not (np.isfinite(weight) and weight > 0):
+        raise ValueError(f"weight must be a positive number, got {weight!r}")
 
 
 def sparse_deconvolve(
@@ -234,24 +260,12 @@ def sparse_deconvolve(
     """
     g = check_image(image)
     h = check_psf(psf)
-    for name, value in (("exponent", exponent), ("iterations", iterations),
-                        ("noise_sigma", noise_sigma), ("saturation_level", saturation_level),
-                        ("weight", weight)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-    if not 0 < exponent <= 1:
-        raise ValueError(f"exponent must be in (0, 1], got {exponent}")
-    if iterations < 0:
-        raise ValueError(f"iterations must be >= 0, got {iterations}")
+    check_sparse_options(exponent=exponent, iterations=iterations, noise_sigma=noise_sigma,
+                         saturation_level=saturation_level, weight=weight)
     if workers is not None:
         warnings.warn("sparse_deconvolve(workers=...) is ignored: its FFTs are OpenCV's, "
                       "which threads them itself (cv2.setNumThreads)", DeprecationWarning,
                       stacklevel=2)
-    if noise_sigma is not None and not (np.isfinite(noise_sigma) and 0 <= noise_sigma < 1):
-        raise ValueError(f"noise_sigma must be in [0, 1) (pixel-value units), got {noise_sigma!r}")
-    if saturation_level is not None and not (np.isfinite(saturation_level)
-                                             and 0 < saturation_level <= 1):
-        raise ValueError(f"saturation_level must be in (0, 1] or None, got {saturation_level!r}")
     if weight is None:
         if noise_sigma is None:
             noise_sigma = estimate_noise_sigma(g)
