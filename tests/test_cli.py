@@ -1,7 +1,6 @@
 """The command line: happy paths, metadata pass-through, and one-line errors with exit 2."""
 
 import json
-import os
 
 import numpy as np
 import pytest
