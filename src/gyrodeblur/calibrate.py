@@ -488,18 +488,27 @@ def _is_count(value) -> bool:
     return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= 1
 
 
-def _refuse_repeated_images(images) -> None:
-    """The same photo twice (the same array, or equal pixels: two exposures never are)
-    would count its evidence twice and seem twice as sure."""
+def repeated_photo(images) -> tuple[int, int] | None:
+    """The first pair ``(i, j)``, ``i < j``, of photos with equal pixels (the same array,
+    or a copy: two exposures never are), or ``None``."""
     import hashlib
     seen = {}
     for k, img in enumerate(images):
         a = np.asarray(img)
         key = (a.shape, a.dtype.str, hashlib.sha1(np.ascontiguousarray(a).tobytes()).hexdigest())
         if key in seen:
-            raise InputError(None, f"photos {seen[key] + 1} and {k + 1} hold the same pixels: "
-                                   "one photo counted twice would seem twice as sure")
+            return seen[key], k
         seen[key] = k
+    return None
+
+
+def _refuse_repeated_images(images) -> None:
+    """The same photo twice would count its evidence twice: every uncertainty shrinks by
+    sqrt 2 and the mapping's margin doubles with nothing learnt."""
+    pair = repeated_photo(images)
+    if pair is not None:
+        raise InputError(None, f"photos {pair[0] + 1} and {pair[1] + 1} hold the same pixels: "
+                               "one photo counted twice would seem twice as sure")
 
 
 def _shrunk_photos(images, captures, factor: float):

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix
+from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix, repeated_photo
 from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
@@ -75,20 +75,15 @@ def fixed_parameters(args) -> set[str]:
 
 
 def _refuse_repeats(paths, photos) -> None:
-    """One photo given twice would count its evidence twice: every uncertainty shrinks by
-    sqrt 2 and the mapping's margin doubles with nothing learnt. Refused, whether the same
-    file or a copy (the same pixels: two exposures never are)."""
-    import hashlib
-    seen = {}
-    for path, photo in zip(paths, photos):
-        key = hashlib.sha1(np.ascontiguousarray(photo.pixels).tobytes()).hexdigest()
-        key = (photo.pixels.shape, key)
-        if key in seen:
-            same = os.path.exists(path) and os.path.samefile(path, seen[key])
-            raise InputError(path, f"{'is' if same else 'holds the same pixels as'} "
-                                   f"{seen[key]}, given already: one photo counted twice "
-                                   "would seem twice as sure")
-        seen[key] = path
+    """One photo given twice would count its evidence twice (:func:`calibrate.calibrate`
+    refuses it too); said here with the files' names, whether the same file or a copy."""
+    pair = repeated_photo([p.pixels for p in photos])
+    if pair is not None:
+        first, path = paths[pair[0]], paths[pair[1]]
+        same = os.path.exists(path) and os.path.samefile(path, first)
+        raise InputError(path, f"{'is' if same else 'holds the same pixels as'} "
+                               f"{first}, given already: one photo counted twice "
+                               "would seem twice as sure")
 
 
 def calibrate_command(args, say, load_capture) -> None:

@@ -116,19 +116,7 @@ def _piecewise(image, threshold: float, slope: float, power_segment) -> np.ndarr
     float32 throughout, with in-place operations: a 12 MP RGB photo costs about one extra
     image-sized buffer rather than a dozen float64 ones. Large images are processed in row
     bands on all cores (:func:`gyrodeblur.bands.for_row_bands`)."""
-    x = np.asarray(image, dtype=np.float32)
-    if not x.flags.c_contiguous:
-        x = np.ascontiguousarray(x)
-    out = np.empty_like(x)
-    if x.size == 0:
-        return out
-    if x.ndim == 0:
-        flat_x, flat_out = x.reshape(1), out.reshape(1)
-    else:
-        flat_x, flat_out = x.reshape(x.shape[0], -1), out.reshape(x.shape[0], -1)
-
-    def band(r0: int, r1: int) -> None:
-        xs, o = flat_x[r0:r1], flat_out[r0:r1]
+    def band(xs, o) -> None:
         np.abs(xs, out=o)
         small = o <= threshold
         power_segment(o)
@@ -136,16 +124,16 @@ def _piecewise(image, threshold: float, slope: float, power_segment) -> np.ndarr
         # the linear segment is odd by itself; masked writes, not fancy indexing (3x faster)
         np.multiply(xs, np.float32(slope), out=o, where=small)
 
-    for_row_bands(band, flat_x.shape[0])
-    return out
+    return _elementwise(image, band)
 
 
 def _identity(image: np.ndarray) -> np.ndarray:
     return np.asarray(image, dtype=np.float32)
 
 
-def _elementwise(image, fn) -> np.ndarray:
-    """``fn`` (float32 rows in, float32 rows out) over an image, in row bands on all cores."""
+def _elementwise(image, fill) -> np.ndarray:
+    """A float32 image of the same shape, ``fill(rows, out_rows)`` writing each band of
+    rows of the output from the same rows of ``image`` (row bands on all cores)."""
     x = np.asarray(image, dtype=np.float32)
     if not x.flags.c_contiguous:
         x = np.ascontiguousarray(x)
@@ -154,11 +142,7 @@ def _elementwise(image, fn) -> np.ndarray:
         return out
     rows_x = x.reshape(1, -1) if x.ndim == 0 else x.reshape(x.shape[0], -1)
     rows_out = out.reshape(rows_x.shape)
-
-    def band(r0: int, r1: int) -> None:
-        rows_out[r0:r1] = fn(rows_x[r0:r1])
-
-    for_row_bands(band, rows_x.shape[0])
+    for_row_bands(lambda r0, r1: fill(rows_x[r0:r1], rows_out[r0:r1]), rows_x.shape[0])
     return out
 
 
@@ -235,12 +219,12 @@ class ParametricCurve:
                                                         self.d, self.e, self.f))
         odd = self._odd
 
-        def rows(v):
+        def rows(v, o):
             x = np.abs(v) if odd else v
             with np.errstate(invalid="ignore"):
                 y = np.power(np.maximum(a * x + b, np.float32(0)), g) + e
             y = np.where(x >= d, y, c * x + f)
-            return np.copysign(y, v) if odd else y
+            o[...] = np.copysign(y, v) if odd else y
 
         return _elementwise(image, rows)
 
@@ -251,14 +235,14 @@ class ParametricCurve:
         odd = self._odd
         y_d = np.float32(self._decode64(np.array([self.d]))[0])   # where the segments meet
 
-        def rows(v):
+        def rows(v, o):
             y = np.abs(v) if odd else v
             x = (np.power(np.maximum(y - e, np.float32(0)), np.float32(1 / self.g)) - b) / a
             if c > 0:
                 x = np.where(y >= y_d, x, (y - f) / c)
             else:                    # a flat foot: every value below it encodes as d
                 x = np.where(y >= y_d, x, d)
-            return np.copysign(x, v) if odd else x
+            o[...] = np.copysign(x, v) if odd else x
 
         return _elementwise(image, rows)
 
@@ -294,10 +278,10 @@ class TableCurve:
         s = self.samples.astype(np.float32)
         n = s.size
 
-        def rows(v):
+        def rows(v, o):
             t = v * np.float32(n - 1)
             i = np.clip(np.floor(t), 0, n - 2).astype(np.intp)
-            return s[i] + (t - i) * (s[i + 1] - s[i])
+            o[...] = s[i] + (t - i) * (s[i + 1] - s[i])
 
         return _elementwise(image, rows)
 
@@ -312,13 +296,12 @@ class TableCurve:
         lo = step / (s[rise[0] + 1] - s[rise[0]]) if rise.size else 0.0
         hi = step / (s[rise[-1] + 1] - s[rise[-1]]) if rise.size else 0.0
 
-        def rows(v):
+        def rows(v, o):
             y = v.astype(np.float64)
             # np.interp takes the last of equal samples: a flat stretch maps to its end
             x = np.interp(y, s, xs)
             x = np.where(y < s[0], (y - s[0]) * lo, x)
-            x = np.where(y > s[-1], 1.0 + (y - s[-1]) * hi, x)
-            return x.astype(np.float32)
+            o[...] = np.where(y > s[-1], 1.0 + (y - s[-1]) * hi, x)
 
         return _elementwise(image, rows)
 
