@@ -205,3 +205,87 @@ def test_command_line(tmp_path, capsys):
     (case,) = load_dataset(tmp_path / "ds")
     assert case.capture.exposure_time == 0.02 and case.meta["seed"] == 5
     assert main([str(tmp_path / "ds2"), "--photos", str(tmp_path / "nowhere")]) == 2
+
+
+def test_a_jittery_log_with_single_dropped_samples_has_no_gap():
+    """Phones' logs jitter (here steps of 0.65-1.35 median, some 1.75) and drop single
+    samples (2 steps): no gap, so their windows can be drawn; a run of missing samples is
+    still one."""
+    rng = np.random.default_rng(4)
+    dt = 0.005 * (1 + rng.uniform(-0.35, 0.35, 4000))
+    dt[100::50] = 0.00875                        # steps of 1.75
+    t = np.cumsum(dt)
+    keep = np.ones(t.size, bool)
+    keep[300::97] = False                        # single samples dropped: steps of 2
+    t = t[keep]
+    log = GyroLog(t, np.zeros((t.size, 3)))
+    assert len(find_gaps(log)) == 0
+    draw_window(log, 0.04, np.random.default_rng(0))
+    holed = GyroLog(np.delete(t, np.arange(2000, 2004)), np.zeros((t.size - 4, 3)))
+    assert len(find_gaps(holed)) == 1
+
+
+def test_photos_of_one_name_stem_are_refused_and_hidden_files_skipped(tmp_path):
+    from skimage import data
+
+    from gyrodeblur.dataset import list_photos
+    from gyrodeblur.imageio import write_photo
+    (tmp_path / "p").mkdir()
+    small = data.astronaut()[::8, ::8] / 255.0
+    write_photo(tmp_path / "p" / "x.png", small)
+    (tmp_path / "p" / "._x.png").write_bytes(b"\0\5\26\7 AppleDouble")
+    assert [p.name for p in list_photos(tmp_path / "p")] == ["x.png"]
+    write_photo(tmp_path / "p" / "x.jpg", small)
+    with pytest.raises(InputError, match="x.png: has the name stem of x.jpg"):
+        list_photos(tmp_path / "p")
+    with pytest.raises(InputError, match="name stem"):
+        build_cases(photos=[tmp_path / "p" / "x.jpg", tmp_path / "p" / "x.png"],
+                    gyro=GyroLog([0, 1], np.zeros((2, 3))))
+
+
+def test_a_rebuild_replaces_the_dataset_and_records_absolute_paths(tmp_path, monkeypatch):
+    """Built again into its folder with fewer cases, the former cases are removed (not
+    other files); dataset.json's photo and gyro paths are absolute, so a benchmark run
+    from another folder finds them."""
+    from skimage import data
+
+    from gyrodeblur.gyrolog import write_gcsv
+    from gyrodeblur.imageio import write_photo
+    from gyrodeblur.shake import synthetic_hand_shake
+    (tmp_path / "photos").mkdir()
+    for name in ("a", "b"):
+        write_photo(tmp_path / "photos" / f"{name}.png", data.astronaut()[::8, ::8] / 255.0)
+    write_gcsv(tmp_path / "shake.gcsv", synthetic_hand_shake(2.0, seed=1))
+    monkeypatch.chdir(tmp_path)
+    opts = dict(photos="photos", gyro="shake.gcsv", orientation="XYZ")
+    build_dataset("ds", windows_per_photo=2, **opts)
+    (tmp_path / "ds" / "notes.txt").write_text("mine")
+    build_dataset("ds", windows_per_photo=1, max_photos=1, **opts)
+    assert sorted(p.name for p in (tmp_path / "ds").iterdir()) == [
+        "a_w0", "dataset.json", "notes.txt"]
+    index = json.loads((tmp_path / "ds" / "dataset.json").read_text())
+    assert index["options"]["gyro"] == str(tmp_path / "shake.gcsv")
+    assert index["options"]["photos"] == str(tmp_path / "photos")
+    assert [c.name for c in load_dataset(tmp_path / "ds")] == ["a_w0"]
+
+
+def test_command_line_takes_the_log_s_axes(tmp_path, capsys):
+    from skimage import data
+
+    from gyrodeblur.dataset import main
+    from gyrodeblur.gyrolog import write_gcsv
+    from gyrodeblur.imageio import write_photo
+    from gyrodeblur.shake import synthetic_hand_shake
+    (tmp_path / "photos").mkdir()
+    write_photo(tmp_path / "photos" / "a.png", data.astronaut()[::8, ::8] / 255.0)
+    write_gcsv(tmp_path / "shake.gcsv", synthetic_hand_shake(2.0, seed=1))
+    base = [str(tmp_path / "ds"), "--photos", str(tmp_path / "photos"), "--gyro",
+            str(tmp_path / "shake.gcsv"), "--windows", "1"]
+    assert main(base + ["--orientation", "XYZ"]) == 0
+    same = load_dataset(tmp_path / "ds")[0].capture.axes
+    assert main(base + ["--orientation", "YxZ"]) == 0
+    turned = load_dataset(tmp_path / "ds")[0].capture.axes
+    np.testing.assert_array_equal(same, np.eye(3))
+    assert not np.array_equal(turned, same)
+    assert main(base + ["--orientation", "XXZ"]) == 2
+    assert "error:" in capsys.readouterr().err

@@ -35,12 +35,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
+import sys
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .atomicfile import atomic_write
 from .camera import Camera
 from .capture import Capture, load_capture
 from .errors import InputError
@@ -80,8 +83,11 @@ DEFAULTS = {
     "orientation": "Xyz",         # log axes -> camera axes (Android device -> back camera)
     "sim_step_px": 1.0,           # px between blur-synthesis time samples (see notes)
 }
-#: A step between two log samples longer than this many median steps is a gap.
-GAP_FACTOR = 1.5
+#: A step between two log samples longer than this many median steps is a gap (two
+#: samples or more missing in a row). Phones' logs jitter, and drop single samples: a
+#: step of 1.5-2 median steps is common and harmless to the integration (the shared log's
+#: one gap is 5.4 steps, its other steps at most 1.02).
+GAP_FACTOR = 3.0
 #: gcsv resolution: 1 us and 1e-6 rad/s (the defaults of :func:`write_gcsv`).
 _TSCALE = 1e-6
 _GSCALE = 1e-6
@@ -147,14 +153,35 @@ class Case:
 # ----------------------------------------------------------------------------- inputs
 
 def list_photos(folder: str | os.PathLike) -> list[Path]:
-    """Image files (png, jpg, tif) in ``folder``, sorted by name."""
+    """Image files (png, jpg, tif) in ``folder``, sorted by name; hidden files (a name
+    starting with ``.``, e.g. macOS's ``._photo.png``) are not photos.
+
+    Raises
+    ------
+    InputError
+        No such folder, no photo in it, or two photos of one name stem (``x.jpg`` and
+        ``x.png``): cases are named, and seeded, by the stem.
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(str(folder), "photo folder not found")
-    photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in _PHOTO_EXT)
+    photos = sorted(p for p in folder.iterdir()
+                    if p.suffix.lower() in _PHOTO_EXT and not p.name.startswith(".")
+                    and p.is_file())
     if not photos:
         raise InputError(str(folder), "no photos (png, jpg, tif) in the folder")
+    _refuse_shared_stems(photos)
     return photos
+
+
+def _refuse_shared_stems(paths) -> None:
+    seen: dict[str, Path] = {}
+    for p in paths:
+        if p.stem in seen:
+            raise InputError(str(p), f"has the name stem of {seen[p.stem].name}: cases are "
+                                     "named and seeded by it (one would replace the other); "
+                                     "rename one of them")
+        seen[p.stem] = p
 
 
 def read_sharp(path: str | os.PathLike, max_size: int | None = None) -> np.ndarray:
@@ -347,8 +374,11 @@ def build_cases(photos=None, gyro=None, *, exposure=DEFAULTS["exposure"],
     -------
     list of Case, photo by photo, window by window.
     """
-    paths = list_photos(photos or _default_photos()) if not isinstance(photos, (list, tuple)) \
-        else [Path(p) for p in photos]
+    if isinstance(photos, (list, tuple)):
+        paths = [Path(p) for p in photos]
+        _refuse_shared_stems(paths)
+    else:
+        paths = list_photos(photos or _default_photos())
     if max_photos is not None:
         paths = paths[:max_photos]
     if isinstance(gyro, GyroLog):
@@ -416,26 +446,50 @@ def load_case(folder: str | os.PathLike) -> Case:
 
 def build_dataset(out_dir: str | os.PathLike, **options) -> list[Path]:
     """:func:`build_cases` with ``options`` and write each case to ``out_dir/<name>/``,
-    plus ``out_dir/dataset.json`` (the options and the case list)."""
+    plus ``out_dir/dataset.json`` (the options, with the photo and gyro paths absolute,
+    and the case list).
+
+    Built again into the same folder, the cases of the former index that the new one
+    lacks are removed (their folders only), so that the folder holds one dataset."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise InputError(str(out), "is a file, not a folder for the dataset")
     cases = build_cases(**options)
+    out.mkdir(parents=True, exist_ok=True)
+    former = _indexed_cases(out)
     folders = [write_case(c, out / c.name) for c in cases]
-    def plain(v):
+    for name in sorted(set(former) - {c.name for c in cases}):
+        stale = out / name
+        if (stale / "case.json").is_file() and stale.parent == out:
+            shutil.rmtree(stale)
+
+    def plain(k, v):
         if isinstance(v, GyroLog):
             return v.source or "GyroLog (in memory)"
+        if k in ("photos", "gyro") and isinstance(v, (str, os.PathLike)):
+            return os.path.abspath(os.fspath(v))      # found from anywhere later
         if isinstance(v, os.PathLike):
             return os.fspath(v)
         if isinstance(v, (list, tuple)):
-            return [plain(x) for x in v]
+            return [plain(k, x) for x in v]
         if isinstance(v, np.ndarray):
             return v.tolist()
         return v
 
-    opts = {k: plain(v) for k, v in options.items() if k != "progress"}
+    opts = {k: plain(k, v) for k, v in options.items() if k != "progress"}
     index = {"options": opts, "cases": [c.name for c in cases]}
-    (out / "dataset.json").write_text(json.dumps(index, indent=2) + "\n", encoding="utf-8")
+    atomic_write(out / "dataset.json",
+                 lambda f: f.write((json.dumps(index, indent=2) + "\n").encode("utf-8")))
     return folders
+
+
+def _indexed_cases(folder: Path) -> list[str]:
+    """The case names a folder's ``dataset.json`` lists (none if it has no readable one)."""
+    try:
+        names = json.loads((folder / "dataset.json").read_text(encoding="utf-8"))["cases"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [n for n in names if isinstance(n, str) and n and os.sep not in n and n != ".."]
 
 
 def load_dataset(folder: str | os.PathLike) -> list[Case]:
@@ -480,16 +534,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=DEFAULTS["seed"])
     ap.add_argument("--max-size", type=int, help="downscale photos to this longer side (px)")
     ap.add_argument("--max-photos", type=int, help="use only the first N photos")
+    ap.add_argument("--orientation", default=DEFAULTS["orientation"], metavar="AXES",
+                    help="the log's axes -> camera axes, as gyro.orientation (default Xyz: "
+                         "an Android phone's device axes -> its back camera; XYZ for a log "
+                         "already in camera axes)")
     args = ap.parse_args(argv)
     try:
         folders = build_dataset(
             args.out, photos=args.photos, gyro=args.gyro, gyro_format=args.gyro_format,
+            orientation=args.orientation,
             exposure=args.exposure, readout=args.readout, focal=args.focal,
             snr_db=args.snr, windows_per_photo=args.windows, seed=args.seed,
             max_size=args.max_size, max_photos=args.max_photos,
             progress=lambda i, n, name: print(f"[{i}/{n}] {name}", flush=True))
     except InputError as exc:
-        print(f"error: {exc}")
+        print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {len(folders)} cases to {args.out}")
     return 0
