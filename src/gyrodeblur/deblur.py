@@ -151,8 +151,8 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     window gives the deconvolution its context) nor 32 px, never coarser than the
     chapter's 6 x 8 (unless the photo is too small for it: windows stay at least 1.25x
     :data:`~gyrodeblur.tiling.MIN_WINDOW`), and never more than ``max_patches`` in all.
-    ``centred``: count only the change of the PSFs' shape (the photo is aligned by the
-    displacement field first, see :func:`plan_psf_field`).
+    ``centred``: count only the PSFs' shape, their change and their extent (the photo is
+    aligned by the displacement field first, see :func:`plan_psf_field`).
 
     Returns
     -------
@@ -161,7 +161,10 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     H, W = shape[:2]
     overlap = check_overlap(overlap)
     cap = capture.scaled_to(W, H)
-    extent = max(psf_extent(render_psf(cap, x, y, max_step=0.5))
+    # the PSFs' extent as they are deconvolved: their shape alone where the photo is
+    # aligned first (a long readout displaces the last rows by hundreds of px, which the
+    # warp undoes: counted, it made a 20 px blur "span" the frame and refused the photo)
+    extent = max(psf_extent(render_psf(cap, x, y, max_step=0.5, centred=centred))
                  for x in (0, (W - 1) / 2, W - 1) for y in (0, (H - 1) / 2, H - 1))
 
     def count(length: int, variation: float) -> int:
@@ -194,8 +197,8 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     with the middle row's rolling-shutter timing. ``mode="variant"``: ``grid`` patches
     (``"auto"``: :func:`auto_grid`) with ``overlap``, each with the PSF of its centre
     (and its row's timing). If a PSF's
-    extent exceeds ``max_fraction`` of its window's smaller side, the grid is made
-    coarser (one row and column fewer at a time) and a warning says so.
+    extent exceeds ``max_fraction`` of its window's height (width), the grid gets fewer
+    rows (columns), each axis only as far as its windows need, and a warning says so.
 
     ``align=True``: the PSFs are rendered centred (their shape only) and the field keeps
     the mean-displacement field; :func:`deblur_with_psfs` then warps the photo by it
@@ -238,22 +241,33 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
         patches = patch_grid((H, W), (rows, cols), overlap)
         pts = _centres_xy(patches)
         psfs = [render_psf(cap, x, y, centred=align) for x, y in pts]
-        side = min(patches[0].shape)
         worst = max(psf_extent(p) for p in psfs)
-        if worst <= max_fraction * side or (rows, cols) == (1, 1):
+        need = worst / max_fraction           # px of window, down and across
+        # each axis is coarsened only as far as its own windows need: taking a column
+        # off with each row (as before) cut a 20 x 8 request down to 11 x 1
+        fewer_rows = _most_patches_holding(need, (H, W), (rows, cols), overlap, axis=0)
+        fewer_cols = _most_patches_holding(need, (H, W), (fewer_rows, cols), overlap, axis=1)
+        if (fewer_rows, fewer_cols) == (rows, cols):
             break
-        rows, cols = max(1, rows - 1), max(1, cols - 1)
-        # grids whose windows are still smaller than this worst PSF are not rendered (a
-        # 2000 x 20 strip stepped through 80 of them, 80 PSFs each)
-        while ((rows, cols) != (1, 1) and max_fraction
-               * min(patch_grid((H, W), (rows, cols), overlap)[0].shape) < worst):
-            rows, cols = max(1, rows - 1), max(1, cols - 1)
+        rows, cols = fewer_rows, fewer_cols
     if (rows, cols) != first:
         msg = (f"grid coarsened from {first[0]}x{first[1]} to {rows}x{cols}: PSFs up to "
                f"{worst} px do not fit patches of the finer grid")
         warnings.warn(msg, stacklevel=3)
         notes.append(msg)
     return patches, PSFField(pts, psfs, (rows, cols), disp), notes
+
+
+def _most_patches_holding(need: float, shape, grid, overlap: float, axis: int) -> int:
+    """The most patches along ``axis``, at most ``grid[axis]``, whose windows are at least
+    ``need`` px long on that axis (1 if none are: the whole side is the best there is)."""
+    n = grid[axis]
+    while n > 1:
+        g = (n, grid[1]) if axis == 0 else (grid[0], n)
+        if patch_grid(shape, g, overlap)[0].shape[axis] >= need:
+            break
+        n -= 1
+    return n
 
 
 def _displacement_slope(displacement) -> float:
