@@ -101,28 +101,186 @@ def quiet():
         yield
 
 
+def run_main(main, argv: list[str] | None = None) -> int:
+    """Run a benchmark's ``main(argv)`` as a command: an :class:`~gyrodeblur.errors.InputError`
+    (bad photo folder, gyro log, dataset, option...) is printed as one line,
+    ``error: <message>`` on stderr, with exit status 2 instead of a traceback. A ``main``
+    that returns something other than an int (a summary) counts as success."""
+    from gyrodeblur.errors import InputError
+
+    try:
+        rc = main(argv)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    return rc if isinstance(rc, int) else 0
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (a count of 0 would silently mean nothing)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def pick_photo(photo: str | None, photos: str | os.PathLike | None,
+               default_name: str | None = None) -> Path:
+    """The one photo a single-photo benchmark uses: ``photo`` as a file, or as a name or
+    name stem (``lai_text_01`` for ``lai_text_01.png``) in the folder ``photos`` (default
+    ``../shared/data/photos``); without ``photo``, ``default_name`` when the folder holds it,
+    else the folder's first photo (:func:`gyrodeblur.dataset.list_photos`' order).
+
+    Raises
+    ------
+    InputError
+        No such photo, or a folder without photos."""
+    from gyrodeblur.dataset import default_shared_data, list_photos
+    from gyrodeblur.errors import InputError
+
+    folder = Path(photos) if photos else default_shared_data() / "photos"
+    if photo:
+        if Path(photo).is_file():
+            return Path(photo)
+        if (folder / photo).is_file():
+            return folder / photo
+        if not folder.is_dir():
+            raise InputError(photo, f"photo not found (nor a photo folder {folder})")
+        found = [p for p in list_photos(folder) if p.stem == photo or p.name == photo]
+        if not found:
+            raise InputError(photo, f"photo not found, as a file or a name in {folder}")
+        return found[0]
+    if default_name and (folder / default_name).is_file():
+        return folder / default_name
+    return list_photos(folder)[0]
+
+
+def resolve_stored_path(value: str, folder: str | os.PathLike, what: str = "path") -> Path:
+    """A path a dataset's ``dataset.json`` stores: as it is when absolute; a relative one
+    (datasets built before the paths were stored absolute) relative to the dataset folder
+    first, then to the current folder."""
+    from gyrodeblur.errors import InputError
+
+    p = Path(value)
+    if p.is_absolute():
+        if not p.exists():
+            raise InputError(str(p), f"{what} stored in {Path(folder) / 'dataset.json'} "
+                                     "not found")
+        return p
+    for candidate in (Path(folder) / p, p):
+        if candidate.exists():
+            return candidate
+    raise InputError(value, f"{what} stored in {Path(folder) / 'dataset.json'} not found "
+                            f"(relative to {folder} or to the current folder)")
+
+
+def _same_option(key: str, stored, wanted, folder: Path) -> bool:
+    """Whether a stored dataset option is the one asked for; photo and gyro paths are
+    compared by their real absolute form (None: the shared default)."""
+    if key not in ("photos", "gyro"):
+        return stored == wanted
+    from gyrodeblur.dataset import default_gyro, default_shared_data
+
+    default = default_shared_data() / "photos" if key == "photos" else default_gyro()
+
+    def real(v, base):
+        if v is None:
+            return os.path.realpath(default)
+        if not isinstance(v, (str, os.PathLike)):
+            return v
+        p = Path(v)
+        if not p.is_absolute() and base is not None and (base / p).exists():
+            p = base / p
+        return os.path.realpath(p)
+
+    return real(stored, folder) == real(wanted, None)
+
+
+def stored_options(folder: str | os.PathLike) -> dict:
+    """The build options a dataset folder's ``dataset.json`` records ({} without one)."""
+    index = Path(folder) / "dataset.json"
+    if not index.is_file():
+        return {}
+    try:
+        return dict(json.loads(index.read_text(encoding="utf-8")).get("options", {}))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return {}
+
+
+def load_cases(folder: str | os.PathLike) -> list:
+    """The cases of a built dataset folder (:func:`gyrodeblur.dataset.load_dataset`: the
+    ones its ``dataset.json`` lists).
+
+    Raises
+    ------
+    InputError
+        No such folder, or no case in it."""
+    from gyrodeblur.dataset import load_dataset
+    from gyrodeblur.errors import InputError
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(str(folder), "dataset folder not found")
+    try:
+        cases = load_dataset(folder)
+    except (ValueError, KeyError, TypeError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(str(folder / "dataset.json"), f"unreadable dataset index "
+                                                        f"({type(exc).__name__}: {exc})") from None
+    if not cases:
+        raise InputError(str(folder), "no cases in the dataset folder (build one with "
+                                      "python -m gyrodeblur.dataset DIR)")
+    for case in cases:
+        if case.sharp is None:
+            raise InputError(str(folder / case.name), "no sharp.png: a benchmark case needs "
+                                                      "its ground truth")
+    return cases
+
+
 def get_cases(*, dataset: str | None = None, **build_options):
     """Benchmark cases: loaded from ``dataset`` when that folder holds a built dataset,
     else built in memory (and written to ``dataset`` when one is named)."""
-    from gyrodeblur.dataset import build_dataset, build_cases, load_dataset
+    return get_cases_and_options(dataset=dataset, **build_options)[0]
 
-    if dataset:
-        folder = Path(dataset)
-        index = folder / "dataset.json"
-        if index.exists():
-            stored = json.loads(index.read_text(encoding="utf-8")).get("options", {})
-            wanted = {k: (os.fspath(v) if isinstance(v, os.PathLike)
-                          else list(v) if isinstance(v, tuple) else v)
-                      for k, v in build_options.items() if k != "progress"}
-            differ = {k: (stored.get(k), v) for k, v in wanted.items()
-                      if k in stored and stored.get(k) != v}
-            if differ:
-                warnings.warn(f"{folder} was built with other options "
-                              f"(stored, asked): {differ}; using it as it is", stacklevel=2)
-            return load_dataset(folder)
+
+def get_cases_and_options(*, dataset: str | None = None, **build_options):
+    """:func:`get_cases`, and the build options of the cases returned: those of the
+    folder's ``dataset.json`` when ``dataset`` is given (what the cases were built with,
+    not what was asked, when the two differ; a warning says so; an option it does not
+    record is :func:`gyrodeblur.dataset.build_cases`' default), else ``build_options``."""
+    import inspect
+
+    from gyrodeblur.dataset import build_cases, build_dataset
+
+    asked = {k: v for k, v in build_options.items() if k != "progress"}
+    if not dataset:
+        return build_cases(**build_options), asked
+    folder = Path(dataset)
+    index = folder / "dataset.json"
+    if index.exists():
+        stored = stored_options(folder)
+        wanted = {k: (os.fspath(v) if isinstance(v, os.PathLike)
+                      else list(v) if isinstance(v, tuple) else v)
+                  for k, v in asked.items()}
+        differ = {k: (stored.get(k), v) for k, v in wanted.items()
+                  if k in stored and not _same_option(k, stored.get(k), v, folder)}
+        if differ:
+            warnings.warn(f"{folder} was built with other options "
+                          f"(stored, asked): {differ}; using it as it is", stacklevel=3)
+    else:
         build_dataset(folder, **build_options)
-        return load_dataset(folder)
-    return build_cases(**build_options)
+        stored = stored_options(folder)
+    cases = load_cases(folder)
+    params = inspect.signature(build_cases).parameters
+    used = {k: stored.get(k, params[k].default if k in params else None) for k in asked}
+    used.update({k: v for k, v in stored.items() if k not in used})
+    return cases, used
 
 
 def progress_printer(label: str):

@@ -288,14 +288,25 @@ def coverage(rows: list[dict]) -> dict:
 def with_long_logs(cases, seconds: float, gyro=None) -> list:
     """The cases with ``seconds`` of the source gyro trace on each side of each exposure
     (the dataset keeps 0.3 s): the source's samples outside each case's excerpt spliced
-    around the excerpt, which stays as it is (the blur was made from it)."""
+    around the excerpt, which stays as it is (the blur was made from it).
+
+    Raises
+    ------
+    InputError
+        The trace does not cover a case's exposure (not the log the case was cut from)."""
     from dataclasses import replace
 
-    trace = read_gyro_log(gyro or default_gyro())
+    gyro = gyro or default_gyro()
+    trace = read_gyro_log(gyro)
     out = []
     for case in cases:
         cap, ex = case.capture, case.capture.log
         t0, t1 = (v - cap.time_offset for v in cap.window)
+        if trace.t[0] > t0 or trace.t[-1] < t1:
+            raise InputError(str(gyro), (
+                f"the gyro log ({trace.t[0]:.3f} to {trace.t[-1]:.3f} s) does not cover case "
+                f"{case.name}'s exposure ({t0:.3f} to {t1:.3f} s): not the log the cases were "
+                "cut from? (--log-seconds needs it: give --gyro)"))
         near = (trace.t >= t0 - seconds) & (trace.t <= t1 + seconds)
         outside = near & ((trace.t < ex.t[0]) | (trace.t > ex.t[-1]))
         t = np.concatenate([trace.t[outside], ex.t])
@@ -306,13 +317,17 @@ def with_long_logs(cases, seconds: float, gyro=None) -> list:
     return out
 
 
-def dataset_gyro(folder) -> str | None:
+def dataset_gyro(folder) -> Path | None:
     """The gyro log a built dataset folder was made from (``None``: the default log, or
-    no such folder)."""
+    no such folder). A relative stored path (a dataset built before the paths were stored
+    absolute) is found relative to the dataset folder first, then the current folder."""
     index = Path(folder) / "dataset.json" if folder else None
     if index is None or not index.exists():
         return None
-    return json.loads(index.read_text(encoding="utf-8")).get("options", {}).get("gyro")
+    gyro = json.loads(index.read_text(encoding="utf-8")).get("options", {}).get("gyro")
+    if gyro is None:
+        return None
+    return _common.resolve_stored_path(gyro, folder, "gyro log")
 
 
 def group_sessions(cases, *, say=None, min_apart: float = 2.0) -> list[list]:
@@ -467,7 +482,9 @@ def ambiguity(rows: list[dict]) -> dict:
             "rival_within_3ms": int(sum(near))}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options, with the defaults ``--quick`` and ``--sessions`` change filled in
+    (explicit values are kept as given)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
                     help="2 cases at 512 px (with --sessions: one photo's 2 windows)")
@@ -476,12 +493,16 @@ def main(argv: list[str] | None = None) -> int:
                                      "../shared/data/photos)")
     ap.add_argument("--gyro", help="gyro log to draw shake from (default the shared hand-held "
                                    "phone log; also the source trace of --log-seconds)")
-    ap.add_argument("--cases", type=int, default=None, help="use only the first N cases")
-    ap.add_argument("--windows", type=int, default=2, help="shake windows per photo (built cases)")
-    ap.add_argument("--max-size", type=int, default=None, help="downscale photos (built cases)")
+    ap.add_argument("--cases", type=_common.positive_int, default=None,
+                    help="use only the first N cases (quick: 2)")
+    ap.add_argument("--windows", type=_common.positive_int, default=None,
+                    help="shake windows per photo (built cases; default 2; quick 1, or 2 "
+                         "with --sessions)")
+    ap.add_argument("--max-size", type=_common.positive_int, default=None,
+                    help="downscale photos (built cases; quick 512)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the injected errors")
     ap.add_argument("--method", default=None, help="deconvolution method (default: the project's)")
-    ap.add_argument("--patches", type=int, default=None,
+    ap.add_argument("--patches", type=_common.positive_int, default=None,
                     help="calibration patches in all (default: calibrate's)")
     ap.add_argument("--timing", action="store_true",
                     help="also time calibrate on the first case's photo upscaled to 12 MP")
@@ -518,10 +539,20 @@ def main(argv: list[str] | None = None) -> int:
         if args.no_errors:
             stem += "_no_errors"
         args.out = _common.RESULTS / (stem + ".json")
-    if args.quick:
-        args.cases = args.cases or 2
-        args.max_size = args.max_size or 512
-        args.windows = 2 if args.sessions else 1
+    if args.log_seconds is not None and args.log_seconds < 0:
+        ap.error(f"--log-seconds: must be >= 0, got {args.log_seconds:g}")
+    if args.quick:                       # --quick changes only the defaults
+        if args.cases is None:
+            args.cases = 2
+        if args.max_size is None:
+            args.max_size = 512
+    if args.windows is None:
+        args.windows = 1 if args.quick and not args.sessions else 2
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     say = _common.say
     t_start = time.perf_counter()
     opts = {"windows_per_photo": args.windows, "max_size": args.max_size,
@@ -622,4 +653,4 @@ def report(s: dict, say) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_common.run_main(main))

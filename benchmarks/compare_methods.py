@@ -213,9 +213,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--list", action="store_true", help="list the methods and exit")
     ap.add_argument("--photos", help="folder of sharp photos (default ../shared/data/photos)")
     ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
-    ap.add_argument("--max-photos", type=int, default=None)
-    ap.add_argument("--windows", type=int, default=None, help="shake windows per photo (3)")
-    ap.add_argument("--max-size", type=int, default=None, help="downscale photos (px)")
+    ap.add_argument("--max-photos", type=_common.positive_int, default=None,
+                    help="use only the first N photos (default all; quick 2)")
+    ap.add_argument("--windows", type=_common.positive_int, default=None,
+                    help="shake windows per photo (default 3; quick 1)")
+    ap.add_argument("--max-size", type=_common.positive_int, default=None,
+                    help="downscale photos (px; quick 256)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--dataset", help="load the cases from this folder, or build and "
                                       "write them there first")
@@ -227,17 +230,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     names = args.methods.split(",") if args.methods else list(registry())
     methods = resolve([n.strip() for n in names if n.strip()])
-    if args.quick:
-        args.max_photos = args.max_photos or 2
-        args.windows = args.windows or 1
-        args.max_size = args.max_size or 256
-    build = dict(photos=args.photos, gyro=args.gyro, max_photos=args.max_photos,
-                 windows_per_photo=args.windows or 3, max_size=args.max_size, seed=args.seed)
+    build = build_options(args)
     t_start = time.perf_counter()
     machine = _common.machine_info()
     _common.say(f"building cases ({build})")
-    cases = _common.get_cases(dataset=args.dataset, progress=_common.progress_printer("case"),
-                              **build)
+    cases, used = _common.get_cases_and_options(
+        dataset=args.dataset, progress=_common.progress_printer("case"), **build)
     t_cases = time.perf_counter() - t_start
 
     per_case = []
@@ -292,9 +290,11 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "benchmark": "compare_methods",
         "quick": args.quick,
-        "dataset": {**{k: (str(v) if isinstance(v, Path) else v) for k, v in build.items()},
+        # the options the cases were built with (a dataset folder's own, stored ones)
+        "dataset": {**{k: (str(v) if isinstance(v, Path) else v) for k, v in used.items()},
                     "from_folder": args.dataset, "cases": len(cases),
-                    "snr_db": cases[0].meta.get("snr_db") if cases else None,
+                    "snr_db": (cases[0].meta.get("snr_db", used.get("snr_db"))
+                               if cases else used.get("snr_db")),
                     "readout_time": cases[0].meta.get("readout_time") if cases else None,
                     "focal_fraction": cases[0].meta.get("focal_fraction") if cases else None,
                     "build_seconds": t_cases},
@@ -318,10 +318,29 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def build_options(args) -> dict:
+    """The dataset options asked for: explicit values as given, ``--quick`` changing only
+    the defaults (2 photos, 1 window, 256 px)."""
+    def pick(value, quick, full):
+        return value if value is not None else quick if args.quick else full
+
+    return dict(photos=args.photos, gyro=args.gyro,
+                max_photos=pick(args.max_photos, 2, None),
+                windows_per_photo=pick(args.windows, 1, 3),
+                max_size=pick(args.max_size, 256, None), seed=args.seed)
+
+
+def _noise_words(snr_db) -> str:
+    if snr_db is None:
+        return "no added noise"
+    return f"{snr_db:g} dB noise"
+
+
 def markdown_table(result: dict) -> str:
     d = result["dataset"]
     lines = [
-        f"{d['cases']} cases (photos x shake windows, 40 dB noise, 8-bit); PSNR/SSIM on the "
+        f"{d['cases']} cases (photos x shake windows, {_noise_words(d.get('snr_db'))}, "
+        f"8-bit); PSNR/SSIM on the "
         f"central region (border 5 % of the smaller side); PSNR reg. = after the best "
         f"global shift; PSNR field = after the best smooth displacement field (forgives "
         f"any smooth geometric difference, e.g. a rolling shutter's skew); time = wall "
@@ -344,4 +363,4 @@ def markdown_table(result: dict) -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_common.run_main(main))

@@ -232,4 +232,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    import _common                      # the script's folder is on sys.path
+
+    raise SystemExit(_common.run_main(main))

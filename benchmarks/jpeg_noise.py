@@ -42,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur.dataset import (default_gyro, default_shared_data, find_gaps,  # noqa: E402
-                                plan_window, read_sharp, render_case)
+                                list_photos, plan_window, read_sharp, render_case)
 from gyrodeblur.deblur import deblur  # noqa: E402
 from gyrodeblur.gyrolog import read_gyro_log  # noqa: E402
 from gyrodeblur.imageio import read_photo  # noqa: E402
@@ -53,23 +53,36 @@ from gyrodeblur.noise import estimate_noise_sigma, photo_noise_sigma  # noqa: E4
 FITTED_ON = ("lai_manmade_01", "lai_natural_02", "lai_natural_03", "lai_people_01",
              "lai_saturated_01", "lai_text_01")
 QUALITIES = (95, 90, 80)
+#: --quick's photos when the folder holds them: one fitted on, one held out.
+QUICK_PHOTOS = ("lai_people_01", "lai_saturated_02")
+
+
+def quick_photos(paths: list[Path]) -> list[Path]:
+    """--quick's two photos: :data:`QUICK_PHOTOS` where the folder has them, the first
+    others (in name order) for any it lacks; in the folder's order."""
+    named = [p for p in paths if p.stem in QUICK_PHOTOS]
+    keep = set((named + [p for p in paths if p not in named])[:2])
+    return [p for p in paths if p in keep]
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="2 photos, 400 px, quality 90")
+    ap.add_argument("--quick", action="store_true",
+                    help="2 photos (two of the shared ones, else the folder's first two), "
+                         "400 px, quality 90")
     ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
     ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
-    ap.add_argument("--max-size", type=int, default=None, help="longer side, px (default 640)")
+    ap.add_argument("--max-size", type=_common.positive_int, default=None,
+                    help="longer side, px (default 640; quick 400)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=_common.RESULTS / "jpeg_noise.json")
     args = ap.parse_args(argv)
     folder = Path(args.photos) if args.photos else default_shared_data() / "photos"
-    paths = sorted(folder.glob("*.png"))
+    paths = list_photos(folder)          # png, jpg, tif; InputError when there are none
     if args.quick:                       # one photo fitted on, one held out
-        paths = [p for p in paths if p.stem in ("lai_people_01", "lai_saturated_02")]
+        paths = quick_photos(paths)
     qualities = (90,) if args.quick else QUALITIES
-    max_size = args.max_size or (400 if args.quick else 640)
+    max_size = args.max_size if args.max_size is not None else (400 if args.quick else 640)
     say = _common.say
     t_start = time.perf_counter()
     log = read_gyro_log(args.gyro or default_gyro())
@@ -125,4 +138,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_common.run_main(main))

@@ -44,8 +44,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur import deblur as deblur_mod  # noqa: E402
-from gyrodeblur.dataset import (default_gyro, default_shared_data, find_gaps,  # noqa: E402
-                                plan_window, read_sharp, render_case)
+from gyrodeblur.dataset import (default_gyro, find_gaps, plan_window,  # noqa: E402
+                                read_sharp, render_case)
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log  # noqa: E402
 from gyrodeblur.metrics import default_border, psnr, ssim  # noqa: E402
 
@@ -69,9 +69,7 @@ def _summary(values: list[float]) -> dict:
 def pick_case(args):
     """Photo x the window (of the first ``--windows-considered``) whose centre blur is the
     median one, so the experiment sees typical shake rather than a still moment."""
-    data = default_shared_data()
-    photos = Path(args.photos) if args.photos else data / "photos"
-    path = Path(args.photo) if Path(args.photo).is_file() else photos / args.photo
+    path = _common.pick_photo(args.photo, args.photos, DEFAULT_PHOTO)
     log = read_gyro_log(args.gyro or default_gyro())
     sharp = read_sharp(path, args.max_size)
     h, w = sharp.shape[:2]
@@ -91,15 +89,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
                     help="256 px photo, 2 levels x 2 realisations per panel")
-    ap.add_argument("--realisations", type=int, default=None,
+    ap.add_argument("--realisations", type=_common.positive_int, default=None,
                     help="gyro-noise realisations per level (default 50; quick 2)")
-    ap.add_argument("--bias-realisations", type=int, default=None,
+    ap.add_argument("--bias-realisations", type=_common.positive_int, default=None,
                     help="random bias directions per level (default 10; quick 1)")
     ap.add_argument("--method", default=None,
                     help=f"deconvolution method (default: the project's, now "
                          f"{deblur_mod.DEFAULT_METHOD!r})")
     ap.add_argument("--mode", default="variant", choices=("variant", "invariant"))
-    ap.add_argument("--photo", default=DEFAULT_PHOTO, help="photo file, or name in --photos")
+    ap.add_argument("--photo", default=None,
+                    help=f"photo file, or name (or name stem) in --photos (default "
+                         f"{DEFAULT_PHOTO} when the folder has it, else its first photo)")
     ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
     ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
     ap.add_argument("--exposure", type=float, default=0.03, help="exposure time, s")
@@ -107,17 +107,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--focal", type=float, default=0.8, help="fx as a fraction of the width")
     ap.add_argument("--snr", type=float, default=40.0, help="image SNR, dB")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--windows-considered", type=int, default=7)
-    ap.add_argument("--max-size", type=int, default=None,
+    ap.add_argument("--windows-considered", type=_common.positive_int, default=None,
+                    help="windows whose median blur is taken (default 7; quick 3)")
+    ap.add_argument("--max-size", type=_common.positive_int, default=None,
                     help="downscale the photo (longer side, px); quick: 256")
     ap.add_argument("--out", type=Path, default=_common.RESULTS / "noise_sensitivity.json")
     ap.add_argument("--figure", type=Path, default=None,
                     help="also save the plot here (full run default: "
                          "benchmarks/figures/noise_sensitivity.png)")
     args = ap.parse_args(argv)
-    if args.quick:
-        args.max_size = args.max_size or 256
-        args.windows_considered = min(args.windows_considered, 3)
+    if args.quick and args.max_size is None:        # --quick changes only the defaults
+        args.max_size = 256
+    if args.windows_considered is None:
+        args.windows_considered = 3 if args.quick else 7
     n_noise = args.realisations or (2 if args.quick else 50)
     n_bias = args.bias_realisations or (1 if args.quick else 10)
     levels = QUICK if args.quick else {"gyro": GYRO_LEVELS, "bias": BIAS_LEVELS,
@@ -334,4 +336,4 @@ def plot(result: dict, path: Path, dpi: int = 110) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_common.run_main(main))

@@ -60,4 +60,6 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    import _common                      # the script's folder is on sys.path
+
+    raise SystemExit(_common.run_main(main))

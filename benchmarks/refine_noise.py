@@ -35,8 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur.calibrate import calibrate  # noqa: E402
-from gyrodeblur.dataset import (default_gyro, default_shared_data, find_gaps,  # noqa: E402
-                                plan_window, read_sharp, render_case)
+from gyrodeblur.dataset import (default_gyro, find_gaps, plan_window,  # noqa: E402
+                                read_sharp, render_case)
 from gyrodeblur.deblur import deblur  # noqa: E402
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log  # noqa: E402
 from gyrodeblur.metrics import default_border, psnr  # noqa: E402
@@ -44,11 +44,12 @@ from gyrodeblur.metrics import default_border, psnr  # noqa: E402
 LEVELS = [0.0, 0.007, 0.02, 0.05]
 TARGET_LEVEL = 0.02
 TARGET_DB = 1.0
+DEFAULT_PHOTO = "lai_manmade_01.png"
 
 
-def pick_case(photo: str, max_size: int, windows: int, seed: int, *, photos=None, gyro=None):
-    folder = Path(photos) if photos else default_shared_data() / "photos"
-    path = Path(photo) if Path(photo).is_file() else folder / photo
+def pick_case(photo: str | None, max_size: int, windows: int, seed: int, *, photos=None,
+              gyro=None):
+    path = _common.pick_photo(photo, photos, DEFAULT_PHOTO)
     log = read_gyro_log(gyro or default_gyro())
     sharp = read_sharp(path, max_size)
     h, w = sharp.shape[:2]
@@ -65,18 +66,22 @@ def pick_case(photo: str, max_size: int, windows: int, seed: int, *, photos=None
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="levels 0 and 0.02, 1 realisation, 400 px")
-    ap.add_argument("--photo", default="lai_manmade_01.png", help="photo file, or name in --photos")
+    ap.add_argument("--photo", default=None,
+                    help=f"photo file, or name (or name stem) in --photos (default "
+                         f"{DEFAULT_PHOTO} when the folder has it, else its first photo)")
     ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
     ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
-    ap.add_argument("--max-size", type=int, default=None, help="longer side, px (default 640)")
-    ap.add_argument("--realisations", type=int, default=None, help="per level (default 3)")
-    ap.add_argument("--windows-considered", type=int, default=5)
+    ap.add_argument("--max-size", type=_common.positive_int, default=None,
+                    help="longer side, px (default 640; quick 400)")
+    ap.add_argument("--realisations", type=_common.positive_int, default=None,
+                    help="per level (default 3; quick 1)")
+    ap.add_argument("--windows-considered", type=_common.positive_int, default=5)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=_common.RESULTS / "refine_noise.json")
     args = ap.parse_args(argv)
     levels = [0.0, TARGET_LEVEL] if args.quick else LEVELS
     n_real = args.realisations or (1 if args.quick else 3)
-    max_size = args.max_size or (400 if args.quick else 640)
+    max_size = args.max_size if args.max_size is not None else (400 if args.quick else 640)
     say = _common.say
     t_start = time.perf_counter()
     case = pick_case(args.photo, max_size, args.windows_considered, args.seed,
@@ -147,4 +152,4 @@ def plot(result: dict, path: Path) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_common.run_main(main))

@@ -332,4 +332,4 @@ def plot(result: dict, path: Path, dpi: int = 110) -> None:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_common.run_main(main))

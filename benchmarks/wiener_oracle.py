@@ -13,7 +13,6 @@ writes ``benchmarks/results/wiener_oracle.json``.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -29,11 +28,11 @@ PHIS = (0.001, 0.003, 0.01, 0.03)
 
 
 def _cases(args):
+    """The cases its ``dataset.json`` lists (:func:`gyrodeblur.dataset.load_dataset`: not
+    every sub-folder), or 2 small built ones."""
     from gyrodeblur import dataset
     if args.dataset:
-        folders = sorted(f for f in os.listdir(args.dataset)
-                         if os.path.isdir(os.path.join(args.dataset, f)))
-        return [dataset.load_case(os.path.join(args.dataset, f)) for f in folders]
+        return _common.load_cases(args.dataset)     # InputError: missing or empty
     return dataset.build_cases(max_photos=2, windows_per_photo=1, max_size=320, seed=0)
 
 
@@ -80,4 +79,4 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(_common.run_main(main))

@@ -6,6 +6,7 @@ The full runs are not part of the test suite (see BENCHMARKS.md).
 import importlib.util
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -386,3 +387,256 @@ def test_jpeg_noise_quick(tmp_path):
         assert jpg["sigma_raised"] > jpg["sigma_measured"]
         assert jpg["psnr_raised"] > jpg["psnr_measured"] + 0.2
     assert set(r["summary"]) == {"png_fitted_on", "png_held_out", "q90_fitted_on", "q90_held_out"}
+
+
+# ----------------------------------------------------------------------------- on tiny inputs
+# (no shared data: a few small photos and a synthetic hand-shake log, seconds in all)
+
+def _run(mod_name: str, argv: list[str]) -> int:
+    """A benchmark's main as its command line runs it (_common.run_main: an InputError is
+    one line on stderr, exit status 2)."""
+    common = _load("_common")
+    return common.run_main(_load(mod_name).main, argv)
+
+
+def _one_line_error(capsys, *needles) -> str:
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "\n" not in err and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """``photos/`` (two PNGs and a JPEG of 160 x 120 px, and a text file), ``jpegs/`` (two
+    JPEGs), ``empty/``, and ``shake.gcsv``: 12 s of synthetic hand shake at 200 Hz."""
+    from PIL import Image
+
+    from gyrodeblur.gyrolog import GyroLog, write_gcsv
+
+    root = tmp_path_factory.mktemp("tiny")
+    for sub in ("photos", "jpegs", "empty"):
+        (root / sub).mkdir()
+    for i, (sub, name) in enumerate([("photos", "a.png"), ("photos", "b.png"),
+                                     ("photos", "c.jpg"), ("jpegs", "p.jpg"),
+                                     ("jpegs", "q.jpeg")]):
+        pix = np.round(255 * _texture_8bit(10 + i, (120, 160))).astype(np.uint8)
+        Image.fromarray(np.stack([pix, pix[::-1], pix[:, ::-1]], -1)).save(
+            root / sub / name, **({"quality": 95} if name.endswith(("jpg", "jpeg")) else {}))
+    (root / "photos" / "notes.txt").write_text("not a photo")
+    t = np.arange(0.0, 12.0, 1 / 200)
+    rng = np.random.default_rng(4)
+    freqs, phases = rng.uniform(2.0, 9.0, (3, 4)), rng.uniform(0, 2 * np.pi, (3, 4))
+    w = np.stack([0.25 * np.sin(2 * np.pi * freqs[a][:, None] * t + phases[a][:, None]).sum(0)
+                  for a in range(3)], axis=1)
+    write_gcsv(root / "shake.gcsv", GyroLog(t, w))
+    return root
+
+
+def _tiny_dataset(tiny, folder, **options):
+    from gyrodeblur.dataset import build_dataset
+
+    opts = dict(photos=tiny / "photos", gyro=tiny / "shake.gcsv", max_size=64,
+                windows_per_photo=1)
+    build_dataset(folder, **{**opts, **options})
+    return folder
+
+
+def test_run_main_turns_an_input_error_into_one_line_and_status_2(capsys):
+    from gyrodeblur.errors import InputError
+
+    common = _load("_common")
+
+    def bad(argv):
+        raise InputError("x.csv", "no samples")
+
+    assert common.run_main(bad, []) == 2
+    assert _one_line_error(capsys) == "error: x.csv: no samples"
+    assert common.run_main(lambda argv: {"summary": 1}, []) == 0    # a main returning a dict
+    assert common.run_main(lambda argv: 3, []) == 3
+
+
+def test_scripts_run_as_commands_print_input_errors_as_one_line(tiny):
+    """The scripts' __main__ goes through run_main: no traceback, exit status 2."""
+    import subprocess
+
+    for script, args in (("wiener_oracle", ["--dataset", str(tiny / "empty")]),
+                         ("compare_methods", ["--photos", str(tiny / "empty"), "--methods",
+                                              "blurred"])):
+        out = subprocess.run([sys.executable, str(BENCH / f"{script}.py"), *args,
+                              "--out", str(tiny / "never.json")],
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 2, (script, out.stderr)
+        err = out.stderr.strip()
+        assert err.startswith("error: ") and "\n" not in err and "Traceback" not in err, err
+        assert not (tiny / "never.json").exists()
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_jpeg_noise_reads_any_photo_folder_and_refuses_an_empty_one(tiny, tmp_path, capsys):
+    """--quick on a folder without the shared photos takes its first two (JPEGs too: the
+    dataset builder's list_photos); a folder without photos is a one-line error."""
+    mod = _load("jpeg_noise")
+    assert [p.name for p in mod.quick_photos([Path(f"{n}.png") for n in
+                                              ("a", "lai_people_01", "lai_saturated_02", "z")])
+            ] == ["lai_people_01.png", "lai_saturated_02.png"]
+    assert [p.name for p in mod.quick_photos([Path(n) for n in ("a.jpg", "b.png", "c.tif")])
+            ] == ["a.jpg", "b.png"]
+    out = tmp_path / "jpeg.json"
+    assert _run("jpeg_noise", ["--quick", "--photos", str(tiny / "jpegs"), "--gyro",
+                               str(tiny / "shake.gcsv"), "--max-size", "64",
+                               "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert [row["photo"] for row in r["rows"]] == ["p", "q"] and r["max_size"] == 64
+    assert _run("jpeg_noise", ["--photos", str(tiny / "empty"), "--out", str(out)]) == 2
+    _one_line_error(capsys, "no photos")
+
+
+def test_single_photo_benchmarks_pick_the_default_a_stem_or_the_first_photo(tiny, tmp_path,
+                                                                            capsys):
+    common = _load("_common")
+    photos = tiny / "photos"
+    assert common.pick_photo(None, photos, "lai_manmade_01.png") == photos / "a.png"
+    assert common.pick_photo(None, photos, "b.png") == photos / "b.png"
+    assert common.pick_photo("c", photos) == photos / "c.jpg"            # a stem
+    assert common.pick_photo("b.png", photos) == photos / "b.png"
+    assert common.pick_photo(str(tiny / "jpegs" / "p.jpg"), photos) == tiny / "jpegs" / "p.jpg"
+    from gyrodeblur.errors import InputError
+
+    with pytest.raises(InputError, match="nosuch"):
+        common.pick_photo("nosuch", photos)
+    with pytest.raises(InputError, match="no photos"):
+        common.pick_photo(None, tiny / "empty")
+    # the scripts: a case from the folder's first photo; bad names are one-line errors
+    ns = _load("noise_sensitivity")
+    args = ns.argparse.Namespace(photo=None, photos=str(photos), gyro=str(tiny / "shake.gcsv"),
+                                 max_size=64, seed=0, exposure=0.03, readout=0.03, focal=0.8,
+                                 windows_considered=1, snr=40.0)
+    assert ns.pick_case(args).meta["photo"] == "a.png"
+    case = _load("refine_noise").pick_case("c", 64, 1, 0, photos=str(photos),
+                                           gyro=str(tiny / "shake.gcsv"))
+    assert case.meta["photo"] == "c.jpg"
+    for script in ("noise_sensitivity", "refine_noise"):
+        assert _run(script, ["--quick", "--photos", str(photos), "--photo", "nosuch",
+                             "--out", str(tmp_path / "x.json")]) == 2
+        _one_line_error(capsys, "nosuch")
+        assert _run(script, ["--quick", "--photos", str(tiny / "empty"),
+                             "--out", str(tmp_path / "x.json")]) == 2
+        _one_line_error(capsys, "no photos")
+
+
+def test_compare_methods_records_the_options_the_stored_cases_were_built_with(
+        tiny, tmp_path, monkeypatch, capsys):
+    """--dataset on a folder built with other options: a warning, the stored cases, and
+    the JSON and markdown say how those were built (here 20 dB noise, 64 px, 1 window);
+    the same folder asked for by a relative path is no difference."""
+    ds = _tiny_dataset(tiny, tmp_path / "ds", snr_db=20.0, max_photos=1)
+    out = tmp_path / "compare.json"
+    with pytest.warns(UserWarning, match="other options"):
+        assert _run("compare_methods", [
+            "--dataset", str(ds), "--photos", str(tiny / "jpegs"), "--windows", "2",
+            "--max-size", "48", "--methods", "blurred", "--out", str(out)]) == 0
+    d = json.loads(out.read_text())["dataset"]
+    assert d["photos"] == os.path.abspath(tiny / "photos")
+    assert d["windows_per_photo"] == 1 and d["max_size"] == 64 and d["max_photos"] == 1
+    assert d["snr_db"] == 20.0 and d["cases"] == 1 and d["from_folder"] == str(ds)
+    assert out.with_suffix(".md").read_text().startswith(
+        "1 cases (photos x shake windows, 20 dB noise, 8-bit)")
+    monkeypatch.chdir(tiny)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        cases, used = _load("_common").get_cases_and_options(
+            dataset=str(ds), photos="photos", gyro="shake.gcsv", max_size=64,
+            windows_per_photo=1, max_photos=1)
+    assert len(cases) == 1 and used["snr_db"] == 20.0
+    # the markdown of a dataset without noise does not claim 40 dB
+    assert "no added noise" in _load("compare_methods").markdown_table(
+        {"dataset": {"cases": 1, "snr_db": None}, "table": {}})
+
+
+def test_count_options_are_honoured_and_zero_is_refused(tiny, tmp_path, capsys):
+    """--quick changes the defaults only: explicit --windows / --max-photos are kept
+    (compare_methods and calibration), and a count of 0 is an argparse error."""
+    out = tmp_path / "compare.json"
+    assert _run("compare_methods", [
+        "--quick", "--photos", str(tiny / "photos"), "--gyro", str(tiny / "shake.gcsv"),
+        "--windows", "2", "--max-photos", "1", "--max-size", "48", "--methods", "blurred",
+        "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert [c["case"] for c in r["per_case"]] == ["a_w0", "a_w1"]
+    assert r["dataset"]["windows_per_photo"] == 2 and r["dataset"]["max_size"] == 48
+    cm = _load("compare_methods")
+    for option in ("--windows", "--max-photos", "--max-size"):
+        with pytest.raises(SystemExit) as exc:
+            cm.main(["--quick", option, "0", "--methods", "blurred", "--out", str(out)])
+        assert exc.value.code == 2
+        assert "must be at least 1" in capsys.readouterr().err
+    cal = _load("calibration")
+    assert cal.parse_args(["--quick", "--windows", "3"]).windows == 3
+    assert cal.parse_args(["--quick", "--sessions", "--windows", "1"]).windows == 1
+    a = cal.parse_args(["--quick"])
+    assert (a.windows, a.cases, a.max_size) == (1, 2, 512)
+    assert cal.parse_args(["--quick", "--sessions"]).windows == 2
+    assert cal.parse_args([]).windows == 2
+    with pytest.raises(SystemExit):
+        cal.parse_args(["--quick", "--windows", "0"])
+    ns = _load("noise_sensitivity")
+    with pytest.raises(SystemExit):
+        ns.main(["--quick", "--realisations", "0"])
+
+
+def test_wiener_oracle_scores_the_indexed_cases_only(tiny, tmp_path, capsys):
+    """A folder rebuilt with fewer photos, a stale case folder left in it and a folder of
+    other things: only the cases dataset.json lists are scored; an empty or missing
+    folder is a one-line error."""
+    import shutil
+
+    ds = _tiny_dataset(tiny, tmp_path / "ds", max_size=None, max_photos=1)   # 6 x 8 patches
+    shutil.copytree(ds / "a_w0", ds / "old_w0")            # stale: not in the index
+    (ds / "results").mkdir()                               # not a case at all
+    out = tmp_path / "oracle.json"
+    assert _run("wiener_oracle", ["--dataset", str(ds), "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert [row["case"] for row in r["per_case"]] == ["a_w0"] and r["summary"]["cases"] == 1
+    (tmp_path / "empty").mkdir()
+    for folder in (tmp_path / "empty", tmp_path / "missing"):
+        assert _run("wiener_oracle", ["--dataset", str(folder), "--out", str(out)]) == 2
+        _one_line_error(capsys, str(folder))
+
+
+def test_calibration_long_logs_find_the_stored_log_and_refuse_one_that_does_not_cover(
+        tiny, tmp_path, monkeypatch):
+    """--log-seconds' source trace: a relative path stored in dataset.json (a dataset
+    built before paths were stored absolute) is found beside the dataset first, then in
+    the current folder; a log that does not cover the exposures is an error, not nothing
+    added."""
+    import shutil
+
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.gyrolog import GyroLog, write_gcsv
+
+    cal = _load("calibration")
+    ds = _tiny_dataset(tiny, tmp_path / "ds", max_size=48, max_photos=1)
+    index = json.loads((ds / "dataset.json").read_text())
+    assert cal.dataset_gyro(ds) == tiny / "shake.gcsv"                   # stored absolute
+    index["options"]["gyro"] = "shake.gcsv"
+    (ds / "dataset.json").write_text(json.dumps(index))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    with pytest.raises(InputError, match="shake.gcsv"):
+        cal.dataset_gyro(ds)                                              # nowhere
+    t = np.arange(100.0, 102.0, 1 / 200)          # another log, of 2 s, under that name
+    write_gcsv(elsewhere / "shake.gcsv", GyroLog(t, np.zeros((t.size, 3))))
+    assert cal.dataset_gyro(ds) == Path("shake.gcsv")                     # the current folder
+    cases = _load("_common").load_cases(ds)
+    with pytest.raises(InputError, match="does not cover"):
+        cal.with_long_logs(cases, 5.0, cal.dataset_gyro(ds))
+    shutil.copy(tiny / "shake.gcsv", ds / "shake.gcsv")
+    assert cal.dataset_gyro(ds) == ds / "shake.gcsv"                      # beside it first
+    long, = cal.with_long_logs(cases, 5.0, cal.dataset_gyro(ds))
+    t0, t1 = cases[0].capture.window
+    assert long.capture.log.t[0] == 0.0 and long.capture.log.t[-1] > t1 + 4.9   # 5 s more
+    assert set(cases[0].capture.log.t) <= set(long.capture.log.t)          # the excerpt kept
