@@ -16,7 +16,7 @@ import secrets
 
 from .errors import InputError
 
-__all__ = ["atomic_write", "check_writable"]
+__all__ = ["atomic_write", "atomic_write_text", "check_writable"]
 
 
 def _temporary_beside(path: str, kind: str) -> str:
@@ -55,6 +55,12 @@ def atomic_write(path: str | os.PathLike, write) -> None:
         if isinstance(exc, OSError) and exc.errno is not None:
             raise InputError(path, f"cannot write the file: {exc.strerror}") from exc
         raise
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """:func:`atomic_write` of ``text``, UTF-8 encoded."""
+    data = text.encode("utf-8")
+    atomic_write(path, lambda f: f.write(data))
 
 
 def check_writable(path: str | os.PathLike) -> None:

@@ -492,6 +492,8 @@ def repeated_photo(images) -> tuple[int, int] | None:
     """The first pair ``(i, j)``, ``i < j``, of photos with equal pixels (the same array,
     or a copy: two exposures never are), or ``None``."""
     import hashlib
+    if len(images) < 2:                  # one photo (deblur --refine): nothing to compare
+        return None
     seen = {}
     for k, img in enumerate(images):
         a = np.asarray(img)

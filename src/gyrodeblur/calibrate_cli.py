@@ -123,13 +123,8 @@ def calibrate_command(args, say, load_capture) -> None:
         caps.append(load_capture(a, ph, say))
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)
-    from .icc import photo_transfer_curve
-    curves = []
-    for ph in photos:
-        curve, note = photo_transfer_curve(ph, args.transfer)
-        if note:
-            say(note)
-        curves.append(curve)
+    from .icc import said_transfer_curve
+    curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
                     downscale=args.downscale, workers=args.workers, transfer=curves)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "

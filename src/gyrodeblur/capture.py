@@ -226,12 +226,11 @@ class Capture:
         InputError
             The log was made in memory (no file) and ``gyro_path`` is not given.
         """
-        from .atomicfile import atomic_write
+        from .atomicfile import atomic_write_text
         path = os.fspath(path)
         if gyro_path is None:
             gyro_path = self._gyro_path_from(os.path.dirname(os.path.abspath(path)))
-        text = json.dumps(self.to_dict(gyro_path), indent=2) + "\n"
-        atomic_write(path, lambda f: f.write(text.encode("utf-8")))
+        atomic_write_text(path, json.dumps(self.to_dict(gyro_path), indent=2) + "\n")
 
     def _gyro_path_from(self, folder: str) -> str:
         stored, opened = self.gyro_spec.get("path"), self.log.source

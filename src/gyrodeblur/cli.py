@@ -220,15 +220,6 @@ def _add_transfer_option(p: argparse.ArgumentParser) -> None:
                         "linear or gamma 2.2; sRGB without a profile), srgb or linear")
 
 
-def _transfer_curve(photo, args, say):
-    """The photo's transfer curve as ``--transfer`` asks, saying where ``auto`` found it."""
-    from .icc import photo_transfer_curve
-    curve, note = photo_transfer_curve(photo, args.transfer)
-    if note:
-        say(note)
-    return curve
-
-
 def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
     what = ("degrees clockwise the photos' pixels were turned from the sensor's layout, one "
             "for all or one per photo, comma-separated" if per_photo else
@@ -309,6 +300,7 @@ def _atomic_npy(path: str, array: np.ndarray) -> None:
 
 def cmd_simulate(args, say) -> None:
     from .imageio import read_photo, write_photo
+    from .icc import said_transfer_curve
     from .simulate import quantize_8bit, simulate_blur
 
     given = read_photo(args.sharp, scene=True)
@@ -324,7 +316,7 @@ def cmd_simulate(args, say) -> None:
         raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
     cap = _load_capture(args, photo, say)
     _check_not_over_capture(cap, args.overwrite, args.output)
-    curve = _transfer_curve(given, args, say)
+    curve = said_transfer_curve(given, args.transfer, say)
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
     blurred = curve.encode(simulate_blur(curve.decode(colour), cap, snr_db=args.snr_db,
@@ -342,6 +334,7 @@ def cmd_simulate(args, say) -> None:
 
 def cmd_deblur(args, say) -> None:
     from .deblur import DEFAULT_METHOD, deblur
+    from .icc import said_transfer_curve
     from .imageio import read_photo, write_photo
     from .psfplot import field_image
 
@@ -379,7 +372,7 @@ def cmd_deblur(args, say) -> None:
         from .tiling import patch_grid
         patch_grid((h, w), grid, overlap)
     colour, alpha = split_alpha(photo.pixels)
-    curve = _transfer_curve(given, args, say)
+    curve = said_transfer_curve(given, args.transfer, say)
     if method == "sparse" and "noise_sigma" not in options and photo.quantization:
         from .noise import estimate_noise_sigma, photo_noise_sigma
         shown = estimate_noise_sigma(colour)

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomicfile import atomic_write
+from .atomicfile import atomic_write_text
 from .camera import Camera
 from .capture import Capture, load_capture
 from .errors import InputError
@@ -478,8 +478,7 @@ def build_dataset(out_dir: str | os.PathLike, **options) -> list[Path]:
 
     opts = {k: plain(k, v) for k, v in options.items() if k != "progress"}
     index = {"options": opts, "cases": [c.name for c in cases]}
-    atomic_write(out / "dataset.json",
-                 lambda f: f.write((json.dumps(index, indent=2) + "\n").encode("utf-8")))
+    atomic_write_text(out / "dataset.json", json.dumps(index, indent=2) + "\n")
     return folders
 
 

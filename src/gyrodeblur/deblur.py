@@ -36,7 +36,7 @@ Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def _wiener_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
-                    clip: bool = True, **options) -> Deconvolver:
+                    **options) -> Deconvolver:
     """The chapter's Wiener filter (eq. 6.18); its one option is ``phi``."""
     unknown = sorted(set(options) - {"phi"})
     if unknown:                      # e.g. the sparse method's noise_sigma
@@ -63,8 +63,7 @@ def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
         raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'sparse' "
                         f"(known: {', '.join(sorted(known))})")
     try:
-        check_sparse_options(noise_sigma=noise_sigma, **{k: v for k, v in options.items()
-                                                         if k != "workers"})
+        check_sparse_options(noise_sigma=noise_sigma, **options)
     except ValueError as exc:
         raise InputError(None, f"method 'sparse': {exc}") from None
     if noise_sigma is None:

@@ -28,7 +28,7 @@ from .tonecurve import (LINEAR, SRGB, ParametricCurve, PerChannelCurve, TableCur
                         TransferCurve, get_transfer_curve, matches_curve)
 
 __all__ = ["profile_transfer_curve", "profile_description", "parametric_curve",
-           "photo_transfer_curve", "AUTO"]
+           "photo_transfer_curve", "said_transfer_curve", "AUTO"]
 
 #: The ``transfer`` name that means "the photo's ICC profile's curve, sRGB without one".
 AUTO = "auto"
@@ -247,3 +247,11 @@ def photo_transfer_curve(photo, requested: str | TransferCurve = AUTO
         return SRGB, None
     return curve, (f"{where}: {label} declares a {curve.name} transfer curve, undone for "
                    f"the work in linear light ({override})")
+
+
+def said_transfer_curve(photo, requested: str | TransferCurve, say) -> TransferCurve:
+    """:func:`photo_transfer_curve`'s curve, its note (if any) passed to ``say``."""
+    curve, note = photo_transfer_curve(photo, requested)
+    if note:
+        say(note)
+    return curve

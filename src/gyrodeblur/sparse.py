@@ -106,11 +106,12 @@ def regularization_weight(noise_sigma: float, exponent: float = 1.0) -> float:
     return float(c * max(float(noise_sigma), _SIGMA_FLOOR) ** (2.0 - exponent))
 
 
-def check_sparse_options(*, exponent: float = 1.0, iterations: int = 6,
+def check_sparse_options(*, exponent: float | None = None, iterations: int | None = None,
                          noise_sigma: float | None = None,
-                         saturation_level: float | None = 0.98,
+                         saturation_level: float | None = None,
                          weight: float | None = None, **others) -> None:
-    """Check :func:`sparse_deconvolve`'s numeric options (ValueError naming the bad one).
+    """Check :func:`sparse_deconvolve`'s numeric options (ValueError naming the bad one);
+    ``None`` is an option not given (or, for ``saturation_level``, turned off).
 
     The other options (``others``) are not numeric and are not looked at.
     """
@@ -119,9 +120,10 @@ def check_sparse_options(*, exponent: float = 1.0, iterations: int = 6,
                         ("weight", weight)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
             raise ValueError(f"{name} must be a number, got {value!r}")
-    if not 0 < exponent <= 1:
+    if exponent is not None and not 0 < exponent <= 1:
         raise ValueError(f"exponent must be in (0, 1], got {exponent}")
-    if not isinstance(iterations, numbers.Integral) or iterations < 0:
+    if iterations is not None and (not isinstance(iterations, numbers.Integral)
+                                   or iterations < 0):
         raise ValueError(f"iterations must be a whole number >= 0, got {iterations!r}")
     if noise_sigma is not None and not (np.isfinite(noise_sigma) and 0 <= noise_sigma < 1):
         raise ValueError(f"noise_sigma must be in [0, 1) (pixel-value units), got {noise_sigma!r}")

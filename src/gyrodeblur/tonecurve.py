@@ -230,8 +230,8 @@ class ParametricCurve:
 
     def encode(self, image) -> np.ndarray:
         """Linear light -> encoded values (float32, any shape); inverse of :meth:`decode`."""
-        g, a, b, c, d, e, f = (np.float32(v) for v in (self.g, self.a, self.b, self.c,
-                                                        self.d, self.e, self.f))
+        a, b, c, d, e, f = (np.float32(v) for v in (self.a, self.b, self.c, self.d, self.e,
+                                                     self.f))
         odd = self._odd
         y_d = np.float32(self._decode64(np.array([self.d]))[0])   # where the segments meet
 
