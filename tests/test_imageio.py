@@ -403,10 +403,19 @@ def test_bad_pixels_are_refused(tmp_path):
     with pytest.raises(ValueError, match="float"):
         write_photo(tmp_path / "a.png", np.zeros((4, 4), np.uint8))
     with pytest.raises(ValueError, match="shape"):
-        write_photo(tmp_path / "a.png", np.zeros((4, 4, 2), np.float32))
+        write_photo(tmp_path / "a.png", np.zeros((4, 4, 5), np.float32))
     with pytest.raises(ValueError, match="NaN"):
         write_photo(tmp_path / "a.png", np.full((4, 4), np.nan, np.float32))
     assert os.listdir(tmp_path) == []
+
+
+def test_grey_and_alpha_are_written_as_they_are_read(tmp_path):
+    """An (H, W, 2) array is grey + alpha: stored as RGBA, as such a file is read."""
+    la = np.dstack([np.linspace(0, 1, 20).reshape(4, 5), np.full((4, 5), 0.6)]).astype(np.float32)
+    back = read_photo(write_photo(tmp_path / "la.png", la)).pixels
+    assert back.shape == (4, 5, 4)
+    assert np.allclose(back[..., :3], la[..., :1], atol=0.5 / 255)
+    assert np.allclose(back[..., 3], la[..., 1], atol=0.5 / 255)
 
 
 @pytest.mark.parametrize("name", ["out.bmp", "out"])

@@ -103,11 +103,16 @@ def test_patch_centre():
         p.y0 = 3  # frozen
 
 
-@pytest.mark.parametrize("grid", [(0, 8), (6,), (6, 8, 1), "6x8", (6.0, 8), (True, 8), (-1, 2),
-                                  None])
+@pytest.mark.parametrize("grid", [(0, 8), (6,), (6, 8, 1), "6x", "0x8", "6x8x1", "6 by 8",
+                                  (6.0, 8), (True, 8), (-1, 2), None])
 def test_bad_grid_raises_input_error(grid):
     with pytest.raises(InputError, match="--grid"):
         patch_grid((480, 640), grid=grid)
+
+
+def test_a_grid_may_be_given_as_text():
+    assert patch_grid((480, 640), grid="3x4") == patch_grid((480, 640), grid=(3, 4))
+    assert patch_grid((480, 640), grid=" 3X4 ") == patch_grid((480, 640), grid=(3, 4))
 
 
 @pytest.mark.parametrize("overlap", [-0.1, 0.6, 1.0, float("nan"), "0.25", None])

@@ -12,7 +12,7 @@ import numpy as np
 from scipy import ndimage
 
 from .capture import Capture
-from .images import PHOTO_MAX, check_image
+from .images import PHOTO_MAX, PHOTO_MIN, check_image, split_alpha
 from .tonecurve import get_transfer_curve
 
 __all__ = ["CalibrationPhoto", "select_patch_centres"]
@@ -30,9 +30,11 @@ class CalibrationPhoto:
     """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
 
     def __init__(self, image, capture: Capture, transfer, index: int):
-        img = check_image(image, f"photo {index + 1}", max_value=PHOTO_MAX)
-        if img.ndim == 3 and img.shape[2] == 4:
-            img = img[..., :3]
+        img = check_image(image, f"photo {index + 1}", max_value=PHOTO_MAX,
+                          min_value=PHOTO_MIN)
+        img = split_alpha(img)[0]                       # alpha is a mask, not light
+        if img.shape[2:] == (1,):
+            img = img[..., 0]
         self.image = img
         self.H, self.W = img.shape[:2]
         self.cap = capture.scaled_to(self.W, self.H)

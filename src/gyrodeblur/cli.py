@@ -319,9 +319,8 @@ def cmd_simulate(args, say) -> None:
     curve = said_transfer_curve(given, args.transfer, say)
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
-    blurred = curve.encode(simulate_blur(curve.decode(colour), cap, snr_db=args.snr_db,
-                                         seed=args.seed,
-                                         order={"cubic": 3, "bilinear": 1}[args.sampling]))
+    blurred = simulate_blur(colour, cap, snr_db=args.snr_db, seed=args.seed,
+                            order={"cubic": 3, "bilinear": 1}[args.sampling], transfer=curve)
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
     blurred = to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
@@ -373,19 +372,23 @@ def cmd_deblur(args, say) -> None:
         patch_grid((h, w), grid, overlap)
     colour, alpha = split_alpha(photo.pixels)
     curve = said_transfer_curve(given, args.transfer, say)
-    if method == "sparse" and "noise_sigma" not in options and photo.quantization:
-        from .noise import estimate_noise_sigma, photo_noise_sigma
-        shown = estimate_noise_sigma(colour)
-        options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
-        say(f"JPEG: deconvolved for noise of {255 * options['noise_sigma']:.2f} levels (its "
-            f"pixels show {255 * shown:.2f}; the compression's "
-            "error counts as noise too; --noise-sigma sets it)")
+
+    def jpeg_noise() -> None:            # said once the inputs are known to be good
+        if method == "sparse" and "noise_sigma" not in options and photo.quantization:
+            from .noise import estimate_noise_sigma, photo_noise_sigma
+            shown = estimate_noise_sigma(colour)
+            options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
+            say(f"JPEG: deconvolved for noise of {255 * options['noise_sigma']:.2f} levels "
+                f"(its pixels show {255 * shown:.2f}; the compression's "
+                "error counts as noise too; --noise-sigma sets it)")
+
     t0 = time.perf_counter()
     if args.blind:
         from .deblur import deblur_blind
         if grid == "auto":
             raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
                                        "--blind give RxC (default 1x1, one kernel)")
+        jpeg_noise()
         blind_grid = (1, 1) if grid is None else grid
         kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
         restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
@@ -400,6 +403,7 @@ def cmd_deblur(args, say) -> None:
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf)
+        jpeg_noise()
         if args.refine:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates
@@ -409,7 +413,7 @@ def cmd_deblur(args, say) -> None:
                 say(line)
             cap = res.capture
         restored, report = deblur(colour, cap, mode=args.mode, grid=grid,
-                                  overlap=overlap, method=args.method,
+                                  overlap=args.overlap, method=args.method,
                                   transfer=curve, progress=progress,
                                   return_report=True, **options)
         field = report.field
@@ -436,7 +440,7 @@ def cmd_deblur(args, say) -> None:
 
 def cmd_demo(args, say) -> None:
     from .demo import run_demo
-    run_demo(args.out, say=say)
+    run_demo(args.out, say=say, overwrite=args.overwrite)
 
 
 def cmd_calibrate(args, say) -> None:
@@ -547,7 +551,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="run the bundled demo",
                        description="Blur a bundled public-domain photo with a bundled gyro trace, "
                        "deblur it and write the pictures and PSNR/SSIM into a folder.")
-    s.add_argument("--out", default="gyrodeblur-demo", help="output folder (default ./gyrodeblur-demo)")
+    s.add_argument("--out", default="gyrodeblur-demo", help="output folder (default ./gyrodeblur-demo); "
+                   "a folder the demo wrote before is written over, another one's files of the "
+                   "demo's names only with --overwrite")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write over files of the demo's names in a folder the demo did not write")
     s.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("calibrate", help="estimate time offset, bias, readout, focal scale and axes",

@@ -9,7 +9,6 @@ whole photo (to estimate e.g. its noise level once) and its options into a
 from __future__ import annotations
 
 import inspect
-import numbers
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -21,13 +20,13 @@ import numpy as np
 
 from .capture import Capture
 from .errors import InputError
-from .images import PHOTO_MAX, check_image, check_psf, join_alpha, split_alpha
+from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
                      deconvolve_patchwise, patch_grid)
 from .tonecurve import TransferCurve, get_transfer_curve
-from .wiener import DEFAULT_PHI, wiener_deconvolve
+from .wiener import DEFAULT_PHI, check_phi, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
            "DEFAULT_METHOD", "register_method", "plan_psf_field"]
@@ -42,10 +41,7 @@ def _wiener_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
     if unknown:                      # e.g. the sparse method's noise_sigma
         raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'wiener' "
                         "(known: phi)")
-    phi = options.get("phi", DEFAULT_PHI)
-    if isinstance(phi, bool) or not isinstance(phi, numbers.Real) or not 0 <= phi < np.inf:
-        raise InputError("--phi", f"must be a number >= 0, got {phi!r}")
-    return partial(wiener_deconvolve, phi=phi)
+    return partial(wiener_deconvolve, phi=check_phi(options.get("phi", DEFAULT_PHI)))
 
 
 def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
@@ -79,10 +75,47 @@ METHODS: dict[str, Callable[..., Deconvolver]] = {"sparse": _sparse_factory,
 DEFAULT_METHOD = "sparse"
 
 
-def register_method(name: str, factory: Callable[..., Deconvolver], *, default: bool = False):
-    """Add a deconvolution method: ``factory(image, **options) -> deconvolve(sub, psf)``."""
+#: Methods registered with ``thread_safe=False``: their patches run one at a time.
+_SERIAL_METHODS: set[str] = set()
+
+
+def register_method(name: str, factory: Callable[..., Deconvolver], *, default: bool = False,
+                    thread_safe: bool = True):
+    """Add a deconvolution method to :data:`METHODS`, for ``deblur(..., method=name)``.
+
+    Parameters
+    ----------
+    name : str
+    factory : callable
+        ``factory(image, **options) -> deconvolve``, called once per photo. ``image`` is
+        the whole photo in linear light, float32 ``(H, W)`` or ``(H, W, C)`` (alpha left
+        out); ``options`` are :func:`deblur`'s method options. A factory that takes an
+        ``encoded`` keyword also gets the photo as given (before its transfer curve is
+        undone), and one that takes ``clip`` gets :func:`deblur`'s.
+        ``deconvolve(sub_image, psf) -> array`` of the sub-image's shape: one patch
+        (float32, linear light, with a margin of neighbouring pixels) and its PSF (odd
+        sides, centred; normalise it if your method needs a sum of exactly 1). If it takes
+        an ``unknown`` keyword it is given, where needed, a boolean mask of the pixels that
+        are not data.
+    default : bool
+        Make it the method :func:`deblur` uses when none is named.
+    thread_safe : bool
+        Whether ``deconvolve`` may run on several patches at once, in threads (the
+        default: patches run concurrently, one thread per core). Give False for one that
+        keeps state between calls (a shared buffer, a GPU context): its patches then run
+        one after the other.
+    """
     global DEFAULT_METHOD
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"a method's name must be a non-empty string, got {name!r}")
+    if not callable(factory):
+        raise TypeError(f"the factory of method {name!r} must be callable "
+                        f"(factory(image, **options) -> deconvolve), got {factory!r}")
     METHODS[name] = factory
+    if thread_safe:
+        _SERIAL_METHODS.discard(name)
+    else:
+        _SERIAL_METHODS.add(name)
     if default:
         DEFAULT_METHOD = name
 
@@ -223,9 +256,7 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
                 notes)
     if mode != "variant":
         raise InputError("--mode", f"unknown mode {mode!r} (variant or invariant)")
-    if isinstance(grid, str):
-        if grid != "auto":
-            raise InputError("--grid", f"expected RxC (e.g. 6x8) or 'auto', got {grid!r}")
+    if isinstance(grid, str) and grid.strip().lower() == "auto":
         grid = auto_grid(cap, (H, W), overlap, centred=align)
     rows, cols = check_grid(grid)
     if disp is not None:
@@ -255,6 +286,19 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
         warnings.warn(msg, stacklevel=3)
         notes.append(msg)
     return patches, PSFField(pts, psfs, (rows, cols), disp), notes
+
+
+def _grid_that_fits(shape, grid: tuple[int, int], overlap: float) -> tuple[int, int]:
+    """``grid`` with fewer rows (columns) where the photo is too small for them."""
+    fitted = list(grid)
+    for axis in (0, 1):
+        while fitted[axis] > 1:
+            try:
+                patch_grid(shape, tuple(fitted) if axis == 1 else (fitted[0], 1), overlap)
+                break
+            except InputError:
+                fitted[axis] -= 1
+    return fitted[0], fitted[1]
 
 
 def _most_patches_holding(need: float, shape, grid, overlap: float, axis: int) -> int:
@@ -530,7 +574,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
     curve = get_transfer_curve(transfer)
-    checked = check_image(image, "photo", max_value=PHOTO_MAX)
+    checked = check_image(image, "photo", max_value=PHOTO_MAX,
+                          min_value=PHOTO_MIN)
     encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
     patches, psfs = list(patches), list(psfs)
     if len(psfs) != len(patches):
@@ -539,9 +584,11 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         check_psf(k, f"PSF {i + 1}")
     img = curve.decode(encoded)
     factory = METHODS[method]
-    if "clip" in inspect.signature(factory).parameters:   # the method clips (or not) itself
+    if _takes_keyword(factory, "clip"):               # the method clips (or not) itself
         options = {**options, "clip": clip}
-    deconvolve = factory(img, encoded=encoded, **options)
+    if _takes_keyword(factory, "encoded"):
+        options = {**options, "encoded": encoded}
+    deconvolve = factory(img, **options)
     unknown = None
     if displacement is not None:
         box = max(p.shape[0] * p.shape[1] for p in psfs)
@@ -559,8 +606,14 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
             progress(1, 1)
     else:
         out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
-                                   unknown=unknown)
+                                   unknown=unknown,
+                                   workers=1 if method in _SERIAL_METHODS else None)
     out = np.asarray(out, np.float32)
+    if out.shape != img.shape:
+        raise ValueError(f"method {method!r} returned an image of shape {out.shape} for a "
+                         f"photo of shape {img.shape}")
+    if not np.isfinite(out).all():
+        raise ValueError(f"method {method!r} returned NaN or infinite values")
     if np.may_share_memory(out, image):  # never clip the caller's array in place
         out = out.copy()
     if clip:  # negative light is ringing; clip before the curve (in row bands, in place)
@@ -573,8 +626,14 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
 
 def _takes_unknown(deconvolve) -> bool:
     """Whether a method's deconvolver takes an ``unknown`` mask (pixels without data)."""
+    return _takes_keyword(deconvolve, "unknown")
+
+
+def _takes_keyword(function, name: str) -> bool:
+    """Whether ``function`` names the parameter ``name`` (a ``**kwargs`` does not count:
+    it may pass everything on to something that does not take it)."""
     try:
-        return "unknown" in inspect.signature(deconvolve).parameters
+        return name in inspect.signature(function).parameters
     except (TypeError, ValueError):      # a callable without an inspectable signature
         return False
 
@@ -592,7 +651,7 @@ _OTHER_DEFAULTS = {"grid": "auto", "align": True}
 
 
 def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
-           grid=None, overlap: float = DEFAULT_OVERLAP, method: str | None = None,
+           grid=None, overlap: float | None = None, method: str | None = None,
            align: bool | None = None,
            transfer: str | TransferCurve = "srgb", clip: bool = True, progress=None,
            return_report: bool = False, **options):
@@ -610,10 +669,12 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     mode : {"variant", "invariant"}
         Space-variant patch-wise deconvolution (default) or one PSF for the whole photo
         (the principal point's, with the middle row's rolling-shutter timing).
-    grid : (rows, cols) or "auto"
-        Patch grid for ``mode="variant"``. Default: the chapter's 6 x 8 for
-        ``method="wiener"``, ``"auto"`` (:func:`auto_grid`: patches small enough that the
-        PSF changes by at most ~half a pixel across one) for the other methods.
+    grid : (rows, cols), "RxC" or "auto"
+        Patch grid for ``mode="variant"`` (with ``mode="invariant"`` it is refused, as is
+        ``overlap``: one PSF serves the whole photo). Default: the chapter's 6 x 8 for
+        ``method="wiener"`` (fewer rows or columns on a photo too small for it),
+        ``"auto"`` (:func:`auto_grid`: patches small enough that the PSF changes by at
+        most ~half a pixel across one) for the other methods.
     align : bool, optional
         Warp the photo by the PSFs' mean-displacement field and deconvolve with centred
         PSFs (see :func:`plan_psf_field`). Default: off for ``"wiener"`` (the chapter's
@@ -623,7 +684,9 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     method : str
         Deconvolution method, a key of :data:`METHODS`.
     transfer : {"srgb", "linear"} or TransferCurve
-        Transfer curve of the photo's values; deconvolution runs in linear light
+        Transfer curve of the photo's values (default sRGB, as a photo file holds them;
+        :func:`gyrodeblur.simulate.simulate_blur` makes such a photo with
+        ``transfer="srgb"``); deconvolution runs in linear light
         (:func:`gyrodeblur.icc.photo_transfer_curve` gives the one a photo's ICC profile
         declares).
     clip : bool
@@ -642,14 +705,24 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     with the scene as the first row saw it, free of rolling-shutter skew.
     """
     t0 = time.perf_counter()
-    image = check_image(image, "photo", max_value=PHOTO_MAX)
+    image = check_image(image, "photo", max_value=PHOTO_MAX,
+                        min_value=PHOTO_MIN)
     patch_grid(image.shape[:2], (1, 1), 0.0)        # a photo too small for any mode: said
     if not isinstance(capture, Capture):
         raise TypeError(f"capture must be a Capture (see gyrodeblur.capture.load_capture), "
                         f"got {type(capture).__name__}")
     method = method or DEFAULT_METHOD
     defaults = METHOD_DEFAULTS.get(method, _OTHER_DEFAULTS)
-    grid = defaults["grid"] if grid is None else grid
+    if mode == "invariant":
+        for name, value in (("grid", grid), ("overlap", overlap)):
+            if value is not None:
+                raise InputError(name, "does not apply with mode='invariant' (one PSF for "
+                                       "the whole photo, no patches)")
+    overlap = DEFAULT_OVERLAP if overlap is None else overlap
+    if grid is None:
+        grid = defaults["grid"]
+        if not isinstance(grid, str):    # the method's fixed default: as much as fits
+            grid = _grid_that_fits(image.shape[:2], check_grid(grid), overlap)
     align = defaults["align"] if align is None else align
     patches, field_, notes = plan_psf_field(capture, image.shape[:2], mode=mode, grid=grid,
                                             overlap=overlap, align=align)
@@ -713,7 +786,8 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     """
     from .blind import estimate_kernel
 
-    image = check_image(image, "photo", max_value=PHOTO_MAX)
+    image = check_image(image, "photo", max_value=PHOTO_MAX,
+                        min_value=PHOTO_MIN)
     H, W = image.shape[:2]
     lin = get_transfer_curve(transfer).decode(split_alpha(image)[0])     # not the mask
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin

@@ -15,17 +15,22 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["check_image", "check_psf", "split_alpha", "join_alpha", "to_sensor_layout",
-           "to_photo_layout", "MAX_CHANNELS", "PHOTO_MAX"]
+           "to_photo_layout", "MAX_CHANNELS", "PHOTO_MAX", "PHOTO_MIN"]
 
 #: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
 MAX_CHANNELS = 4
 #: Largest value a photo to deblur or calibrate may hold (a little overshoot from earlier
 #: processing passes; 0-255 values do not).
 PHOTO_MAX = 2.0
+#: Smallest value a photo to deblur or calibrate may hold: a little undershoot from earlier
+#: processing (sharpening, a black level subtracted from noisy data) is tolerated, but no
+#: light is far below black (an offset photo, ``x - 0.5``, or negated values are refused).
+PHOTO_MIN = -0.25
 
 
 def check_image(image, what: str = "image", *, min_size: int = 2,
-                dtype=np.float32, max_value: float = np.inf) -> np.ndarray:
+                dtype=np.float32, max_value: float = np.inf,
+                min_value: float = -np.inf) -> np.ndarray:
     """``image`` as a float32 (or ``dtype``) array, or :class:`InputError` saying what is
     wrong.
 
@@ -43,6 +48,8 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
         Largest value accepted: a photo in [0, 1] has none far above 1, and one with values
         up to 255 was not scaled (:data:`PHOTO_MAX` for photos; a scene to blur may hold
         brighter light).
+    min_value : float
+        Smallest value accepted (:data:`PHOTO_MIN` for photos).
 
     Returns
     -------
@@ -53,7 +60,7 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
     InputError
         An integer, boolean or complex dtype (the values would be misread), a shape that is
         not ``(H, W)`` or channels-last ``(H, W, C)`` with ``C <= 4``, a side under
-        ``min_size``, or NaN/infinite values.
+        ``min_size``, NaN/infinite values, or values outside ``[min_value, max_value]``.
     """
     if isinstance(image, np.ndarray):
         arr = image
@@ -83,6 +90,11 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
         if top > max_value:
             raise InputError(None, f"{what} has values up to {top:.4g}; expected [0, 1] "
                                    "(divide 8-bit values by 255, 16-bit ones by 65535)")
+    if np.isfinite(min_value):
+        bottom = float(arr.min())
+        if bottom < min_value:
+            raise InputError(None, f"{what} has values down to {bottom:.4g}; expected [0, 1] "
+                                   "(light is never below black: is it offset or negated?)")
     return arr
 
 
@@ -130,11 +142,12 @@ def check_psf(psf, what: str = "PSF", *, dtype=np.float32) -> np.ndarray:
 
 
 def split_alpha(pixels: np.ndarray):
-    """``(colour, alpha)``: an RGBA photo's colour channels and its alpha channel
-    (``None`` without one). Alpha is a mask, not light: it is neither blurred nor
-    deblurred, and must not take part in what the colour channels' result depends on."""
-    if pixels.ndim == 3 and pixels.shape[2] == 4:
-        return pixels[..., :3], pixels[..., 3:]
+    """``(colour, alpha)``: an RGBA (or grey + alpha, ``(H, W, 2)``) photo's colour
+    channels and its alpha channel, each ``(H, W, C)``; ``(pixels, None)`` without one.
+    Alpha is a mask, not light: it is neither blurred nor deblurred, and must not take
+    part in what the colour channels' result depends on."""
+    if pixels.ndim == 3 and pixels.shape[2] in (2, 4):
+        return pixels[..., :-1], pixels[..., -1:]
     return pixels, None
 
 

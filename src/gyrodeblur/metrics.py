@@ -2,7 +2,9 @@
 
 Both compare a restored image with the sharp one on a central region that leaves out a
 border (``border`` pixels on every side), where the scene outside the frame leaked into
-the blur and no method can be fair; averaged over colour channels.
+the blur and no method can be fair; averaged over colour channels (an alpha channel,
+the last of 2 or 4, is a mask and is left out). Images are on the [0, 1] scale: values
+far outside it (0-255 floats) are refused rather than scored.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from skimage.metrics import structural_similarity
 
-from .images import check_image
+from .images import PHOTO_MAX, PHOTO_MIN, check_image, split_alpha
 
 __all__ = ["psnr", "ssim", "crop_border", "default_border"]
 
@@ -57,11 +59,14 @@ def ssim(reference: np.ndarray, estimate: np.ndarray, border: int = 0) -> float:
 
 
 def _pair(reference, estimate, border: int, min_size: int = 1):
-    """Both images checked (float, finite, the same shape) and cropped, as float64."""
-    a = check_image(reference, "reference", min_size=1, dtype=np.float64)
-    b = check_image(estimate, "estimate", min_size=1, dtype=np.float64)
+    """Both images checked (float, finite, on the [0, 1] scale, the same shape), their
+    colour channels (alpha left out), cropped, as float64."""
+    a, b = (check_image(image, what, min_size=1, dtype=np.float64, max_value=PHOTO_MAX,
+                        min_value=PHOTO_MIN)
+            for image, what in ((reference, "reference"), (estimate, "estimate")))
     if a.shape != b.shape:
         raise ValueError(f"reference and estimate differ in shape: {a.shape} and {b.shape}")
+    a, b = split_alpha(a)[0], split_alpha(b)[0]
     a, b = crop_border(a, border), crop_border(b, border)
     if min(a.shape[:2]) < min_size:
         raise ValueError(f"{a.shape[1]}x{a.shape[0]} pixels (after a border of {border}) are "

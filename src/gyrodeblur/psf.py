@@ -55,7 +55,29 @@ def trace(capture: Capture, x0: float, y0: float, n: int, row: float | None = No
     (:func:`landing_pixel`), at the midpoints of ``n`` equal steps of ``p``'s row's
     exposure (``row``: that row's timing instead, e.g. the middle row's for one PSF of the
     whole photo). To first order these are where the point's light goes."""
+    n = _sample_count(n)
     return _trace_from(capture, x0, y0, landing_pixel(capture, x0, y0, row=row), n, row)
+
+
+def _sample_count(n) -> int:
+    """``n`` as a whole number of samples >= 1, or ValueError."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n must be a whole number of samples >= 1, got {n!r}")
+    return int(n)
+
+
+def _pixel_position(x, y) -> tuple[float, float]:
+    """``(x, y)`` as floats, or InputError naming what is not a pixel position."""
+    try:
+        if isinstance(x, (str, bytes)) or isinstance(y, (str, bytes)):
+            raise TypeError
+        fx, fy = float(x), float(y)
+    except (TypeError, ValueError):
+        raise InputError(None, f"a pixel position must be two numbers (x, y), got "
+                               f"({x!r}, {y!r})") from None
+    if not (np.isfinite(fx) and np.isfinite(fy)):
+        raise InputError(None, f"a pixel position must be finite, got ({x!r}, {y!r})")
+    return fx, fy
 
 
 def _trace_from(capture: Capture, x0: float, y0: float, p: np.ndarray, n: int,
@@ -204,8 +226,18 @@ def _separable_splat(offsets, weights, radius: int | None, taps: np.ndarray,
     ``kernel(o - pixel)`` (normalised to sum 1 per point and axis), into a centred
     ``(2r+1, 2r+1)`` float32 array normalised to sum 1; ``r`` is ``radius`` or the
     points' reach plus the last tap. Taps outside the array are dropped."""
-    offsets = np.asarray(offsets, dtype=np.float64).reshape(-1, 2)
-    w = np.full(len(offsets), 1.0) if weights is None else np.asarray(weights, np.float64)
+    offsets = np.asarray(offsets, dtype=np.float64)
+    if offsets.ndim == 0 or offsets.shape[-1] != 2 or offsets.size == 0:
+        raise ValueError(f"offsets must be (n, 2) pixel offsets (x, y), n >= 1, got shape "
+                         f"{offsets.shape}")
+    offsets = offsets.reshape(-1, 2)
+    w = (np.full(len(offsets), 1.0) if weights is None
+         else np.asarray(weights, np.float64).reshape(-1))
+    if w.shape != (len(offsets),):
+        raise ValueError(f"weights must be one per point, shape ({len(offsets)},), got "
+                         f"{w.shape}")
+    if not (np.all(np.isfinite(offsets)) and np.all(np.isfinite(w)) and w.sum() > 0):
+        raise ValueError("offsets and weights must be finite, the weights' sum positive")
     reach = int(taps[-1])
     if radius is None:
         radius = int(np.ceil(np.abs(offsets).max())) + reach if len(offsets) else reach
@@ -286,7 +318,8 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
                                or not 0 <= radius <= max(cam.width, cam.height)):
         raise InputError(None, f"radius must be a whole number of pixels from 0 to "
                                f"{max(cam.width, cam.height)}, got {radius!r}")
-    pts = _adaptive_trace(capture, float(x), float(y), max_step, row)
+    x, y = _pixel_position(x, y)
+    pts = _adaptive_trace(capture, x, y, max_step, row)
     offsets = pts - np.array([x, y])
     if centred:
         offsets -= offsets.mean(axis=0)
@@ -325,6 +358,10 @@ class PSFField:
 def psf_extent(psf: np.ndarray, rel_threshold: float = 1e-3) -> int:
     """The larger side (px) of the bounding box of a PSF's mass (samples above
     ``rel_threshold`` times its maximum): the blur's size, whatever its offset."""
+    psf = np.asarray(psf)
+    if psf.ndim != 2 or psf.size == 0 or not np.isfinite(psf).all() or psf.max() <= 0:
+        raise ValueError(f"a PSF must be a finite 2-D array with a positive sample, got "
+                         f"shape {psf.shape}")
     ys, xs = np.nonzero(psf > psf.max() * rel_threshold)
     return int(max(np.ptp(xs), np.ptp(ys)) + 1)
 
@@ -360,6 +397,10 @@ def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int 
     the maxima over vertical and over horizontal pairs apart, ``(down, across)``: a rolling
     shutter changes the PSF from row to row faster than from column to column.
     """
+    if (len(probes) != 2 or not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool)
+                                    and p >= 2 for p in probes)):
+        raise ValueError(f"probes must be two whole numbers >= 2 (rows, columns), got {probes!r}")
+    n = _sample_count(n)
     cam = capture.camera
     ys = np.linspace(0, cam.height - 1, probes[0])
     xs = np.linspace(0, cam.width - 1, probes[1])

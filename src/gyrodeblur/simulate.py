@@ -15,6 +15,7 @@ from scipy import ndimage
 from .capture import Capture
 from .images import check_image, join_alpha, split_alpha
 from .psf import check_blur_span
+from .tonecurve import TransferCurve, get_transfer_curve
 
 __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
 
@@ -52,17 +53,26 @@ def warp_samples(capture: Capture, max_step: float = MAX_STEP_PX) -> int:
 
 def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None = None,
                   seed: int | None = None, quantize: bool = False,
-                  n_samples: int | None = None, order: int = 3) -> np.ndarray:
+                  n_samples: int | None = None, order: int = 3,
+                  transfer: str | TransferCurve = "linear") -> np.ndarray:
     """Blur ``sharp`` by the camera rotation recorded in ``capture``.
 
     Parameters
     ----------
     sharp : ndarray (H, W) or (H, W, C)
         The scene as seen at the reference orientation, float in [0, 1] (values above 1
-        are allowed, e.g. for light sources that saturate only after blurring). Its size
-        must match ``capture.camera`` (use ``capture.scaled_to``). A fourth channel is
-        alpha, a mask: returned untouched (not blurred, noised or quantised).
+        are allowed, e.g. for light sources that saturate only after blurring), in
+        **linear light** by default (see ``transfer``). Its size must match
+        ``capture.camera`` (use ``capture.scaled_to``). A last channel of 2 or 4 is alpha,
+        a mask: returned untouched (not blurred, noised or quantised).
     capture : Capture
+    transfer : {"linear", "srgb"} or TransferCurve
+        How ``sharp``'s values encode light. Light blurs linearly, so an encoded photo is
+        decoded, blurred, noised and encoded again. ``"linear"`` (default): ``sharp`` is
+        light itself. For an sRGB photo pass ``"srgb"``: the result is then what
+        :func:`gyrodeblur.deblur.deblur` expects by default (its ``transfer="srgb"``);
+        blurring encoded values directly would model a camera that does not exist and
+        cost a deblur of them several dB.
     snr_db : float, optional
         Add Gaussian noise with standard deviation ``std(blurred) / 10**(snr_db / 20)``.
     seed : int, optional
@@ -82,7 +92,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
 
     Returns
     -------
-    ndarray, float32, same shape as ``sharp``.
+    ndarray, float32, same shape as ``sharp``, encoded as ``sharp`` was.
 
     Notes
     -----
@@ -97,7 +107,9 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         raise ValueError(f"n_samples must be a positive whole number or None, got {n_samples!r}")
     if snr_db is not None and not np.isfinite(float(snr_db)):
         raise ValueError(f"snr_db must be a finite number of dB or None, got {snr_db!r}")
+    curve = get_transfer_curve(transfer, "transfer")
     img, alpha = split_alpha(check_image(sharp, "sharp image"))   # alpha: a mask, kept
+    img = curve.decode(img)
     H, W = img.shape[:2]
     cam = capture.camera
     if (W, H) != (cam.width, cam.height):
@@ -123,6 +135,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     out = (acc / n).reshape(img.shape)
     if snr_db is not None:
         out = add_noise(out, snr_db, seed)
+    out = curve.encode(out)
     if quantize:
         out = quantize_8bit(out)
     return join_alpha(out.astype(np.float32, copy=False), alpha)

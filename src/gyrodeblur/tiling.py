@@ -393,9 +393,17 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
     return out
 
 
-def check_grid(grid: Sequence[int]) -> tuple[int, int]:
+def check_grid(grid: Sequence[int] | str) -> tuple[int, int]:
     """``grid`` as ``(rows, cols)``, or :class:`InputError` (``--grid``) unless it is two
-    positive integers."""
+    positive integers, as a pair or as the text ``"RxC"`` (e.g. ``"6x8"``)."""
+    if isinstance(grid, str):
+        parts = grid.strip().lower().split("x")
+        items = ([int(v) for v in parts]
+                 if len(parts) == 2 and all(v.strip().isdigit() for v in parts) else None)
+        if items is None or min(items) < 1:
+            raise InputError("--grid", f"expected RxC with two positive integers (e.g. 6x8), "
+                                       f"got {grid!r}")
+        return items[0], items[1]
     try:
         items = list(grid)
     except TypeError:

@@ -41,6 +41,7 @@ __all__ = [
     "wiener_filter",
     "apply_spectral_filter",
     "normalize_range",
+    "check_phi",
     "DEFAULT_PHI",
     "NORMALIZE_PERCENTILES",
 ]
@@ -126,7 +127,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     """
     image = _as_image(image)
     psf = check_psf(psf)
-    phi = _check_phi(phi)
+    phi = check_phi(phi)
     height, width = image.shape[:2]
     shape = wiener_fft_shape(image.shape, psf.shape, taper=taper)
     padded = smooth_periodic_pad(image, shape) if shape != (height, width) else image
@@ -165,7 +166,7 @@ def wiener_filter(otf: np.ndarray, phi: float = DEFAULT_PHI) -> np.ndarray:
     -------
     ndarray, complex64, same shape as ``otf``.
     """
-    phi = _check_phi(phi)
+    phi = check_phi(phi)
     otf = np.asarray(otf).astype(np.complex64, copy=False)
     dc = otf[0, 0]
     if dc == 0:
@@ -265,7 +266,8 @@ def _as_image(image: np.ndarray) -> np.ndarray:
     return check_image(image)
 
 
-def _check_phi(phi: float) -> float:
+def check_phi(phi: float) -> float:
+    """``phi`` as a float, or :class:`InputError` unless it is a positive finite number."""
     if isinstance(phi, bool) or not isinstance(phi, numbers.Real) or not np.isfinite(phi) \
             or phi <= 0:
         raise InputError("--phi", f"must be a positive number (inverse SNR), got {phi!r}")

@@ -1,0 +1,191 @@
+"""What the Python API promises a researcher building their own pipeline: values in
+[0, 1], a simulate -> deblur round trip in one transfer curve, methods of one's own, and
+options that apply (or are refused)."""
+
+import threading
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from gyrodeblur.deblur import METHODS, deblur, register_method
+from gyrodeblur.errors import InputError
+from gyrodeblur.metrics import psnr, ssim
+from gyrodeblur.simulate import simulate_blur
+
+
+@pytest.fixture
+def scene():
+    """A textured grey scene (smooth blobs and edges), 96 x 128."""
+    rng = np.random.default_rng(3)
+    y, x = np.mgrid[0:96, 0:128]
+    u = 0.5 + 0.25 * np.sin(x / 5.0) * np.cos(y / 7.0)
+    u[30:60, 40:90] += 0.2
+    return np.clip(u + 0.02 * rng.standard_normal(u.shape), 0, 1).astype(np.float32)
+
+
+@pytest.fixture
+def own_method():
+    """Registers methods for one test and removes them afterwards."""
+    names = []
+
+    def add(name, factory, **kw):
+        names.append(name)
+        register_method(name, factory, **kw)
+
+    yield add
+    for name in names:
+        METHODS.pop(name, None)
+
+
+def test_photos_far_below_black_are_refused(scene, make_capture):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    blurred = simulate_blur(scene, cap)
+    for bad in (blurred - 0.5, -255 * blurred):
+        with pytest.raises(InputError, match="values down to .*below black"):
+            deblur(bad, cap)
+    slight = blurred.copy()
+    slight[0, 0] = -0.01                      # a little undershoot from earlier processing
+    assert deblur(slight, cap).min() >= 0
+
+
+def test_metrics_refuse_0_255_floats_and_leave_alpha_out(scene):
+    other = np.clip(scene + 0.05, 0, 1)
+    with pytest.raises(InputError, match="values up to 2[0-9][0-9]"):
+        psnr(scene * 255, other * 255)
+    with pytest.raises(InputError, match="values up to 2[0-9][0-9]"):
+        ssim(scene * 255, other * 255)
+    alpha = np.ones_like(scene)[..., None]
+    grey = psnr(scene, other)
+    assert psnr(np.dstack([scene, alpha]), np.dstack([other, alpha])) == pytest.approx(grey)
+    rgb, rgb2 = np.dstack([scene] * 3), np.dstack([other] * 3)
+    assert psnr(np.dstack([rgb, alpha]), np.dstack([rgb2, alpha])) == pytest.approx(grey)
+
+
+def test_simulate_with_the_srgb_curve_is_what_deblur_expects(scene, make_capture):
+    """``simulate_blur`` blurs light; given an sRGB photo and ``transfer="srgb"`` it
+    decodes, blurs and encodes, so the default ``deblur`` undoes it; blurring the encoded
+    values as light (the default ``"linear"`` on an sRGB photo) does not match it."""
+    from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
+
+    cap = make_capture([0.2, 0.5, 0.1], width=128, height=96, f=120.0)
+    y, x = np.mgrid[0:96, 0:128]
+    scene = np.where((x // 16 + y // 16) % 2, 0.9, 0.05)                     # contrast,
+    scene = ndimage.gaussian_filter(scene, 1.5).astype(np.float32)  # edges a lens passes
+    by_hand = linear_to_srgb(simulate_blur(srgb_to_linear(scene), cap))
+    assert np.allclose(simulate_blur(scene, cap, transfer="srgb"), by_hand, atol=1e-5)
+    matched = psnr(scene, deblur(simulate_blur(scene, cap, transfer="srgb"), cap), 12)
+    mismatched = psnr(scene, deblur(simulate_blur(scene, cap), cap), 12)
+    assert matched > mismatched + 1.0, (matched, mismatched)
+    with pytest.raises(InputError, match="transfer"):
+        simulate_blur(scene, cap, transfer="gamma 2.2")
+
+
+def test_a_method_of_ones_own_gets_what_it_names(scene, make_capture, own_method):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    blurred = simulate_blur(scene, cap)
+    own_method("identity", lambda image, phi=0.01: (lambda sub, psf: sub))   # no `encoded`
+    out = deblur(blurred, cap, method="identity", grid=(2, 2), align=False)
+    assert np.allclose(out, blurred, atol=2e-3)          # the curve's round trip only
+    seen = {}
+
+    def factory(image, *, encoded, clip):
+        seen.update(encoded=encoded.shape, clip=clip)
+        return lambda sub, psf: sub
+
+    own_method("names-them", factory)
+    deblur(blurred, cap, method="names-them", grid=(2, 2), clip=False)
+    assert seen == {"encoded": blurred.shape, "clip": False}
+    with pytest.raises(TypeError, match="callable"):
+        register_method("five", 5)
+    own_method("nan", lambda image: (lambda sub, psf: sub * np.nan))
+    with pytest.raises(ValueError, match="'nan' returned NaN"):
+        deblur(blurred, cap, method="nan", grid=(2, 2))
+
+
+def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
+        scene, make_capture, own_method):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    blurred = simulate_blur(scene, cap)
+    busy = threading.Lock()
+    overlaps = []
+
+    def factory(image):
+        def deconvolve(sub, psf):
+            if not busy.acquire(blocking=False):
+                overlaps.append(1)
+                busy.acquire()
+            try:
+                threading.Event().wait(0.01)       # long enough for a second thread
+                return sub
+            finally:
+                busy.release()
+        return deconvolve
+
+    own_method("serial", factory, thread_safe=False)
+    deblur(blurred, cap, method="serial", grid=(3, 3))
+    assert overlaps == []
+    own_method("parallel", factory)
+    deblur(blurred, cap, method="parallel", grid=(3, 3))
+    assert overlaps, "the default runs patches side by side (the test's own check)"
+
+
+def test_options_that_do_not_apply_are_refused_and_defaults_fit_the_photo(
+        scene, make_capture):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    blurred = simulate_blur(scene, cap)
+    with pytest.raises(InputError, match="grid: does not apply with mode='invariant'"):
+        deblur(blurred, cap, mode="invariant", grid="bogus")
+    with pytest.raises(InputError, match="overlap: does not apply"):
+        deblur(blurred, cap, mode="invariant", overlap=0.1)
+    for phi in (0, -1):                  # one rule, before any work
+        with pytest.raises(InputError, match="--phi: must be a positive number"):
+            deblur(blurred, cap, method="wiener", phi=phi)
+    _, report = deblur(blurred, cap, grid="3x2", return_report=True)
+    assert report.grid == (3, 2)
+    small = make_capture([0.0, 0.04, 0.01], width=60, height=40, f=70.0)
+    _, report = deblur(np.full((40, 60), 0.5, np.float32), small, method="wiener",
+                       return_report=True)
+    assert report.grid[0] < 6 and report.grid[1] < 8     # the chapter's 6 x 8 does not fit
+
+
+def test_grey_plus_alpha_keeps_its_alpha(scene, make_capture):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    alpha = (np.indices(scene.shape).sum(0) % 2).astype(np.float32)
+    la = np.dstack([scene, alpha])
+    blurred = simulate_blur(la, cap)
+    assert np.array_equal(blurred[..., 1], alpha)
+    assert np.array_equal(blurred[..., 0], simulate_blur(scene, cap))
+    out = deblur(blurred, cap)
+    assert out.shape == la.shape and np.array_equal(out[..., 1], alpha)
+    assert np.array_equal(out[..., 0], deblur(blurred[..., 0], cap))
+
+
+def test_psf_helpers_refuse_what_they_cannot_draw(make_capture):
+    from gyrodeblur.psf import lanczos_splat, psf_extent, psf_variation, render_psf, splat, trace
+
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    with pytest.raises(ValueError, match="offsets must be"):
+        lanczos_splat(np.zeros((0, 2)))
+    with pytest.raises(ValueError, match="one per point"):
+        splat(np.zeros((2, 2)), weights=np.array([1.0]))
+    assert splat(np.array([0.0, 0.0])).shape == (3, 3)        # one point, as (2,)
+    with pytest.raises(ValueError, match="positive sample"):
+        psf_extent(np.zeros((3, 3)))
+    for n in (0, 2.5, True):
+        with pytest.raises(ValueError, match="whole number of samples"):
+            trace(cap, 10, 10, n)
+    with pytest.raises(InputError, match="two numbers"):
+        render_psf(cap, "10", 10)
+    with pytest.raises(ValueError, match="probes"):
+        psf_variation(cap, probes=(1, 1))
+
+
+def test_logs_and_captures_are_hashable_and_refuse_complex_rates(make_capture):
+    from gyrodeblur.gyrolog import GyroLog
+
+    cap = make_capture([0.0, 0.4, 0.1])
+    assert cap == cap and cap != cap.replace() and len({cap, cap.log}) == 2
+    t = np.arange(5) * 0.01
+    with pytest.raises(InputError, match="real numbers"):
+        GyroLog(t, np.ones((5, 3)) * (1 + 1j))
