@@ -376,3 +376,29 @@ def test_a_capture_keeps_its_own_copy_of_the_axis_matrix(capture_files):
     made = Capture(cap.exposure_start, cap.exposure_time, 0.0, cap.camera, cap.log, axes=m)
     m[0, 0] = -1.0                                      # now a reflection
     assert np.linalg.det(made.axes) == pytest.approx(1.0)
+
+
+def test_a_bad_gyro_format_or_unit_is_named_where_it_was_given(capture_files):
+    d, doc = capture_files
+    for key, value, said in (("format", "CSV-ish", "gyro.format"),
+                             ("time_unit", "sec", "gyro.time_unit")):
+        (d / "bad.json").write_text(json.dumps({**doc, "gyro": {**doc["gyro"], key: value}}))
+        with pytest.raises(InputError, match=f"bad.json: {said}") as exc:
+            load_capture(d / "bad.json")
+        assert "gyro.gcsv" not in str(exc.value)
+    (d / "upper.json").write_text(json.dumps({**doc, "gyro": {**doc["gyro"], "format": "GCSV"}}))
+    assert len(load_capture(d / "upper.json").log) == 400
+
+
+def test_another_log_given_as_an_option_has_its_own_format(capture_files):
+    """``--gyro other.csv`` with a capture that says ``"format": "gcsv"``: the JSON's
+    format was its own log's; the new one's is worked out from the new file."""
+    d, doc = capture_files
+    log = load_capture(d / "cap.json").log
+    (d / "other.csv").write_text("t_s,wx,wy,wz\n" + "".join(
+        f"{t:.6f},{w[0]},{w[1]},{w[2]}\n" for t, w in zip(log.t, log.omega)))
+    cap = load_capture(d / "cap.json", overrides={"gyro_path": str(d / "other.csv")})
+    assert np.allclose(cap.log.omega, log.omega)
+    with pytest.raises(InputError, match="--gyro-format"):
+        load_capture(d / "cap.json", overrides={"gyro_path": str(d / "other.csv"),
+                                                "gyro_format": "nope"})

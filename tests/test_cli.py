@@ -187,7 +187,7 @@ def test_bad_inputs_exit_2_and_write_nothing(capture_dir, capsys):
 
 @pytest.mark.parametrize("content,match", [
     ("t_s,x,y,z\n50,0,0,0\n50.01,0,0,0\n50.005,0,0,0\n", "not increasing"),
-    ("t_s,x,y,z\n50,0,0,0\n50.5,nan,0,0\n51,0,0,0\n", "NaN"),
+    ("t_s,x,y,z\n50,0,0,0\n50.5,inf,0,0\n51,0,0,0\n", "infinite"),
     ("t_s,x,y,z\n50,0,0,0\n50.1,0,0,0\n50.6,0,0,0\n51,0,0,0\n", "gap"),
     ("t_s,x,y,z\n50.31,0,0,0\n50.32,0,0,0\n", "covers"),
     ("t_s,x,y,z\n50,90,90,90\n50.5,90,90,90\n51,90,90,90\n", "deg/s"),
@@ -652,3 +652,48 @@ def test_outputs_are_all_written_or_none(capture_dir, capsys, monkeypatch):
     assert (d / "p.npy.part.npy").read_bytes() == b"someone else's"
     assert np.load(d / "p.npy").ndim == 2
     assert not [p for p in d.iterdir() if p.name.endswith((".tmp", ".probe"))]
+
+
+def test_the_demo_writes_over_its_own_folder_but_not_over_a_user_s_files(tmp_path, capsys,
+                                                                           monkeypatch):
+    import gyrodeblur.demo as demo
+
+    ran = []
+    monkeypatch.setattr(demo, "simulate_blur", lambda *a, **k: ran.append(1) or (
+        _ for _ in ()).throw(KeyboardInterrupt))    # stop at the work: the folder matters
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "capture.json").write_text("my notes")
+    err = _run_error(["demo", "--out", str(mine)], capsys)
+    assert "capture.json, not written by the demo" in err and "--overwrite" in err
+    assert (mine / "capture.json").read_text() == "my notes" and ran == []
+    with pytest.raises(KeyboardInterrupt):
+        demo.run_demo(str(mine), overwrite=True, say=lambda s: None)
+    assert ran == [1]
+    own = tmp_path / "own"                   # a folder the demo wrote before
+    own.mkdir()
+    (own / demo.MARKER).write_text("")
+    (own / "capture.json").write_text("{}")
+    with pytest.raises(KeyboardInterrupt):
+        demo.run_demo(str(own), say=lambda s: None)
+    assert ran == [1, 1]
+
+
+def test_a_phone_photo_of_more_megapixels_than_pillow_allows_is_read(tmp_path, monkeypatch):
+    """Pillow calls anything over 89 MP a possible decompression bomb (and refuses 179 MP);
+    phones take 108 and 200 MP photos. Shown at a small scale: Pillow's limit lowered
+    under the photo's size reads it anyway, the tool's own limit refuses it clearly."""
+    import warnings
+
+    import gyrodeblur.imageio as imageio
+    from gyrodeblur.errors import InputError
+
+    p = write_photo(tmp_path / "big.png", np.full((60, 80, 3), 0.5, np.float32))
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 1000)      # 4800 px: over twice that
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_photo(p).pixels.shape == (60, 80, 3)
+    assert Image.MAX_IMAGE_PIXELS == 1000                     # left as it was
+    monkeypatch.setattr(imageio, "MAX_PHOTO_PIXELS", 4000)
+    with pytest.raises(InputError, match=r"80x60 pixels \(0 MP\) is more than"):
+        read_photo(p)

@@ -241,7 +241,6 @@ def test_shared_android_log(shared_data):
 @pytest.mark.parametrize("content,match", [
     ("t_s,x,y,z\n0,0,0,0\n0.01,0,0,0\n0.005,0,0,0\n",
      r"not increasing \(sample 3: 0.005000 s after 0.010000 s\)"),
-    ("t_s,x,y,z\n0,0,0,0\n0.01,nan,0,0\n0.02,0,0,0\n", "NaN"),
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
     ("t_s,x,y,z\n0,0,0\n", "expected 4 values"),
     ("t_s,x,y,z\n0,0,0,abc\n", "not a number"),
@@ -367,8 +366,8 @@ def test_time_unit_from_interval_refuses_rates_outside_a_gyros():
 
 def test_read_gyro_log_checks_its_format_and_options(tmp_path, trace):
     write_gcsv(tmp_path / "g.gcsv", trace)
-    with pytest.raises(InputError, match="unknown gyro log format 'CSV'"):
-        read_gyro_log(tmp_path / "g.gcsv", "CSV", time_unit="ms")
+    with pytest.raises(InputError, match="unknown gyro log format 'tsv'"):
+        read_gyro_log(tmp_path / "g.gcsv", "tsv", time_unit="ms")
     with pytest.raises(TypeError, match="unknown option.*time_units"):
         read_gyro_log(tmp_path / "g.gcsv", time_units="ms")
     with pytest.warns(UserWarning, match="time_unit applies to CSV logs only; this log is gcsv"):
@@ -456,3 +455,53 @@ def test_logs_saved_by_windows_tools_are_read(tmp_path, trace, encoding):
     p.write_bytes(b"t_ns,gx,gy,gz\n\x00\x01\x02")
     with pytest.raises(InputError, match="not a text file"):
         read_gyro_log(p)
+
+
+def _formatted_rows(trace, fmt, sep=","):
+    return "".join(sep.join(fmt(v) for v in (t, *w)) + "\n" for t, w in zip(trace.t, trace.omega))
+
+
+def test_quoted_values_holding_the_delimiter_keep_the_columns_apart(tmp_path, trace):
+    """A spreadsheet quotes a text value holding a comma; an unquoted one shifts the
+    columns, which is refused rather than read as other rates."""
+    p = tmp_path / "q.csv"
+    p.write_text("t_s,place,gx,gy,gz\n" + "".join(
+        f'{t:.6f},"48.1,11.5",{w[0]:.9f},{w[1]:.9f},{w[2]:.9f}\n'
+        for t, w in zip(trace.t, trace.omega)))
+    log = read_gyro_log(p)
+    assert np.allclose(log.omega, trace.omega, atol=1e-8)
+    p.write_text(p.read_text().replace('"48.1,11.5"', "48.1,11.5"))
+    with pytest.raises(InputError, match="6 values where the header names 5 columns"):
+        read_gyro_log(p)
+
+
+def test_a_tab_separated_log_may_use_the_decimal_comma(tmp_path, trace):
+    """phyphox's "CSV (Tabulator, decimal comma)" export."""
+    p = tmp_path / "phyphox.csv"
+    p.write_text('"Time (s)"\t"Gyroscope x (rad/s)"\t"Gyroscope y (rad/s)"\t'
+                 '"Gyroscope z (rad/s)"\n'
+                 + _formatted_rows(trace, lambda v: f"{v:.9E}".replace(".", ","), "\t"))
+    log = read_gyro_log(p)
+    assert np.allclose(log.t, trace.t, atol=1e-6) and np.allclose(log.omega, trace.omega)
+
+
+def test_samples_with_a_missing_value_are_skipped_with_a_warning(tmp_path, trace):
+    p = tmp_path / "gaps.csv"
+    lines = ["t_s,wx,wy,wz"] + _formatted_rows(trace, lambda v: f"{v:.9f}").splitlines()
+    lines[5] = lines[5].split(",")[0] + ",NaN,NaN,NaN"          # phyphox
+    lines[9] = ",".join(lines[9].split(",")[:2]) + ",,0.1"      # an empty cell
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.warns(UserWarning, match="2 sample"):
+        log = read_gyro_log(p)
+    assert len(log) == len(trace) - 2
+    assert np.allclose(log.omega, np.delete(trace.omega, [4, 8], axis=0))
+
+
+def test_format_names_and_column_names_are_matched_as_a_person_types_them(tmp_path, trace):
+    p = tmp_path / "log.csv"
+    p.write_text("Time since start in ms ,wx,wy,wz\n"
+                 + _formatted_rows(trace, lambda v: f"{v:.9f}"))
+    log = read_gyro_log(p, "CSV", time_column="Time since start in ms ", time_unit="s")
+    assert np.allclose(log.omega, trace.omega)
+    with pytest.raises(InputError, match="unknown gyro log format 'tsv'"):
+        read_gyro_log(p, "tsv")

@@ -35,7 +35,7 @@ import numpy as np
 from .axes import axes_to_letters, parse_axes
 from .camera import Camera
 from .errors import InputError
-from .gyrolog import GyroLog, check_coverage, read_gyro_log
+from .gyrolog import RATE_UNITS, TIME_UNITS, GyroLog, check_coverage, check_format, read_gyro_log
 from .orientation import Orientation
 
 __all__ = ["Capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"]
@@ -61,7 +61,7 @@ _WIDEST_VIEW_DEG = float(np.degrees(2 * np.arctan(0.5 / MIN_FOCAL_PER_SIDE)))
 ORIENTATION_MARGIN = 0.25
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Capture:
     """Everything needed to turn a gyro log into the PSFs of one photo.
 
@@ -90,6 +90,11 @@ class Capture:
         The JSON file, for messages.
     max_gap : float
         Largest allowed gap between gyro samples inside the exposure (s).
+
+    Notes
+    -----
+    Equality is identity (its arrays have no single truth value); the instance is
+    hashable, so it can key a cache.
     """
 
     exposure_start: float
@@ -468,6 +473,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             gyro_d[k] = ov[k_ov]
             if k_ov == "gyro_path":
                 base = os.getcwd()
+                if "gyro_format" not in ov:   # the file's format said nothing of another
+                    gyro_d.pop("format", None)
     hints = exif_hints or {}
     if "exposure_time" not in data and "exposure_time" in hints:
         data["exposure_time"] = hints["exposure_time"]
@@ -519,6 +526,13 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise InputError(src, f"gyro.path must be a file path (a string), got {gyro_d['path']!r}")
     gpath = os.path.normpath(os.path.join(base, os.path.expanduser(os.fspath(gyro_d["path"]))))
     fmt = gyro_d.get("format")
+    if fmt is not None:                   # named where it was given, not at the log
+        fmt = check_format(fmt, origin(("gyro_format",)) if "gyro_format" in ov
+                           else f"{src}: gyro.format")
+    for key, known in (("time_unit", TIME_UNITS), ("rate_unit", RATE_UNITS)):
+        if key in gyro_d and gyro_d[key] not in known:
+            where = origin((key,)) if key in ov else f"{src}: gyro.{key}"
+            raise InputError(where, f"unknown unit {gyro_d[key]!r} (known: {', '.join(known)})")
     csv_opts = {k: gyro_d[k] for k in CSV_OPTION_KEYS if k in gyro_d}
     rc = csv_opts.get("rate_columns")
     if rc is not None:

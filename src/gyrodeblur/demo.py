@@ -18,6 +18,7 @@ import numpy as np
 from .camera import Camera
 from .capture import Capture
 from .deblur import deblur
+from .errors import InputError
 from .gyrolog import read_gyro_log
 from .imageio import write_photo
 from .metrics import default_border, psnr, ssim
@@ -26,6 +27,18 @@ from .simulate import quantize_8bit, simulate_blur
 from .tonecurve import linear_to_srgb, srgb_to_linear
 
 __all__ = ["demo_capture", "run_demo"]
+
+
+def _check_demo_folder(out_dir: str, overwrite: bool) -> None:
+    """Refuse to write over files in a folder that is not the demo's own."""
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise InputError(out_dir, "exists and is not a folder")
+    if overwrite or not os.path.isdir(out_dir) or os.path.exists(os.path.join(out_dir, MARKER)):
+        return
+    taken = [name for name in OUTPUTS if os.path.lexists(os.path.join(out_dir, name))]
+    if taken:
+        raise InputError(out_dir, f"already holds {', '.join(taken)}, not written by the demo; "
+                                  "give another --out folder, or --overwrite to replace them")
 
 
 def demo_capture(folder: str | None = None) -> Capture:
@@ -37,12 +50,27 @@ def demo_capture(folder: str | None = None) -> Capture:
                    gyro_spec={"path": gyro_path, "format": "gcsv"})
 
 
-def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = True,
+#: What the demo writes into its folder; ``MARKER`` says a folder is the demo's own.
+OUTPUTS = ("sharp.png", "blurred.png", "deblurred.png", "psf_field.png", "comparison.png",
+           "capture.json", "metrics.json")
+MARKER = ".gyrodeblur-demo"
+
+
+def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = False,
              progress=None) -> dict:
-    """Run the demo and write its pictures into ``out_dir``; returns the metrics."""
+    """Run the demo and write its pictures into ``out_dir``; returns the metrics.
+
+    A folder the demo wrote before (it holds :data:`MARKER`) is written over, so the demo
+    can be run again; in any other folder a file of the demo's names (:data:`OUTPUTS`) is
+    refused (:class:`~gyrodeblur.errors.InputError`, before any work) unless
+    ``overwrite``.
+    """
     from skimage import data
 
+    _check_demo_folder(out_dir, overwrite)
     os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, MARKER), "w", encoding="utf-8") as fh:
+        fh.write("written by `gyrodeblur demo`, which may write over this folder's files\n")
     sharp = data.astronaut().astype(np.float32) / 255.0
     cap = demo_capture()
     blurred = quantize_8bit(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap,
@@ -59,7 +87,7 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = T
         "method": report.method, "grid": list(report.grid),
         "psf_extent_px": list(report.extent_range), "seconds": report.seconds,
     }
-    w = dict(overwrite=overwrite)
+    w = dict(overwrite=True)                 # the folder was checked above
     write_photo(os.path.join(out_dir, "sharp.png"), sharp, **w)
     write_photo(os.path.join(out_dir, "blurred.png"), blurred, **w)
     write_photo(os.path.join(out_dir, "deblurred.png"), restored, **w)

@@ -52,6 +52,7 @@ __all__ = [
     "read_gcsv",
     "read_csv_log",
     "read_android_events",
+    "check_format",
     "write_gcsv",
     "check_coverage",
     "rate_noise",
@@ -70,7 +71,7 @@ IMPLAUSIBLE_MEDIAN_RATE = 35.0
 FAST_MEDIAN_RATE = 2.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GyroLog:
     """Angular-velocity samples.
 
@@ -84,6 +85,11 @@ class GyroLog:
         The file it came from, for error messages.
     meta : dict
         Extra header values (e.g. gcsv ``frame_readout_time``).
+
+    Notes
+    -----
+    Equality is identity (its arrays have no single truth value); the instance is
+    hashable, so it can key a cache.
     """
 
     t: np.ndarray
@@ -92,6 +98,11 @@ class GyroLog:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        for name in ("t", "omega"):
+            kind = np.asarray(getattr(self, name)).dtype.kind
+            if kind not in "biuf":
+                raise InputError(self.source, f"gyro {name} must be real numbers, got "
+                                              f"dtype {np.asarray(getattr(self, name)).dtype}")
         t = np.array(self.t, dtype=np.float64)         # copies: the caller's arrays may
         w = np.array(self.omega, dtype=np.float64)     # change after validation
         object.__setattr__(self, "t", t)
@@ -244,10 +255,7 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
         raise InputError(path, "is a folder, not a gyro log")
     if not os.path.isfile(path):
         raise InputError(path, "gyro log not found")
-    if format is None:
-        format = _guess_format(path)
-    if format not in FORMATS:
-        raise InputError(path, f"unknown gyro log format {format!r} (known: {', '.join(FORMATS)})")
+    format = _guess_format(path) if format is None else check_format(format)
     unknown = sorted(set(options) - set(_CSV_OPTIONS))
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} "
@@ -261,6 +269,16 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if format == "csv":
         return read_csv_log(path, **options)
     return read_android_events(path)
+
+
+def check_format(format, source: str | None = None) -> str:
+    """A log format's name (any case) as a key of :data:`FORMATS`, or :class:`InputError`
+    naming ``source`` (where the name was given)."""
+    key = format.strip().lower() if isinstance(format, str) else None
+    if key not in FORMATS:
+        raise InputError(source, f"unknown gyro log format {format!r} (known: "
+                                 f"{', '.join(FORMATS)})")
+    return key
 
 
 def _guess_format(path: str) -> str:
@@ -350,18 +368,27 @@ def _parse_numeric_rows(path: str, lines: list[str], columns: list[int], *, firs
     out = []
     need = max(columns) + 1
     last = max((k for k, line in enumerate(lines) if line.strip()), default=-1)
+    decimal_comma = sep in (";", "\t")  # a comma that cannot split is a decimal mark
     for k, line in enumerate(lines):
         if not line.strip():
             continue
-        parts = line.split(sep) if sep else line.split()
+        parts = _fields(line, sep)
         try:
             if len(parts) < need:
                 raise InputError(path, f"line {first_line + k}: expected {need} values, "
                                        f"got {len(parts)}")
+            if names and len(parts) > len(names) and any(v.strip() for v in parts[len(names):]):
+                raise InputError(path, f"line {first_line + k}: {len(parts)} values where the "
+                                       f"header names {len(names)} columns, so the columns "
+                                       f"cannot be told apart (a value holding the delimiter "
+                                       f"{sep!r} without quotes?)")
             row = []
             for c in columns:
+                if not parts[c].strip().strip('"'):      # an empty cell: a missing value
+                    row.append(np.nan)
+                    continue
                 try:
-                    row.append(parse_number(parts[c], decimal_comma=sep == ";"))
+                    row.append(parse_number(parts[c], decimal_comma=decimal_comma))
                 except ValueError:
                     what = f"column {names[c]!r}" if names else f"value {c + 1}"
                     raise InputError(path, f"line {first_line + k}: {what} is not a number "
@@ -373,7 +400,25 @@ def _parse_numeric_rows(path: str, lines: list[str], columns: list[int], *, firs
             raise
     if not out:
         raise InputError(path, "no data rows")
-    return _without_repeats(np.asarray(out, dtype=np.float64))
+    rows = np.asarray(out, dtype=np.float64)
+    missing = np.isnan(rows).any(axis=1)      # (an infinite value is refused, not missing)
+    if missing.any():          # phyphox writes NaN, a spreadsheet an empty cell
+        rows = rows[~missing]
+        if len(rows) == 0:
+            raise InputError(path, "no data row holds a time and three rates")
+        warnings.warn(f"{path}: {int(missing.sum())} sample(s) with a missing or NaN value "
+                      "skipped; an exposure they fall in sees a gap in the log", stacklevel=4)
+    return _without_repeats(rows)
+
+
+def _fields(line: str, sep: str | None) -> list[str]:
+    """The values of one line: split by ``sep`` (whitespace for ``None``), quotes
+    respected (a spreadsheet quotes a text value holding the delimiter)."""
+    if sep is None:
+        return line.split()
+    if '"' in line:
+        return next(csv.reader([line], delimiter=sep))
+    return line.split(sep)
 
 
 def _without_repeats(rows: np.ndarray) -> np.ndarray:
@@ -449,9 +494,9 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         elif isinstance(c, str) and c.isascii() and c.isdigit():
             i = int(c)
         elif isinstance(c, str):
-            if c not in header:
+            if c.strip() not in header:   # names are compared as the header's, stripped
                 raise InputError(path, f"no column named {c!r} (columns: {', '.join(header)})")
-            return header.index(c)
+            return header.index(c.strip())
         else:
             raise InputError(path, f"{what} must name a column (its name, or its index from "
                                    f"0), got {c!r}")
@@ -461,7 +506,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         return i
 
     first_row = next((ln for ln in lines[1:] if ln.strip()), "")
-    ti = (default_time_column(header, first_row.split(delimiter)) if time_column is None
+    ti = (default_time_column(header, _fields(first_row, delimiter)) if time_column is None
           else col(time_column, "time_column"))
     if rate_columns is None:
         ri = default_rate_columns(path, header, ti)

@@ -195,12 +195,35 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
                  png_gamma=gamma)
 
 
+#: Most pixels a photo may have (Pillow's own guard, 89 MP with a warning and 179 MP
+#: refused as a "decompression bomb", is below the 108 and 200 MP of phone sensors).
+MAX_PHOTO_PIXELS = 400_000_000
+
+
+def _open_within_size_limit(p: str) -> Image.Image:
+    """``Image.open(p)`` with :data:`MAX_PHOTO_PIXELS` as the size limit (checked on the
+    header, before any pixel is decoded) instead of Pillow's."""
+    limit = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None          # for this open only (it checks the header)
+    try:
+        im = Image.open(p)
+    finally:
+        Image.MAX_IMAGE_PIXELS = limit
+    width, height = im.size
+    if width * height > MAX_PHOTO_PIXELS:
+        im.close()
+        raise InputError(p, f"{width}x{height} pixels ({width * height / 1e6:.0f} MP) is more "
+                            f"than the {MAX_PHOTO_PIXELS / 1e6:.0f} MP this tool reads (a damaged "
+                            "file, or one made to exhaust memory?)")
+    return im
+
+
 def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict | None,
                              float | None]:
     """(format, samples, EXIF block, ICC profile, JPEG quantisation tables, PNG file
     gamma) of a file; decoder errors propagate."""
     try:
-        im = Image.open(p)
+        im = _open_within_size_limit(p)
     except UnidentifiedImageError:
         if not _is_tiff(p):
             raise
@@ -764,8 +787,10 @@ def _check_pixels(pixels) -> np.ndarray:
         raise ValueError(f"pixels must be floats in [0, 1], not {arr.dtype}")
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
+    if arr.ndim == 3 and arr.shape[2] == 2:   # grey + alpha: stored as RGBA, as read
+        arr = _grey_alpha_to_rgba(arr)
     if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or 0 in arr.shape:
-        raise ValueError(f"pixels must have shape (H, W) or (H, W, 3 or 4), not {arr.shape}")
+        raise ValueError(f"pixels must have shape (H, W) or (H, W, 1 to 4), not {arr.shape}")
     if np.isnan(arr).any():
         raise ValueError("pixels contain NaN")
     return arr

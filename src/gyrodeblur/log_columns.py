@@ -30,9 +30,9 @@ RATE_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
 
 
 def parse_number(text: str, decimal_comma: bool = False) -> float:
-    """A value of a log's line, quotes stripped; with ``decimal_comma`` (semicolon-separated
-    files, as spreadsheets write them where the comma is the decimal mark) ``-0,82`` is
-    -0.82."""
+    """A value of a log's line, quotes stripped; with ``decimal_comma`` (semicolon- or
+    tab-separated files, as spreadsheets and phyphox write them where the comma is the
+    decimal mark) ``-0,82`` is -0.82."""
     text = text.strip().strip('"')
     if decimal_comma and "," in text and "." not in text:
         text = text.replace(",", ".")
