@@ -105,6 +105,9 @@ def _ignored_options(args) -> None:
                                  "does not apply with --blind, which uses no gyro log")
         if args.mode != "variant":
             raise InputError("--mode", "does not apply with --blind (--grid sets its patches)")
+        if given("overlap") and args.grid in (None, "1x1"):
+            raise InputError("--overlap", "applies with --blind --grid RxC only (one kernel "
+                                          "for the whole photo has no patches)")
     else:
         if args.fix and not args.refine:
             raise InputError("--fix", "applies with --refine only")
@@ -259,6 +262,8 @@ def cmd_psf(args, say) -> None:
     _check_not_over_capture(cap, args.overwrite, args.output)
     if (args.at is None) == (args.grid is None):
         raise InputError("--at/--grid", "give exactly one of --at X,Y or --grid RxC")
+    if args.at is not None and args.overlap is not None:
+        raise InputError("--overlap", "applies with --grid only (one PSF at --at has no patches)")
     out = args.output
     if not out.lower().endswith((".npy", ".png")):
         raise InputError(out, "output must end in .npy or .png")
@@ -279,7 +284,8 @@ def cmd_psf(args, say) -> None:
     grid = _pair(args.grid, "--grid")
     cam = cap.camera
     _, field, notes = plan_psf_field(cap, (cam.height, cam.width), grid=grid,
-                                     overlap=args.overlap, max_fraction=np.inf)
+                                     overlap=DEFAULT_OVERLAP if args.overlap is None
+                                     else args.overlap, max_fraction=np.inf)
     if out.lower().endswith(".npy"):
         k = max(p.shape[0] for p in field.psfs)
         stack = np.zeros((len(field.psfs), k, k), np.float32)
@@ -314,6 +320,8 @@ def cmd_simulate(args, say) -> None:
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
     if args.seed is not None and args.seed < 0:
         raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
+    if args.seed is not None and args.snr_db is None:
+        raise InputError("--seed", "seeds the noise: it applies with --snr-db only")
     cap = _load_capture(args, photo, say)
     _check_not_over_capture(cap, args.overwrite, args.output)
     curve = said_transfer_curve(given, args.transfer, say)
@@ -458,10 +466,20 @@ WORKERS_HELP = ("processes that refine the calibration's independent starts side
                 "same for any number")
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, like the tool's own (``--help``
+    prints the usage)."""
+
+    def error(self, message):
+        command = self.prog.partition(" ")[2]          # "deblur" of "gyrodeblur deblur"
+        where = f"{command}: " if command else ""
+        self.exit(2, f"gyrodeblur: error: {where}{message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .deblur import METHODS
 
-    p = argparse.ArgumentParser(
+    p = _OneLineErrors(
         prog="gyrodeblur",
         description="Remove camera-shake blur from photos using the camera's gyroscope log.",
         epilog=FRAMES_HELP)
@@ -476,7 +494,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "N x K x K stack, row-major) or .png (a picture). " + FRAMES_HELP)
     s.add_argument("--at", metavar="X,Y", help="pixel position (x right, y down, pixels)")
     s.add_argument("--grid", metavar="RxC", help="patch grid, e.g. 6x8")
-    s.add_argument("--overlap", type=float, default=0.25, help="patch overlap fraction (default 0.25)")
+    s.add_argument("--overlap", type=float, default=None,
+                   help=f"patch overlap fraction, with --grid (default {DEFAULT_OVERLAP:g})")
     s.add_argument("-o", "--output", required=True, metavar="OUT.npy|OUT.png")
     s.add_argument("--overwrite", action="store_true")
     _add_capture_options(s)
