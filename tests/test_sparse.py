@@ -431,3 +431,28 @@ def test_unknown_pixels_get_no_data_term(textured_case):
     assert masked > taken + 0.5 and masked > clean - 1.0, (clean, taken, masked)
     with pytest.raises(ValueError, match="unknown must be a boolean mask"):
         sparse_deconvolve(bad, psf, unknown=unknown[:-1])
+
+
+def test_a_long_blur_gets_more_iterations_and_they_pay():
+    """A 70 px stroke converges slowly: the default runs more iterations for it (the
+    rule's points: 6 up to 32 px, 9 at 48, 12 from 64) and restores it better than 6."""
+    from gyrodeblur.sparse import default_iterations
+
+    def streak(n):
+        k = np.zeros((n + 6 | 1, n + 6 | 1), np.float32)
+        k[k.shape[0] // 2, 3:3 + n] = 1.0
+        return k
+
+    assert [default_iterations(streak(n)) for n in (5, 32, 48, 64, 90)] == [6, 6, 9, 12, 12]
+    rng = np.random.default_rng(4)
+    m = 40
+    big = _texture(rng, (128 + 2 * m, 160 + 2 * m))
+    dy, dx = _curved_path(n=140, length=70.0, bend=4.0)
+    sharp = big[m:-m, m:-m]
+    blurred = _degrade(_blur_by_shifts(big, dy, dx)[m:-m, m:-m], rng, 0.004)
+    psf = _psf_from_path(dy, dx)
+    assert default_iterations(psf) == 12
+    kw = dict(noise_sigma=0.004)
+    six = _psnr(sparse_deconvolve(blurred, psf, iterations=6, **kw)[8:-8, 8:-8], sharp[8:-8, 8:-8])
+    default = _psnr(sparse_deconvolve(blurred, psf, **kw)[8:-8, 8:-8], sharp[8:-8, 8:-8])
+    assert default > six + 0.15, (default, six)     # 23.84 against 23.51 dB here

@@ -539,8 +539,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--phi", type=float, default=None,
                    help="Wiener inverse SNR (default 0.01, the chapter's)")
     s.add_argument("--iterations", type=int, default=None,
-                   help="sparse method: ADMM iterations (default 6; fewer is faster, see "
-                        "BENCHMARKS.md for the trade)")
+                   help="sparse method: ADMM iterations (default 6, up to 12 for PSFs longer "
+                        "than 32 px, which converge slowly; fewer is faster, see BENCHMARKS.md "
+                        "for the trade)")
     s.add_argument("--noise-sigma", type=float, default=None,
                    help="sparse method: noise std of the photo in [0, 1] units, which sets the "
                         "prior weight (default: measured on the photo; for a JPEG, raised "
