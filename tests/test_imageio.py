@@ -392,7 +392,8 @@ def test_bit_depth_choice(tmp_path):
     assert read_photo(write_photo(tmp_path / "a.png", px, like=src)).bit_depth == 16
     assert read_photo(write_photo(tmp_path / "b.tif", px, like=src, bit_depth=8)).bit_depth == 8
     assert read_photo(write_photo(tmp_path / "c.png", px)).bit_depth == 8
-    assert read_photo(write_photo(tmp_path / "d.jpg", px, like=src)).bit_depth == 8
+    with pytest.warns(UserWarning, match="written at 8"):
+        assert read_photo(write_photo(tmp_path / "d.jpg", px, like=src)).bit_depth == 8
     with pytest.raises(InputError, match="e.jpg"):
         write_photo(tmp_path / "e.jpg", px, bit_depth=16)
     with pytest.raises(InputError, match="alpha"):
@@ -615,3 +616,16 @@ def test_a_png_file_gamma_is_read_and_written_back(tmp_path, bit_depth):
     srgb.add(b"gAMA", (45455).to_bytes(4, "big"))
     Image.fromarray(np.full((4, 5, 3), 100, np.uint8)).save(tmp_path / "srgb.png", pnginfo=srgb)
     assert read_photo(tmp_path / "srgb.png").png_gamma is None
+
+
+def test_a_16_bit_photo_written_as_jpeg_is_said_and_a_file_is_no_folder(tmp_path):
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.imageio import check_destination
+
+    px = np.linspace(0, 1, 48, dtype=np.float32).reshape(4, 4, 3)
+    src = read_photo(write_photo(tmp_path / "s16.png", px, bit_depth=16))
+    with pytest.warns(UserWarning, match="JPEG stores 8 bits per sample"):
+        write_photo(tmp_path / "s.jpg", px, like=src)
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(InputError, match="afile is a file, not a folder"):
+        check_destination(tmp_path / "afile" / "x.png")

@@ -16,7 +16,7 @@ import secrets
 
 from .errors import InputError
 
-__all__ = ["atomic_write", "atomic_write_text", "check_writable"]
+__all__ = ["atomic_write", "atomic_write_text", "check_writable", "check_folder_of"]
 
 
 def _temporary_beside(path: str, kind: str) -> str:
@@ -73,9 +73,8 @@ def check_writable(path: str | os.PathLike) -> None:
         system), naming ``path``.
     """
     path = os.fspath(path)
+    check_folder_of(path)
     folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise InputError(path, f"folder {folder} does not exist")
     probe = _temporary_beside(path, "probe")
     try:
         fd = os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
@@ -87,3 +86,14 @@ def check_writable(path: str | os.PathLike) -> None:
         os.unlink(probe)
     except OSError:
         pass
+
+
+def check_folder_of(path) -> None:
+    """:class:`InputError` naming ``path`` unless the folder it would be written in exists
+    (and is a folder, not a file of that name)."""
+    folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+    if os.path.isdir(folder):
+        return
+    if os.path.exists(folder):
+        raise InputError(os.fspath(path), f"{folder} is a file, not a folder")
+    raise InputError(os.fspath(path), f"folder {folder} does not exist")

@@ -63,7 +63,7 @@ import numpy as np
 import tifffile
 from PIL import Image, PngImagePlugin, TiffImagePlugin, UnidentifiedImageError
 
-from gyrodeblur.atomicfile import atomic_write, check_writable
+from gyrodeblur.atomicfile import atomic_write, check_folder_of, check_writable
 from gyrodeblur.errors import InputError
 
 __all__ = ["Photo", "read_photo", "write_photo", "check_destination", "exif_capture_hints",
@@ -764,6 +764,9 @@ def write_photo(
     if fmt == "JPEG" and channels == 4:
         raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
     check_destination(p, like, overwrite)
+    if fmt == "JPEG" and bit_depth is None and like is not None and like.bit_depth == 16:
+        warnings.warn(f"{p}: JPEG stores 8 bits per sample: the 16-bit photo is written at 8 "
+                      "(.png or .tif keep 16)", stacklevel=2)
 
     ints = _to_integers(pixels, depth)
     exif = _normalise_exif(like.exif) if like is not None else None
@@ -854,9 +857,7 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
                 and like.pixels.shape[2] == 4:
             raise InputError(path, "JPEG cannot store the photo's alpha channel; write .png "
                                    "or .tif")
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise InputError(path, f"folder {folder} does not exist")
+    check_folder_of(path)
     if like is not None and like.path is not None and _same_file(path, like.path):
         raise InputError(path, "is the input photo; choose another output file")
     for other in inputs:
