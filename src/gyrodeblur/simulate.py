@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from .bands import for_row_bands
 from .capture import Capture
 from .images import check_image, join_alpha, split_alpha
 from .psf import check_blur_span
@@ -122,16 +123,21 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
                                                  mode="reflect")
                            for c in range(planes.shape[2])], axis=-1)
     xs = np.arange(W, dtype=np.float64)[None, :]
-    ys = np.arange(H, dtype=np.float64)[:, None]
-    for j in range(n):
-        h = _row_homographies(capture, (j + 0.5) / n)[:, None]        # (H, 1, 3, 3)
-        den = h[..., 2, 0] * xs + h[..., 2, 1] * ys + h[..., 2, 2]
-        sx = (h[..., 0, 0] * xs + h[..., 0, 1] * ys + h[..., 0, 2]) / den
-        sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den
-        coords = np.stack([sy, sx])
-        for c in range(planes.shape[2]):
-            acc[..., c] += ndimage.map_coordinates(planes[..., c], coords, order=order,
-                                                   mode="reflect", prefilter=False)
+
+    def band(r0, r1):                # rows r0:r1 of every sample, in the samples' order
+        ys = np.arange(r0, r1, dtype=np.float64)[:, None]
+        for j in range(n):
+            h = _row_homographies(capture, (j + 0.5) / n)[r0:r1, None]   # (rows, 1, 3, 3)
+            den = h[..., 2, 0] * xs + h[..., 2, 1] * ys + h[..., 2, 2]
+            sx = (h[..., 0, 0] * xs + h[..., 0, 1] * ys + h[..., 0, 2]) / den
+            sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den
+            coords = np.stack([sy, sx])
+            for c in range(planes.shape[2]):
+                acc[r0:r1, :, c] += ndimage.map_coordinates(
+                    planes[..., c], coords, order=order, mode="reflect", prefilter=False)
+
+    capture.orientation              # integrated once, before the bands share it
+    for_row_bands(band, H)           # map_coordinates releases the GIL: one band per core
     out = (acc / n).reshape(img.shape)
     if snr_db is not None:
         out = add_noise(out, snr_db, seed)
