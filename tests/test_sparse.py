@@ -433,17 +433,19 @@ def test_unknown_pixels_get_no_data_term(textured_case):
         sparse_deconvolve(bad, psf, unknown=unknown[:-1])
 
 
+def _streak(n):
+    """A horizontal stroke of ``n`` px, centred in an odd square with 3 px to spare."""
+    k = np.zeros((n + 6 | 1, n + 6 | 1), np.float32)
+    k[k.shape[0] // 2, 3:3 + n] = 1.0
+    return k
+
+
 def test_a_long_blur_gets_more_iterations_and_they_pay():
     """A 70 px stroke converges slowly: the default runs more iterations for it (the
     rule's points: 6 up to 32 px, 9 at 48, 12 from 64) and restores it better than 6."""
     from gyrodeblur.sparse import default_iterations
 
-    def streak(n):
-        k = np.zeros((n + 6 | 1, n + 6 | 1), np.float32)
-        k[k.shape[0] // 2, 3:3 + n] = 1.0
-        return k
-
-    assert [default_iterations(streak(n)) for n in (5, 32, 48, 64, 90)] == [6, 6, 9, 12, 12]
+    assert [default_iterations(_streak(n)) for n in (5, 32, 48, 64, 90)] == [6, 6, 9, 12, 12]
     rng = np.random.default_rng(4)
     m = 40
     big = _texture(rng, (128 + 2 * m, 160 + 2 * m))
@@ -463,12 +465,7 @@ def test_a_long_blur_gets_a_lower_data_penalty_and_it_pays(monkeypatch):
     on a 70 px stroke the lower penalty restores more at the same iterations."""
     from gyrodeblur.sparse import default_data_penalty
 
-    def streak(n):
-        k = np.zeros((n + 6 | 1, n + 6 | 1), np.float32)
-        k[k.shape[0] // 2, 3:3 + n] = 1.0
-        return k
-
-    got = [default_data_penalty(streak(n)) for n in (5, 32, 48, 64, 90)]
+    got = [default_data_penalty(_streak(n)) for n in (5, 32, 48, 64, 90)]
     assert np.allclose(got, [0.15, 0.15, 0.15 * (32 / 48) ** 2, 0.0375, 0.03]), got
     rng = np.random.default_rng(4)
     m = 40

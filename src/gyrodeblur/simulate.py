@@ -24,10 +24,12 @@ __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
 MAX_STEP_PX = 0.5
 
 
-def _row_homographies(capture: Capture, s: float) -> np.ndarray:
-    """``(H, 3, 3)``: ``K R(t_y) K^-1`` with ``t_y = row_start(y) + s * exposure_time``."""
+def _row_homographies(capture: Capture, s: float, r0: int = 0,
+                      r1: int | None = None) -> np.ndarray:
+    """``(r1 - r0, 3, 3)``: ``K R(t_y) K^-1`` for rows ``y`` in ``r0:r1`` (default all),
+    with ``t_y = row_start(y) + s * exposure_time``."""
     cam = capture.camera
-    rows = np.arange(cam.height)
+    rows = np.arange(r0, cam.height if r1 is None else r1)
     R = capture.orientation.matrices(capture.row_start(rows) + s * capture.exposure_time)
     return cam.K @ R @ cam.K_inv
 
@@ -127,7 +129,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     def band(r0, r1):                # rows r0:r1 of every sample, in the samples' order
         ys = np.arange(r0, r1, dtype=np.float64)[:, None]
         for j in range(n):
-            h = _row_homographies(capture, (j + 0.5) / n)[r0:r1, None]   # (rows, 1, 3, 3)
+            h = _row_homographies(capture, (j + 0.5) / n, r0, r1)[:, None]  # (rows, 1, 3, 3)
             den = h[..., 2, 0] * xs + h[..., 2, 1] * ys + h[..., 2, 2]
             sx = (h[..., 0, 0] * xs + h[..., 0, 1] * ys + h[..., 0, 2]) / den
             sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den

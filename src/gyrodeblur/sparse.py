@@ -278,9 +278,9 @@ def sparse_deconvolve(
     Tikhonov solution (gradient weight :math:`25\lambda` for TV, :math:`3\lambda`
     otherwise), except around small over-exposed blobs (point lights), where it starts as
     the blurred image with each light's clipped streak gathered into the streak's core,
-    where the light must be
-    (:func:`_start_lights_at_their_cores`): the Tikhonov start would ring there, and ADMM is
-    slow to undo ringing, or to gather a streak into its light, inside data-free areas.
+    where the light must be (:func:`_start_lights_at_their_cores`): the Tikhonov start
+    would ring there, and ADMM is slow to undo ringing, or to gather a streak into its
+    light, inside data-free areas.
     Over-relaxation 1.5 (Eckstein & Bertsekas) on both splits.
 
     *Cost.* Four real FFTs per channel and iteration plus about 22 array passes; with
