@@ -171,6 +171,11 @@ def registry() -> dict[str, tuple[Callable, str]]:
             reg[name] = (_deblur(name, "variant"),
                          f"ours: deblur(method={name!r}) with its default grid and "
                          f"alignment{default}")
+    if _supports("model", deblur_mod.deblur_with_psfs):
+        reg["sparse-patches"] = (_deblur("sparse", "variant", model="patches"),
+                                 "ours: the sparse method patch by patch, blended, without "
+                                 "the global model's refinement (the default before "
+                                 "session 28)")
     has_blind = hasattr(deblur_mod, "deblur_blind")
     if not has_blind:
         try:

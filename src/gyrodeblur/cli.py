@@ -114,7 +114,7 @@ def _ignored_options(args) -> None:
         if given("kernel_size"):
             raise InputError("--kernel-size", "applies with --blind only")
         if args.mode == "invariant":
-            for name in ("grid", "overlap"):
+            for name in ("grid", "overlap", "model"):
                 if given(name):
                     raise InputError("--" + name, "applies to --mode variant only (invariant "
                                                   "deblurs the whole photo with one PSF)")
@@ -372,6 +372,10 @@ def cmd_deblur(args, say) -> None:
         if name == "noise_sigma" and not 0 <= value < 1:
             raise InputError(flag, f"must be in [0, 1) (pixel-value units), got {value!r}")
         options[name] = value
+    if args.model is not None:
+        if method != "sparse":
+            raise InputError("--model", "applies to --method sparse only")
+        options["model"] = args.model
     grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
     progress = _Progress("deblurring", args.quiet)
     h, w = photo.pixels.shape[:2]
@@ -536,6 +540,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overlap", type=float, default=None, help=f"patch overlap fraction (default {DEFAULT_OVERLAP:g})")
     s.add_argument("--method", choices=sorted(METHODS), default=None,
                    help="deconvolution method (default: the best available)")
+    s.add_argument("--model", choices=("global", "patches"), default=None,
+                   help="sparse method: 'global' (default) refines the patches' result under one "
+                        "blur model for the whole photo, the PSFs interpolated between patch "
+                        "centres; 'patches' deconvolves each patch alone and blends them (faster, "
+                        "the chapter's design; see BENCHMARKS.md)")
     s.add_argument("--phi", type=float, default=None,
                    help="Wiener inverse SNR (default 0.01, the chapter's)")
     s.add_argument("--iterations", type=int, default=None,

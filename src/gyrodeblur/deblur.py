@@ -542,7 +542,7 @@ def _interpolate_grid(values: np.ndarray, rows, cols) -> np.ndarray:
 
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
                      transfer: str | TransferCurve = "srgb", clip: bool = True, progress=None,
-                     displacement=None, **options) -> np.ndarray:
+                     displacement=None, model: str | None = None, **options) -> np.ndarray:
     """Deconvolve ``image`` patch by patch with given PSFs (no gyro needed).
 
     Parameters
@@ -567,12 +567,21 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         (a strip as wide as the displacement at an edge) the values are mirrored, not
         data; a method whose deconvolver takes an ``unknown`` mask (``"sparse"``) gives
         them no data term.
+    model : {"global", "patches"}, optional
+        ``"patches"``: each patch deconvolved with its PSF and the results blended (the
+        chapter's design). ``"global"``: that result refined under one forward model for
+        the whole photo, the PSFs interpolated between the patch centres by the blending
+        weights (:mod:`gyrodeblur.spacevariant`), so no patch's boundary or neighbour's
+        blur is mistaken for its own; ``"sparse"`` only. Default: ``"global"`` for
+        ``"sparse"`` with a grid of equal windows (:func:`~gyrodeblur.tiling.patch_grid`'s)
+        of more than one patch, else ``"patches"``.
     **options
         Passed to the method's factory (e.g. ``phi`` for Wiener).
     """
     method = method or DEFAULT_METHOD
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    model = _check_model(model, method, list(patches))
     curve = get_transfer_curve(transfer)
     checked = check_image(image, "photo", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
@@ -604,6 +613,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
                else deconvolve(img, psfs[0], unknown=unknown))
         if progress:
             progress(1, 1)
+    elif model == "global":
+        out = _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress)
     else:
         out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
                                    unknown=unknown,
@@ -622,6 +633,69 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if clip:
         _clip_rows(out, 0.0, 1.0)
     return out if alpha is None else join_alpha(out, alpha)
+
+
+#: Forward models of :func:`deblur_with_psfs`.
+MODELS = ("global", "patches")
+
+
+def _check_model(model, method: str, patches) -> str:
+    """The forward model to use (see :func:`deblur_with_psfs`), checked."""
+    one_grid = len(patches) > 1 and len({p.shape for p in patches}) == 1
+    if model is None:
+        return "global" if method == "sparse" and one_grid else "patches"
+    if model not in MODELS:
+        raise InputError("--model", f"unknown model {model!r} (global or patches)")
+    if model == "global":
+        if method != "sparse":
+            raise InputError("--model", f"'global' is the sparse method's; method "
+                                        f"{method!r} deconvolves patch by patch")
+        if len(patches) > 1 and not one_grid:
+            raise InputError("--model", "'global' needs a grid of equal windows "
+                                        "(gyrodeblur.tiling.patch_grid)")
+    return model if len(patches) > 1 else "patches"
+
+
+def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress):
+    """The patch-wise sparse result refined under the interpolated-PSF model of the whole
+    photo (:func:`gyrodeblur.spacevariant.refine_globally`), with the patch-wise solver's
+    own prior weight and clipped-pixel handling."""
+    from .sparse import _clipping, regularization_weight
+    from .spacevariant import DEFAULT_OUTER, InterpolatedBlur, refine_globally
+    settings = dict(inspect.signature(deconvolve.func).parameters)
+    settings = {k: v.default for k, v in settings.items()} | deconvolve.keywords
+    channels = 1 if img.ndim == 2 else img.shape[2]
+    total = len(patches) + DEFAULT_OUTER * channels
+    report = None if progress is None else (lambda done, _: progress(done, total))
+    start = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=report,
+                                 unknown=unknown)
+    weight = settings["weight"]
+    if weight is None:
+        weight = regularization_weight(settings["noise_sigma"], settings["exponent"])
+    gc = np.moveaxis(img, 2, 0) if img.ndim == 3 else img[None]
+    middle = psfs[len(psfs) // 2]
+    sat = _clipping(gc, settings["saturation_level"], settings["saturation_dilation"],
+                    np.asarray(middle, np.float32) / np.float32(np.sum(middle)))
+    ignore = None if sat is None else sat.ignore
+    blur = InterpolatedBlur(patches, psfs, img.shape[:2])
+    lights = None
+    if sat is not None and sat.lights is not None:
+        # held at the patch-wise result: over-exposed lights and the pixels whose light
+        # lands mostly on them (with a rolling shutter a light's core may lie beside its
+        # streak): no data says more about them than the patches' start does
+        cover = blur.adjoint(sat.ignore.astype(np.float32))
+        p = blur.pad
+        lights = sat.ignore | (cover[p:p + img.shape[0], p:p + img.shape[1]] > 0.5)
+    if unknown is not None:
+        ignore = unknown if ignore is None else ignore | unknown
+    at_least = None
+    if sat is not None and sat.at_least is not None:
+        at_least = np.moveaxis(sat.at_least, 0, 2) if img.ndim == 3 else sat.at_least[0]
+    step = None if progress is None else (
+        lambda done: progress(len(patches) + done, total))
+    return refine_globally(img, start, blur,
+                           weight=weight, exponent=settings["exponent"], ignore=ignore,
+                           at_least=at_least, fixed=lights, progress=step)
 
 
 def _takes_unknown(deconvolve) -> bool:

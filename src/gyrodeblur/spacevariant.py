@@ -1,0 +1,339 @@
+"""Deconvolution under one space-variant blur for the whole photo, not one PSF per patch.
+
+Patch-wise deconvolution (:func:`gyrodeblur.tiling.deconvolve_patchwise`) solves each
+window, with its margin, as if one PSF blurred all of it. Where the PSF changes across
+that support (roll, a wide lens, the rolling shutter, and above all long exposures, whose
+PSFs are as long as the windows) the model is wrong inside every window, and blending the
+windows' answers does not make it right. Here the whole photo is solved at once under
+
+.. math:: A u = \\sum_r W_r \\odot (k_r * u),
+
+the PSFs ``k_r`` of the patch centres interpolated across the photo by the patches'
+Hamming blending weights ``W_r`` (which sum to one at every pixel): the same PSFs, with
+no window boundary anywhere in the model. The solver is sparse-prior (TV) ADMM like
+:func:`gyrodeblur.sparse.sparse_deconvolve`, but ``A`` is not a convolution, so its
+u-step is a few conjugate-gradient steps instead of a closed-form FFT solve; it starts
+from the patch-wise result, which it refines.
+
+Convolution convention as in :mod:`gyrodeblur.fftutils`: ``(k * u)(x) = sum_s k(s) u(x - s)``.
+"""
+
+from __future__ import annotations
+
+import numbers
+from concurrent.futures import ThreadPoolExecutor
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from .fftutils import FFT_WORKERS, fast_shape
+from .sparse import _shrink_residual
+from .tiling import Patch, blend_weights
+
+__all__ = ["InterpolatedBlur", "refine_globally", "DEFAULT_OUTER", "DEFAULT_CG_STEPS"]
+
+#: ADMM iterations of :func:`refine_globally` (each one shrinkage and one u-step).
+DEFAULT_OUTER = 4
+#: Conjugate-gradient steps per u-step (each costs two batched FFT pairs of all patches).
+DEFAULT_CG_STEPS = 8
+#: Penalty of the gradient split: ``beta * weight``, ``beta`` from 8, x1.5 per iteration,
+#: at most 64 (as :mod:`gyrodeblur.sparse`'s continuation).
+_BETA0, _BETA_GROWTH, _BETA_MAX = 8.0, 1.5, 64.0
+#: Most threads the windows' transforms are spread over.
+_MAX_THREADS = 4
+
+
+class InterpolatedBlur:
+    """The forward model ``A u = sum_r W_r (k_r * u)`` and its adjoint, for a grid of
+    equal windows.
+
+    ``u`` lives on the photo extended by ``pad`` pixels on every side (the light a PSF
+    brings in from beyond the frame); ``A u`` is photo-sized.
+
+    Parameters
+    ----------
+    patches : sequence of Patch
+        Windows of equal size forming a row/column grid that covers the photo
+        (:func:`gyrodeblur.tiling.patch_grid`).
+    psfs : sequence of ndarray
+        One odd-sized PSF per patch (each normalised to sum 1 here).
+    shape : (H, W)
+        The photo's rows and columns.
+
+    Notes
+    -----
+    Each window, extended by the largest PSF's size, is convolved by OpenCV's real FFT
+    (:mod:`gyrodeblur.packedfft`'s layout), the windows spread over threads (OpenCV
+    releases the GIL). Memory: two float32 stacks of all the extended windows (their
+    spectra, and the work buffer the transforms run in), about
+    ``2 * len(patches) * (h + kh) * (w + kw)`` values. Not thread-safe: one model per
+    thread.
+    """
+
+    def __init__(self, patches: Sequence[Patch], psfs: Sequence[np.ndarray],
+                 shape: tuple[int, int]):
+        patches, psfs = list(patches), [np.asarray(k, np.float64) for k in psfs]
+        if len(patches) != len(psfs) or not patches:
+            raise ValueError(f"need one PSF per patch, got {len(psfs)} for {len(patches)}")
+        sizes = {p.shape for p in patches}
+        if len(sizes) != 1:
+            raise ValueError("the global model needs windows of one size (patch_grid's)")
+        H, W = int(shape[0]), int(shape[1])
+        weights = blend_weights(patches, (H, W))          # refuses a layout that is no grid
+        kh = max(k.shape[0] for k in psfs)
+        kw = max(k.shape[1] for k in psfs)
+        self.h, self.w = sizes.pop()
+        self.kh, self.kw = kh, kw
+        self.pad = max(kh, kw) // 2 + 1
+        self.shape = (H, W)
+        self.patches = patches
+        self.n = fast_shape((self.h + kh - 1, self.w + kw - 1))
+        self.otf = np.zeros((len(psfs),) + self.n, np.float32)
+        for i, k in enumerate(psfs):     # top-left, centred in the common kh x kw
+            oy, ox = (kh - k.shape[0]) // 2, (kw - k.shape[1]) // 2
+            self.otf[i, oy:oy + k.shape[0], ox:ox + k.shape[1]] = k / k.sum()
+            cv2.dft(self.otf[i], dst=self.otf[i])
+        self.weights = [np.outer(wy, wx).astype(np.float32) for wy, wx in weights]
+        self._buf = np.zeros_like(self.otf)
+        self._threads = max(1, min(FFT_WORKERS, _MAX_THREADS, len(patches)))
+
+    @property
+    def padded_shape(self) -> tuple[int, int]:
+        """Shape of the unknown: the photo with ``pad`` px on every side."""
+        return self.shape[0] + 2 * self.pad, self.shape[1] + 2 * self.pad
+
+    def _extended(self, p: Patch) -> tuple[int, int]:
+        """Top-left corner, in padded coordinates, of window ``p`` extended by the PSF."""
+        return p.y0 + self.pad - self.kh // 2, p.x0 + self.pad - self.kw // 2
+
+    def _filter_planes(self, fill, conjugate: bool) -> None:
+        """``fill(i, plane)`` writes plane ``i`` of the work buffer; it is then filtered
+        by PSF ``i`` (convolved, or correlated when ``conjugate``), in place, the planes
+        spread over threads."""
+        def run(indices):
+            for i in indices:
+                plane = self._buf[i]
+                fill(i, plane)
+                cv2.dft(plane, dst=plane)
+                cv2.mulSpectrums(plane, self.otf[i], 0, c=plane, conjB=conjugate)
+                cv2.idft(plane, dst=plane, flags=cv2.DFT_REAL_OUTPUT | cv2.DFT_SCALE)
+        chunks = [range(t, len(self.patches), self._threads) for t in range(self._threads)]
+        if self._threads == 1:
+            run(chunks[0])
+            return
+        with ThreadPoolExecutor(self._threads) as pool:
+            list(pool.map(run, chunks))
+
+    def forward(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``A u``: ``u`` of :attr:`padded_shape` -> photo-sized float32 (into ``out``)."""
+        eh, ew = self.h + self.kh - 1, self.w + self.kw - 1
+
+        def fill(i, plane):
+            y, x = self._extended(self.patches[i])
+            plane[:eh, :ew] = u[y:y + eh, x:x + ew]
+            plane[eh:] = 0.0
+            plane[:eh, ew:] = 0.0
+
+        self._filter_planes(fill, conjugate=False)
+        out = np.zeros(self.shape, np.float32) if out is None else out
+        out[...] = 0.0
+        y0, x0 = self.kh - 1, self.kw - 1
+        for i, p in enumerate(self.patches):
+            valid = self._buf[i, y0:y0 + self.h, x0:x0 + self.w]
+            valid *= self.weights[i]
+            out[p.y0:p.y1, p.x0:p.x1] += valid
+        return out
+
+    def adjoint(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``A^T g``: photo-sized ``g`` -> float32 of :attr:`padded_shape` (into ``out``)."""
+        eh, ew = self.h + self.kh - 1, self.w + self.kw - 1
+        y0, x0 = self.kh - 1, self.kw - 1
+
+        def fill(i, plane):
+            p = self.patches[i]
+            plane[...] = 0.0
+            np.multiply(g[p.y0:p.y1, p.x0:p.x1], self.weights[i],
+                        out=plane[y0:y0 + self.h, x0:x0 + self.w])
+
+        self._filter_planes(fill, conjugate=True)
+        out = np.zeros(self.padded_shape, np.float32) if out is None else out
+        out[...] = 0.0
+        for i, p in enumerate(self.patches):
+            y, x = self._extended(p)
+            out[y:y + eh, x:x + ew] += self._buf[i, :eh, :ew]
+        return out
+
+
+def _grad(u: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> None:
+    """Forward differences of ``u`` along x into ``gx`` and along y into ``gy`` (periodic
+    on the padded domain)."""
+    np.subtract(u[:, 1:], u[:, :-1], out=gx[:, :-1])
+    np.subtract(u[:, :1], u[:, -1:], out=gx[:, -1:])
+    np.subtract(u[1:], u[:-1], out=gy[:-1])
+    np.subtract(u[:1], u[-1:], out=gy[-1:])
+
+
+def _grad_t(gx: np.ndarray, gy: np.ndarray, out: np.ndarray, scratch: np.ndarray) -> None:
+    """``out = grad^T (gx, gy)``, the adjoint of :func:`_grad` (``scratch``: a work array
+    of the same shape)."""
+    np.subtract(gx[:, :-1], gx[:, 1:], out=out[:, 1:])
+    np.subtract(gx[:, -1:], gx[:, :1], out=out[:, :1])
+    np.subtract(gy[:-1], gy[1:], out=scratch[1:])
+    np.subtract(gy[-1:], gy[:1], out=scratch[:1])
+    out += scratch
+
+
+def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur, *,
+                    weight: float, exponent: float = 1.0, outer: int = DEFAULT_OUTER,
+                    cg_steps: int = DEFAULT_CG_STEPS, ignore: np.ndarray | None = None,
+                    at_least: np.ndarray | None = None, fixed: np.ndarray | None = None,
+                    progress=None) -> np.ndarray:
+    """Refine ``start`` towards ``argmin_u 1/2 |M (A u - g)|^2 + weight sum |grad u|^p``.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, C)
+        The blurred photo ``g``, linear light, float32.
+    start : ndarray like ``image``
+        The first estimate (the patch-wise result); each channel is solved on its own.
+    blur : InterpolatedBlur
+        The forward model ``A`` for this photo's patches and PSFs.
+    weight : float
+        Prior weight (:func:`gyrodeblur.sparse.regularization_weight` of the photo's
+        noise: the patch-wise solver's own).
+    exponent : float
+        Prior exponent ``p`` in (0, 1] (1: total variation).
+    outer, cg_steps : int
+        ADMM iterations, and conjugate-gradient steps in each one's u-step.
+    ignore : ndarray of bool (H, W), optional
+        Pixels with no data term (over-exposed lights, samples from outside the photo).
+    at_least : ndarray of bool (H, W) or (H, W, C), optional
+        Pixels at the clip value: they ask only ``A u >= g`` (their data term counts
+        where the current estimate falls below the clipped value).
+    fixed : ndarray of bool (H, W), optional
+        Pixels held at ``start``'s values: where the photo holds no data and the start
+        knows more than the prior would (over-exposed lights, which the patch-wise solver
+        gathers into their cores; left to the prior, such a light fades).
+    progress : callable(done), optional
+        Called after each iteration, ``done`` counting over the channels.
+
+    Returns
+    -------
+    ndarray float32 like ``image`` (not clipped).
+    """
+    g = np.asarray(image, np.float32)
+    u0 = np.asarray(start, np.float32)
+    if g.shape != u0.shape or g.shape[:2] != blur.shape:
+        raise ValueError(f"image {g.shape}, start {u0.shape} and model {blur.shape} differ")
+    for name, v in (("outer", outer), ("cg_steps", cg_steps)):
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
+            raise ValueError(f"{name} must be a positive whole number, got {v!r}")
+    if not (np.isfinite(weight) and weight > 0):
+        raise ValueError(f"weight must be a positive number, got {weight!r}")
+    color = g.ndim == 3
+    gc = np.moveaxis(g, 2, 0) if color else g[None]
+    uc = np.moveaxis(u0, 2, 0) if color else u0[None]
+    out = np.empty(gc.shape, np.float32)
+    base = np.ones(blur.shape, np.float32)
+    if ignore is not None:
+        base[np.asarray(ignore, bool)] = 0.0
+    held = None
+    if fixed is not None and np.any(fixed):
+        held = np.pad(np.asarray(fixed, bool), blur.pad)
+    for c in range(gc.shape[0]):
+        one_sided = None
+        if at_least is not None:
+            a = np.asarray(at_least, bool)
+            one_sided = a[..., c] if a.ndim == 3 else a
+            if not one_sided.any():
+                one_sided = None
+        step = None if progress is None else (lambda k, c=c: progress(c * outer + k))
+        out[c] = _solve_channel(np.ascontiguousarray(gc[c]), uc[c], blur, float(weight),
+                                float(exponent), int(outer), int(cg_steps), base, one_sided,
+                                held, step)
+    return np.moveaxis(out, 0, 2).copy() if color else out[0]
+
+
+def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, base,
+                   one_sided, held, progress):
+    """ADMM on one channel: ``w = grad u`` split off, the u-step by CG, warm-started.
+    Work arrays are allocated once (15 of the padded size)."""
+    pad = blur.pad
+    u = np.pad(u0, pad, mode="edge").astype(np.float32)
+    gx, gy, wx, wy, b, r, d, nd, t1, t2, t3 = (np.empty_like(u) for _ in range(11))
+    dx = np.zeros_like(u)                    # scaled duals of the split
+    dy = np.zeros_like(u)
+    image_sized = np.empty(blur.shape, np.float32)
+    masked = None if base.all() else base
+    m = masked
+    rho = 0.0
+
+    def normal(v, out):                      # out = (A^T M A + rho grad^T grad) v
+        blur.forward(v, out=image_sized)
+        if m is not None:
+            np.multiply(image_sized, m, out=image_sized)
+        blur.adjoint(image_sized, out=out)
+        _grad(v, t1, t2)
+        _grad_t(t1, t2, t3, scratch=t1)
+        np.multiply(t3, np.float32(rho), out=t3)
+        np.add(out, t3, out=out)
+
+    _grad(u, gx, gy)
+    beta = _BETA0
+    for it in range(outer):
+        rho = weight * beta
+        # w-step: w = prox(grad u + d); b = A^T M g + rho grad^T (w - d)
+        np.add(gx, dx, out=t1)
+        _shrink_residual(t1, beta, p, out=wx)
+        np.subtract(t1, wx, out=wx)
+        np.add(gy, dy, out=t1)
+        _shrink_residual(t1, beta, p, out=wy)
+        np.subtract(t1, wy, out=wy)
+        np.subtract(wx, dx, out=t1)
+        np.subtract(wy, dy, out=t2)
+        _grad_t(t1, t2, b, scratch=t1)
+        b *= np.float32(rho)
+        m = masked
+        if one_sided is not None:            # active set of the one-sided pixels
+            m = base.copy()
+            m[one_sided & (blur.forward(u, out=image_sized) >= g)] = 0.0
+        np.copyto(image_sized, g)
+        if m is not None:
+            image_sized *= m
+        b += blur.adjoint(image_sized, out=t3)
+        # u-step: CG on the normal equations from the current u
+        normal(u, nd)
+        np.subtract(b, nd, out=r)
+        if held is not None:          # CG over the free pixels only: u stays put there
+            r[held] = 0.0
+        np.copyto(d, r)
+        rr = float(np.vdot(r, r))
+        for _ in range(cg_steps):
+            if rr == 0.0:
+                break
+            normal(d, nd)
+            step = np.float32(rr / float(np.vdot(d, nd)))
+            np.multiply(d, step, out=t1)
+            u += t1
+            np.multiply(nd, step, out=t1)
+            r -= t1
+            if held is not None:
+                r[held] = 0.0
+            rr_new = float(np.vdot(r, r))
+            d *= np.float32(rr_new / rr)
+            d += r
+            rr = rr_new
+        # dual update, then continuation (the scaled dual rescaled: the true one stays)
+        _grad(u, gx, gy)
+        dx += gx
+        dx -= wx
+        dy += gy
+        dy -= wy
+        new_beta = min(beta * _BETA_GROWTH, _BETA_MAX)
+        dx *= np.float32(beta / new_beta)
+        dy *= np.float32(beta / new_beta)
+        beta = new_beta
+        if progress is not None:
+            progress(it + 1)
+    return u[pad:pad + blur.shape[0], pad:pad + blur.shape[1]]

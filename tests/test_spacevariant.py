@@ -1,0 +1,132 @@
+"""Tests for gyrodeblur.spacevariant: one interpolated-PSF model for the whole photo.
+
+The physics test blurs a photo by warping (``simulate_blur``: the homographies of a
+constant turn with strong roll, row by row under a rolling shutter), not by any PSF, and
+deblurs it with the patch centres' PSFs, once patch by patch and once under the global
+model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import fftconvolve
+from skimage import data
+from skimage.transform import resize
+
+from conftest import constant_rate_capture
+from gyrodeblur.deblur import deblur, deblur_with_psfs
+from gyrodeblur.errors import InputError
+from gyrodeblur.metrics import psnr
+from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
+from gyrodeblur.spacevariant import InterpolatedBlur, refine_globally
+from gyrodeblur.tiling import Patch, patch_grid
+
+
+def _random_model(rng, shape=(120, 170), grid=(3, 4)):
+    patches = patch_grid(shape, grid, 0.25)
+    psfs = [rng.random((2 * rng.integers(1, 8) + 1, 2 * rng.integers(1, 8) + 1))
+            for _ in patches]
+    return InterpolatedBlur(patches, psfs, shape)
+
+
+def test_the_adjoint_is_the_transpose_of_the_forward_model():
+    rng = np.random.default_rng(0)
+    blur = _random_model(rng)
+    u = rng.standard_normal(blur.padded_shape).astype(np.float32)
+    g = rng.standard_normal(blur.shape).astype(np.float32)
+    lhs = float(np.vdot(blur.forward(u), g))
+    rhs = float(np.vdot(u, blur.adjoint(g)))
+    assert abs(lhs - rhs) < 1e-4 * (abs(lhs) + 1.0), (lhs, rhs)
+
+
+def test_one_psf_everywhere_is_a_plain_convolution():
+    rng = np.random.default_rng(1)
+    k = rng.random((9, 13))
+    shape = (120, 170)
+    patches = patch_grid(shape, (3, 4), 0.25)
+    blur = InterpolatedBlur(patches, [k] * len(patches), shape)
+    u = rng.random(blur.padded_shape).astype(np.float32)
+    p = blur.pad
+    ref = fftconvolve(u, k / k.sum(), mode="same")[p:-p, p:-p]
+    assert np.abs(blur.forward(u) - ref).max() < 1e-5
+
+
+def test_the_psfs_are_interpolated_between_patch_centres():
+    """A point source between two patch centres is blurred by the blend of their PSFs,
+    in the proportion of the blending weights there."""
+    shape = (40, 200)
+    patches = patch_grid(shape, (1, 2), 0.5)
+    left, right = np.zeros((5, 5)), np.zeros((5, 5))
+    left[2, 0] = 1.0                                     # moves light 2 px left
+    right[2, 4] = 1.0                                    # ... 2 px right
+    blur = InterpolatedBlur(patches, [left, right], shape)
+    u = np.zeros(blur.padded_shape, np.float32)
+    y, x = 20, 100
+    u[y + blur.pad, x + blur.pad] = 1.0
+    out = blur.forward(u)
+    from gyrodeblur.tiling import blend_weights
+    (wy0, wx0), (wy1, wx1) = blend_weights(patches, shape)
+    w_left = wx0[x - 2 - patches[0].x0]
+    w_right = wx1[x + 2 - patches[1].x0]
+    assert out[y, x - 2] == pytest.approx(w_left, abs=1e-6)
+    assert out[y, x + 2] == pytest.approx(w_right, abs=1e-6)
+    assert 0.2 < w_left < 0.8 and 0.2 < w_right < 0.8
+
+
+def test_pixels_without_data_do_not_matter():
+    rng = np.random.default_rng(2)
+    blur = _random_model(rng)
+    g = rng.random(blur.shape).astype(np.float32)
+    ignore = np.zeros(blur.shape, bool)
+    ignore[30:60, 40:90] = True
+    spoiled = g.copy()
+    spoiled[ignore] = 1.0
+    a = refine_globally(g, g, blur, weight=1e-3, ignore=ignore)
+    b = refine_globally(spoiled, g, blur, weight=1e-3, ignore=ignore)
+    assert np.array_equal(a, b)
+    c = refine_globally(spoiled, g, blur, weight=1e-3)
+    assert not np.allclose(a, c, atol=1e-3)
+
+
+def test_strong_roll_deblurs_better_under_the_global_model():
+    """A turn with strong roll (blur from ~5 px at the centre to ~20 px at the corners)
+    and a 20 ms readout, synthesised by warping: the global model beats patch-wise
+    deconvolution with the same PSFs (measured: 23.83 -> 25.32 dB; blurred 14.25)."""
+    sharp = resize(data.astronaut(), (240, 320), anti_aliasing=True).astype(np.float32)
+    cap = constant_rate_capture((0.3, 0.5, 1.5), exposure=0.05, readout=0.02)
+    blurred = quantize_8bit(add_noise(simulate_blur(sharp, cap, transfer="srgb"), 40.0, seed=1))
+    b = 16
+    before = psnr(sharp, blurred, b)
+    patches = psnr(sharp, deblur(blurred, cap, model="patches"), b)
+    whole = psnr(sharp, deblur(blurred, cap), b)                 # the default
+    assert patches > before + 6.0, (before, patches)
+    assert whole > patches + 0.75, (patches, whole)
+
+
+def test_the_model_is_checked_and_one_patch_needs_no_global_model(make_capture):
+    cap = make_capture((0.0, 0.2, 0.0))
+    img = np.full((240, 320), 0.5, np.float32)
+    with pytest.raises(InputError, match="sparse method"):
+        deblur(img, cap, method="wiener", model="global")
+    with pytest.raises(InputError, match="unknown model"):
+        deblur(img, cap, model="eff")
+    k = np.ones((3, 3))
+    uneven = [Patch(0, 240, 0, 200), Patch(0, 240, 150, 320)]
+    with pytest.raises(InputError, match="equal windows"):
+        deblur_with_psfs(img, uneven, [k, k], model="global")
+    whole = [Patch(0, 240, 0, 320)]                  # one patch: already one model
+    a = deblur_with_psfs(img, whole, [k], model="global")
+    assert np.array_equal(a, deblur_with_psfs(img, whole, [k], model="patches"))
+
+
+def test_refine_globally_refuses_bad_settings():
+    rng = np.random.default_rng(3)
+    blur = _random_model(rng)
+    g = rng.random(blur.shape).astype(np.float32)
+    with pytest.raises(ValueError, match="outer"):
+        refine_globally(g, g, blur, weight=1e-3, outer=0)
+    with pytest.raises(ValueError, match="weight"):
+        refine_globally(g, g, blur, weight=0.0)
+    with pytest.raises(ValueError, match="differ"):
+        refine_globally(g[:-1], g[:-1], blur, weight=1e-3)
