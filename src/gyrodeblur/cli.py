@@ -548,7 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--phi", type=float, default=None,
                    help="Wiener inverse SNR (default 0.01, the chapter's)")
     s.add_argument("--iterations", type=int, default=None,
-                   help="sparse method: ADMM iterations (default 6, up to 12 for PSFs longer "
+                   help="sparse method: ADMM iterations per patch (default 6, up to 12 for PSFs longer "
                         "than 32 px, which converge slowly; fewer is faster, see BENCHMARKS.md "
                         "for the trade)")
     s.add_argument("--noise-sigma", type=float, default=None,
