@@ -40,6 +40,16 @@ def test_the_adjoint_is_the_transpose_of_the_forward_model():
     assert abs(lhs - rhs) < 1e-4 * (abs(lhs) + 1.0), (lhs, rhs)
 
 
+def test_a_closed_model_gives_the_same_answer_on_one_thread():
+    rng = np.random.default_rng(4)
+    with _random_model(rng) as blur:
+        u = rng.standard_normal(blur.padded_shape).astype(np.float32)
+        threaded = blur.forward(u).copy()
+    blur.close()                                # closing twice is harmless
+    assert blur._pool is None
+    np.testing.assert_array_equal(blur.forward(u), threaded)
+
+
 def test_one_psf_everywhere_is_a_plain_convolution():
     rng = np.random.default_rng(1)
     k = rng.random((9, 13))

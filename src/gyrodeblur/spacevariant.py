@@ -68,7 +68,9 @@ class InterpolatedBlur:
     releases the GIL). Memory: two float32 stacks of all the extended windows (their
     spectra, and the work buffer the transforms run in), about
     ``2 * len(patches) * (h + kh) * (w + kw)`` values. Not thread-safe: one model per
-    thread.
+    thread. It holds a pool of threads for the transforms: use it as a context manager,
+    or call :meth:`close` when done (an unclosed model's threads end when it is
+    garbage-collected).
     """
 
     def __init__(self, patches: Sequence[Patch], psfs: Sequence[np.ndarray],
@@ -97,6 +99,21 @@ class InterpolatedBlur:
         self.weights = [np.outer(wy, wx).astype(np.float32) for wy, wx in weights]
         self._buf = np.zeros_like(self.otf)
         self._threads = max(1, min(FFT_WORKERS, _MAX_THREADS, len(patches)))
+        self._chunks = [range(t, len(patches), self._threads) for t in range(self._threads)]
+        self._pool = ThreadPoolExecutor(self._threads) if self._threads > 1 else None
+
+    def close(self) -> None:
+        """End the model's transform threads (it can still be used, on one thread)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+            self._chunks = [range(len(self.patches))]
+
+    def __enter__(self) -> "InterpolatedBlur":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     @property
     def padded_shape(self) -> tuple[int, int]:
@@ -118,12 +135,10 @@ class InterpolatedBlur:
                 cv2.dft(plane, dst=plane)
                 cv2.mulSpectrums(plane, self.otf[i], 0, c=plane, conjB=conjugate)
                 cv2.idft(plane, dst=plane, flags=cv2.DFT_REAL_OUTPUT | cv2.DFT_SCALE)
-        chunks = [range(t, len(self.patches), self._threads) for t in range(self._threads)]
-        if self._threads == 1:
-            run(chunks[0])
+        if self._pool is None:
+            run(self._chunks[0])
             return
-        with ThreadPoolExecutor(self._threads) as pool:
-            list(pool.map(run, chunks))
+        list(self._pool.map(run, self._chunks))
 
     def forward(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``A u``: ``u`` of :attr:`padded_shape` -> photo-sized float32 (into ``out``)."""
@@ -258,7 +273,7 @@ def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur
 def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, base,
                    one_sided, held, progress):
     """ADMM on one channel: ``w = grad u`` split off, the u-step by CG, warm-started.
-    Work arrays are allocated once (15 of the padded size)."""
+    Work arrays are allocated once (14 of the padded size, one of the photo's)."""
     pad = blur.pad
     u = np.pad(u0, pad, mode="edge").astype(np.float32)
     gx, gy, wx, wy, b, r, d, nd, t1, t2, t3 = (np.empty_like(u) for _ in range(11))
