@@ -20,7 +20,7 @@ import scipy.ndimage as ndi
 import gyrodeblur.sparse as sparse_mod
 from gyrodeblur.fftutils import fast_shape, psf_to_otf, smooth_periodic_pad
 from gyrodeblur.noise import estimate_noise_sigma
-from gyrodeblur.sparse import regularization_weight, sparse_deconvolve
+from gyrodeblur.sparse import SparseSettings, regularization_weight, sparse_deconvolve
 
 
 # --------------------------------------------------------------------------- helpers
@@ -479,3 +479,18 @@ def test_a_long_blur_gets_a_lower_data_penalty_and_it_pays(monkeypatch):
     monkeypatch.setattr(sparse_mod, "default_data_penalty", lambda h: sparse_mod._RHO_DATA)
     old = _psnr(sparse_deconvolve(blurred, psf, noise_sigma=0.004)[8:-8, 8:-8], sharp)
     assert new > old + 0.2, (new, old)     # 24.20 against 23.84 dB here
+
+
+def test_resolved_settings_deconvolve_as_the_keywords_they_came_from():
+    rng = np.random.default_rng(3)
+    img = rng.random((48, 56)).astype(np.float32)
+    psf = np.ones((1, 7)) / 7
+    settings = SparseSettings.resolve(noise_sigma=0.01, exponent=1.0, iterations=3)
+    assert settings.weight == regularization_weight(0.01, 1.0)
+    np.testing.assert_array_equal(
+        settings(img, psf), sparse_deconvolve(img, psf, noise_sigma=0.01, iterations=3))
+    assert SparseSettings.resolve(noise_sigma=0.01, weight=0.5).weight == 0.5
+    with pytest.raises(ValueError, match="noise_sigma or weight"):
+        SparseSettings.resolve()
+    with pytest.raises(ValueError, match="exponent"):
+        SparseSettings.resolve(noise_sigma=0.01, exponent=2.0)

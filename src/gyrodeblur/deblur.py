@@ -8,6 +8,7 @@ whole photo (to estimate e.g. its noise level once) and its options into a
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import time
 import warnings
@@ -49,22 +50,26 @@ def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
                     **options) -> Deconvolver:
     """Sparse-prior (TV) ADMM deconvolution; the noise level is measured once on the
     photo as encoded (where sensor noise is roughly uniform), not in linear light.
-    Options are checked here, before any work (not from inside a worker thread)."""
+    Options are checked here, before any work (not from inside a worker thread).
+    Returns a :class:`gyrodeblur.sparse.SparseSettings` (the resolved settings)."""
     from .noise import estimate_noise_sigma
-    from .sparse import check_sparse_options, sparse_deconvolve
-    known = (set(inspect.signature(sparse_deconvolve).parameters)
-             - {"image", "psf", "unknown", "clip"})
+    from .sparse import SparseSettings, check_sparse_options
+    known = {f.name for f in dataclasses.fields(SparseSettings)} | {"noise_sigma", "workers"}
     unknown = sorted(set(options) - known)
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'sparse' "
-                        f"(known: {', '.join(sorted(known))})")
+                        f"(known: {', '.join(sorted(known - {'clip'}))})")
+    if options.pop("workers", None) is not None:
+        warnings.warn("the sparse method's workers option is ignored: its FFTs are "
+                      "OpenCV's, which threads them itself (cv2.setNumThreads)",
+                      DeprecationWarning, stacklevel=3)
     try:
         check_sparse_options(noise_sigma=noise_sigma, **options)
+        if noise_sigma is None and options.get("weight") is None:
+            noise_sigma = estimate_noise_sigma(image if encoded is None else encoded)
+        return SparseSettings.resolve(noise_sigma=noise_sigma, clip=clip, **options)
     except ValueError as exc:
         raise InputError(None, f"method 'sparse': {exc}") from None
-    if noise_sigma is None:
-        noise_sigma = estimate_noise_sigma(image if encoded is None else encoded)
-    return partial(sparse_deconvolve, noise_sigma=noise_sigma, clip=clip, **options)
 
 
 #: name -> factory(image, **options) -> deconvolve(sub_image, psf). ``image`` is the
@@ -660,42 +665,41 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress):
     """The patch-wise sparse result refined under the interpolated-PSF model of the whole
     photo (:func:`gyrodeblur.spacevariant.refine_globally`), with the patch-wise solver's
     own prior weight and clipped-pixel handling."""
-    from .sparse import _clipping, regularization_weight
+    from .sparse import SparseSettings, _clipping
     from .spacevariant import DEFAULT_OUTER, InterpolatedBlur, refine_globally
-    settings = dict(inspect.signature(deconvolve.func).parameters)
-    settings = {k: v.default for k, v in settings.items()} | deconvolve.keywords
+    if not isinstance(deconvolve, SparseSettings):
+        raise TypeError("the global model needs the sparse method's deconvolver "
+                        f"(gyrodeblur.sparse.SparseSettings), got {deconvolve!r}")
+    settings = deconvolve
     channels = 1 if img.ndim == 2 else img.shape[2]
     total = len(patches) + DEFAULT_OUTER * channels
     report = None if progress is None else (lambda done, _: progress(done, total))
     start = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=report,
                                  unknown=unknown)
-    weight = settings["weight"]
-    if weight is None:
-        weight = regularization_weight(settings["noise_sigma"], settings["exponent"])
     gc = np.moveaxis(img, 2, 0) if img.ndim == 3 else img[None]
     middle = psfs[len(psfs) // 2]
-    sat = _clipping(gc, settings["saturation_level"], settings["saturation_dilation"],
+    sat = _clipping(gc, settings.saturation_level, settings.saturation_dilation,
                     np.asarray(middle, np.float32) / np.float32(np.sum(middle)))
     ignore = None if sat is None else sat.ignore
-    blur = InterpolatedBlur(patches, psfs, img.shape[:2])
-    lights = None
-    if sat is not None and sat.lights is not None:
-        # held at the patch-wise result: over-exposed lights and the pixels whose light
-        # lands mostly on them (with a rolling shutter a light's core may lie beside its
-        # streak): no data says more about them than the patches' start does
-        cover = blur.adjoint(sat.ignore.astype(np.float32))
-        p = blur.pad
-        lights = sat.ignore | (cover[p:p + img.shape[0], p:p + img.shape[1]] > 0.5)
-    if unknown is not None:
-        ignore = unknown if ignore is None else ignore | unknown
-    at_least = None
-    if sat is not None and sat.at_least is not None:
-        at_least = np.moveaxis(sat.at_least, 0, 2) if img.ndim == 3 else sat.at_least[0]
-    step = None if progress is None else (
-        lambda done: progress(len(patches) + done, total))
-    return refine_globally(img, start, blur,
-                           weight=weight, exponent=settings["exponent"], ignore=ignore,
-                           at_least=at_least, fixed=lights, progress=step)
+    with InterpolatedBlur(patches, psfs, img.shape[:2]) as blur:
+        lights = None
+        if sat is not None and sat.lights is not None:
+            # held at the patch-wise result: over-exposed lights and the pixels whose light
+            # lands mostly on them (with a rolling shutter a light's core may lie beside its
+            # streak): no data says more about them than the patches' start does
+            cover = blur.adjoint(sat.ignore.astype(np.float32))
+            p = blur.pad
+            lights = sat.ignore | (cover[p:p + img.shape[0], p:p + img.shape[1]] > 0.5)
+        if unknown is not None:
+            ignore = unknown if ignore is None else ignore | unknown
+        at_least = None
+        if sat is not None and sat.at_least is not None:
+            at_least = np.moveaxis(sat.at_least, 0, 2) if img.ndim == 3 else sat.at_least[0]
+        step = None if progress is None else (
+            lambda done: progress(len(patches) + done, total))
+        return refine_globally(img, start, blur,
+                               weight=settings.weight, exponent=settings.exponent, ignore=ignore,
+                               at_least=at_least, fixed=lights, progress=step)
 
 
 def _takes_unknown(deconvolve) -> bool:

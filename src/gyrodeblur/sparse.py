@@ -32,8 +32,8 @@ from .noise import estimate_noise_sigma
 from .packedfft import pack_spectrum, packed_irfft2, packed_multiply, packed_rfft2
 from .psf import psf_extent
 
-__all__ = ["sparse_deconvolve", "regularization_weight", "check_sparse_options",
-           "default_iterations", "default_data_penalty"]
+__all__ = ["sparse_deconvolve", "SparseSettings", "regularization_weight",
+           "check_sparse_options", "default_iterations", "default_data_penalty"]
 
 #: Regularisation weight per unit noise, ``weight = C * sigma**(2 - p)`` (see
 #: :func:`regularization_weight`). Tuned on 8-bit sRGB photos (scikit-image/Lai sets, camera
@@ -346,6 +346,62 @@ def sparse_deconvolve(
     if clip:
         np.clip(out, 0.0, 1.0, out=out)
     return np.ascontiguousarray(out, dtype=np.float32)
+
+
+@dataclass(frozen=True)
+class SparseSettings:
+    r""":func:`sparse_deconvolve`'s settings for one photo, resolved, and a deconvolver
+    with them: ``settings(image, psf, unknown=None)`` calls :func:`sparse_deconvolve`.
+
+    What the patches of one photo share (the prior weight is set once, from the whole
+    photo's noise), kept readable so that a later stage (the global refinement of
+    :mod:`gyrodeblur.spacevariant`) solves with the same prior and the same clipped-pixel
+    rules. Make one with :meth:`resolve`.
+
+    Attributes
+    ----------
+    weight : float
+        Prior weight :math:`\lambda` (image units to the power ``2 - exponent``).
+    exponent : float
+        Prior exponent ``p`` in ``(0, 1]``.
+    iterations : int or None
+        ADMM iterations per patch (``None``: :func:`default_iterations` of each PSF).
+    saturation_level : float or None
+        Clip level of the clipped-pixel handling (``None``: off).
+    saturation_dilation : int
+        Growth, in pixels, of an over-exposed blob's mask.
+    clip : bool
+        Whether results are clipped to ``[0, 1]``.
+    """
+
+    weight: float
+    exponent: float = 1.0
+    iterations: int | None = None
+    saturation_level: float | None = 0.98
+    saturation_dilation: int = 1
+    clip: bool = True
+
+    @classmethod
+    def resolve(cls, *, noise_sigma: float | None = None, weight: float | None = None,
+                exponent: float = 1.0, **options) -> "SparseSettings":
+        """Settings from :func:`sparse_deconvolve`'s keywords: ``weight`` if given, else
+        :func:`regularization_weight` of ``noise_sigma`` (which must then be given).
+        The options are checked (:func:`check_sparse_options`: ValueError)."""
+        check_sparse_options(noise_sigma=noise_sigma, weight=weight, exponent=exponent,
+                             **options)
+        if weight is None:
+            if noise_sigma is None:
+                raise ValueError("give noise_sigma or weight")
+            weight = regularization_weight(noise_sigma, exponent)
+        return cls(weight=float(weight), exponent=float(exponent), **options)
+
+    def __call__(self, image: np.ndarray, psf: np.ndarray, *,
+                 unknown: np.ndarray | None = None) -> np.ndarray:
+        return sparse_deconvolve(image, psf, weight=self.weight, exponent=self.exponent,
+                                 iterations=self.iterations,
+                                 saturation_level=self.saturation_level,
+                                 saturation_dilation=self.saturation_dilation,
+                                 clip=self.clip, unknown=unknown)
 
 
 @dataclass
