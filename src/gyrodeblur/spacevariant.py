@@ -154,10 +154,9 @@ class InterpolatedBlur:
         out = np.zeros(self.shape, np.float32) if out is None else out
         out[...] = 0.0
         y0, x0 = self.kh - 1, self.kw - 1
-        for i, p in enumerate(self.patches):
-            valid = self._buf[i, y0:y0 + self.h, x0:x0 + self.w]
-            valid *= self.weights[i]
-            out[p.y0:p.y1, p.x0:p.x1] += valid
+        for i, p in enumerate(self.patches):        # out += W_i * valid part, one pass
+            cv2.accumulateProduct(self._buf[i, y0:y0 + self.h, x0:x0 + self.w],
+                                  self.weights[i], out[p.y0:p.y1, p.x0:p.x1])
         return out
 
     def adjoint(self, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -165,9 +164,12 @@ class InterpolatedBlur:
         eh, ew = self.h + self.kh - 1, self.w + self.kw - 1
         y0, x0 = self.kh - 1, self.kw - 1
 
-        def fill(i, plane):
+        def fill(i, plane):                        # W_i g in the window, zero around it
             p = self.patches[i]
-            plane[...] = 0.0
+            plane[:y0] = 0.0
+            plane[y0 + self.h:] = 0.0
+            plane[y0:y0 + self.h, :x0] = 0.0
+            plane[y0:y0 + self.h, x0 + self.w:] = 0.0
             np.multiply(g[p.y0:p.y1, p.x0:p.x1], self.weights[i],
                         out=plane[y0:y0 + self.h, x0:x0 + self.w])
 
@@ -197,6 +199,20 @@ def _grad_t(gx: np.ndarray, gy: np.ndarray, out: np.ndarray, scratch: np.ndarray
     np.subtract(gy[:-1], gy[1:], out=scratch[1:])
     np.subtract(gy[-1:], gy[:1], out=scratch[:1])
     out += scratch
+
+
+_LAPLACIAN = np.array([[0, -1, 0], [-1, 4, -1], [0, -1, 0]], np.float32)
+
+
+def _add_grad_t_grad(v: np.ndarray, rho: float, out: np.ndarray, scratch: np.ndarray) -> None:
+    """``out += rho * grad^T grad v`` (:func:`_grad`'s periodic differences): the
+    5-point Laplacian ``4 v - (the four neighbours)``, in two OpenCV passes."""
+    cv2.filter2D(v, -1, _LAPLACIAN, dst=scratch, borderType=cv2.BORDER_CONSTANT)
+    scratch[0] -= v[-1]                   # the neighbours across the periodic edges
+    scratch[-1] -= v[0]
+    scratch[:, 0] -= v[:, -1]
+    scratch[:, -1] -= v[:, 0]
+    cv2.scaleAdd(scratch, float(rho), out, dst=out)
 
 
 def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur, *,
@@ -289,10 +305,7 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
         if m is not None:
             np.multiply(image_sized, m, out=image_sized)
         blur.adjoint(image_sized, out=out)
-        _grad(v, t1, t2)
-        _grad_t(t1, t2, t3, scratch=t1)
-        np.multiply(t3, np.float32(rho), out=t3)
-        np.add(out, t3, out=out)
+        _add_grad_t_grad(v, rho, out, scratch=t3)
 
     _grad(u, gx, gy)
     beta = _BETA0
@@ -328,16 +341,13 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
             if rr == 0.0:
                 break
             normal(d, nd)
-            step = np.float32(rr / float(np.vdot(d, nd)))
-            np.multiply(d, step, out=t1)
-            u += t1
-            np.multiply(nd, step, out=t1)
-            r -= t1
+            step = rr / float(np.vdot(d, nd))
+            cv2.scaleAdd(d, step, u, dst=u)           # u += step d
+            cv2.scaleAdd(nd, -step, r, dst=r)         # r -= step A'A d
             if held is not None:
                 r[held] = 0.0
             rr_new = float(np.vdot(r, r))
-            d *= np.float32(rr_new / rr)
-            d += r
+            cv2.scaleAdd(d, rr_new / rr, r, dst=d)    # d = r + (rr_new / rr) d
             rr = rr_new
         # dual update, then continuation (the scaled dual rescaled: the true one stays)
         _grad(u, gx, gy)
