@@ -1,8 +1,10 @@
 """Wall time and peak memory of deblurring against image size, with the FFT floor.
 
 For every size (1, 3, 12, 24, 48 MP, RGB, 4:3), every method (default: all of
-:data:`gyrodeblur.deblur.METHODS`) and both modes (``variant``: 6 x 8 patches;
-``invariant``: one whole-image PSF), a fresh Python process
+:data:`gyrodeblur.deblur.METHODS`) and both modes (``variant``: the automatic grid of
+patches, with the method's default model; ``invariant``: one whole-image PSF; and, when
+asked for with ``--modes``, ``patches``: ``variant`` with ``model="patches"``, the sparse
+method without its global refinement), a fresh Python process
 
 1. builds a photo-like float32 sRGB image (scikit-image's astronaut mirror-tiled, as
    ``benchmarks/deconv_speed.py`` does) and a capture from a real shake window of the
@@ -52,6 +54,9 @@ import _common  # noqa: E402
 SIZES_MP = [1, 3, 12, 24, 48]
 QUICK_SIZES_MP = [0.25, 1]
 MODES = ["variant", "invariant"]
+#: Modes ``--modes`` may name: deblur()'s mode and model for each.
+MODE_CALLS = {"variant": {"mode": "variant"}, "invariant": {"mode": "invariant"},
+              "patches": {"mode": "variant", "model": "patches"}}
 EXPOSURE = 0.02
 READOUT = 0.03
 FOCAL = 0.8
@@ -108,7 +113,8 @@ def worker(mp: float, method: str, mode: str, repeat: int) -> dict:
     with _common.quiet():
         for _ in range(repeat):
             t0 = time.perf_counter()
-            out, report = deblur(image, cap, mode=mode, method=method, return_report=True)
+            out, report = deblur(image, cap, method=method, return_report=True,
+                                 **MODE_CALLS[mode])
             runs.append(time.perf_counter() - t0)
             del out
             if rss_after is None:
@@ -192,7 +198,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="0.25 and 1 MP, the default method only")
     ap.add_argument("--sizes", help="comma-separated megapixels (default 1,3,12,24,48)")
     ap.add_argument("--methods", help=f"comma-separated (default all: {', '.join(METHODS)})")
-    ap.add_argument("--modes", default=",".join(MODES))
+    ap.add_argument("--modes", default=",".join(MODES),
+                    help=f"comma-separated, of {', '.join(MODE_CALLS)} (default "
+                         f"{','.join(MODES)})")
     ap.add_argument("--repeat", type=int, default=None,
                     help="timed runs per measurement (default 3 up to 3 MP, 2 above; quick 1)")
     ap.add_argument("--timeout", type=float, default=900.0,
@@ -210,6 +218,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise SystemExit(f"unknown method(s) {unknown}; known: {', '.join(METHODS)}")
+    unknown = [m for m in modes if m not in MODE_CALLS]
+    if unknown:
+        raise SystemExit(f"unknown mode(s) {unknown}; known: {', '.join(MODE_CALLS)}")
     t_start = time.perf_counter()
     machine = _common.machine_info()
     runs, given_up = [], set()
