@@ -130,6 +130,27 @@ def test_the_model_is_checked_and_one_patch_needs_no_global_model(make_capture):
     assert np.array_equal(a, deblur_with_psfs(img, whole, [k], model="patches"))
 
 
+def test_the_default_model_depends_on_the_photo_size(monkeypatch):
+    """Global up to GLOBAL_DEFAULT_MAX_PIXELS, patch-wise above (the 12 MP time budget);
+    asked for, global at any size."""
+    import gyrodeblur.deblur as deblur_mod
+    rng = np.random.default_rng(5)
+    shape = (96, 128)
+    img = np.clip(0.5 + 0.2 * rng.standard_normal(shape), 0, 1).astype(np.float32)
+    patches = patch_grid(shape, (2, 2), 0.25)
+    psfs = [np.ones((1, 2 * i + 3)) for i in range(len(patches))]
+    run = {m: deblur_with_psfs(img, patches, psfs, model=m, iterations=2)
+           for m in ("global", "patches")}
+    assert not np.array_equal(run["global"], run["patches"])
+    np.testing.assert_array_equal(deblur_with_psfs(img, patches, psfs, iterations=2),
+                                  run["global"])
+    monkeypatch.setattr(deblur_mod, "GLOBAL_DEFAULT_MAX_PIXELS", shape[0] * shape[1] - 1)
+    np.testing.assert_array_equal(deblur_with_psfs(img, patches, psfs, iterations=2),
+                                  run["patches"])
+    np.testing.assert_array_equal(
+        deblur_with_psfs(img, patches, psfs, model="global", iterations=2), run["global"])
+
+
 def test_refine_globally_refuses_bad_settings():
     rng = np.random.default_rng(3)
     blur = _random_model(rng)

@@ -541,10 +541,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", choices=sorted(METHODS), default=None,
                    help="deconvolution method (default: the best available)")
     s.add_argument("--model", choices=("global", "patches"), default=None,
-                   help="sparse method: 'global' (default) refines the patches' result under one "
+                   help="sparse method: 'global' refines the patches' result under one "
                         "blur model for the whole photo, the PSFs interpolated between patch "
-                        "centres; 'patches' deconvolves each patch alone and blends them (faster, "
-                        "the chapter's design; see BENCHMARKS.md)")
+                        "centres (default up to 4 MP; about 3x the time); 'patches' "
+                        "deconvolves each patch alone and blends them (the chapter's design; "
+                        "default above 4 MP; see BENCHMARKS.md)")
     s.add_argument("--phi", type=float, default=None,
                    help="Wiener inverse SNR (default 0.01, the chapter's)")
     s.add_argument("--iterations", type=int, default=None,

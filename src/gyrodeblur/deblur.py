@@ -30,7 +30,8 @@ from .tonecurve import TransferCurve, get_transfer_curve
 from .wiener import DEFAULT_PHI, check_phi, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
-           "DEFAULT_METHOD", "register_method", "plan_psf_field"]
+           "DEFAULT_METHOD", "register_method", "plan_psf_field", "MODELS",
+           "GLOBAL_DEFAULT_MAX_PIXELS"]
 
 Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -579,17 +580,19 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         weights (:mod:`gyrodeblur.spacevariant`), so no patch's boundary or neighbour's
         blur is mistaken for its own; ``"sparse"`` only. Default: ``"global"`` for
         ``"sparse"`` with a grid of equal windows (:func:`~gyrodeblur.tiling.patch_grid`'s)
-        of more than one patch, else ``"patches"``.
+        of more than one patch on a photo of at most :data:`GLOBAL_DEFAULT_MAX_PIXELS`
+        (4 MP; the refinement costs about twice the patch-wise solve), else
+        ``"patches"``.
     **options
         Passed to the method's factory (e.g. ``phi`` for Wiener).
     """
     method = method or DEFAULT_METHOD
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
-    model = _check_model(model, method, list(patches))
     curve = get_transfer_curve(transfer)
     checked = check_image(image, "photo", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
+    model = _check_model(model, method, list(patches), checked.shape[:2])
     encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
     patches, psfs = list(patches), list(psfs)
     if len(psfs) != len(patches):
@@ -642,13 +645,20 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
 
 #: Forward models of :func:`deblur_with_psfs`.
 MODELS = ("global", "patches")
+#: Largest photo (pixels) for which ``"global"`` is the default model. The refinement
+#: costs about twice the patch-wise solve (speed benchmark, session 29, 2 cores: 1 MP
+#: 1.0 -> 3.0 s, 3 MP 2.3 -> 7.2 s, 12 MP 8.1 -> 31.0 s and 1.0 -> 2.3 GB peak), so larger
+#: photos stay patch-wise by default, within issue 5's 12 MP budget (10 s, 2 GB);
+#: ``model="global"`` still asks for it at any size.
+GLOBAL_DEFAULT_MAX_PIXELS = 4_000_000
 
 
-def _check_model(model, method: str, patches) -> str:
+def _check_model(model, method: str, patches, shape) -> str:
     """The forward model to use (see :func:`deblur_with_psfs`), checked."""
     one_grid = len(patches) > 1 and len({p.shape for p in patches}) == 1
     if model is None:
-        return "global" if method == "sparse" and one_grid else "patches"
+        small = shape[0] * shape[1] <= GLOBAL_DEFAULT_MAX_PIXELS
+        return "global" if method == "sparse" and one_grid and small else "patches"
     if model not in MODELS:
         raise InputError("--model", f"unknown model {model!r} (global or patches)")
     if model == "global":
