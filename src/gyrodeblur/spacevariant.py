@@ -178,7 +178,8 @@ class InterpolatedBlur:
         out[...] = 0.0
         for i, p in enumerate(self.patches):
             y, x = self._extended(p)
-            out[y:y + eh, x:x + ew] += self._buf[i, :eh, :ew]
+            view = out[y:y + eh, x:x + ew]
+            cv2.add(view, self._buf[i, :eh, :ew], dst=view)
         return out
 
 
@@ -289,7 +290,7 @@ def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur
 def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, base,
                    one_sided, held, progress):
     """ADMM on one channel: ``w = grad u`` split off, the u-step by CG, warm-started.
-    Work arrays are allocated once (14 of the padded size, one of the photo's)."""
+    Work arrays are allocated once (15 of the padded size, one of the photo's)."""
     pad = blur.pad
     u = np.pad(u0, pad, mode="edge").astype(np.float32)
     gx, gy, wx, wy, b, r, d, nd, t1, t2, t3 = (np.empty_like(u) for _ in range(11))
@@ -299,6 +300,7 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
     masked = None if base.all() else base
     m = masked
     rho = 0.0
+    atg = None                               # A^T M g
 
     def normal(v, out):                      # out = (A^T M A + rho grad^T grad) v
         blur.forward(v, out=image_sized)
@@ -326,10 +328,12 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
         if one_sided is not None:            # active set of the one-sided pixels
             m = base.copy()
             m[one_sided & (blur.forward(u, out=image_sized) >= g)] = 0.0
-        np.copyto(image_sized, g)
-        if m is not None:
-            image_sized *= m
-        b += blur.adjoint(image_sized, out=t3)
+        if one_sided is not None or atg is None:   # A^T M g: once, unless M moves
+            np.copyto(image_sized, g)
+            if m is not None:
+                image_sized *= m
+            atg = blur.adjoint(image_sized, out=np.empty_like(u) if atg is None else atg)
+        b += atg
         # u-step: CG on the normal equations from the current u
         normal(u, nd)
         np.subtract(b, nd, out=r)
