@@ -38,7 +38,7 @@ def test_simulate_then_deblur_keeps_metadata(capture_dir, capsys):
     assert main(["deblur", str(d / "blurred.jpg"), "--capture", str(d / "cap.json"),
                  "-o", str(d / "out.jpg"), "--save-psf", str(d / "field.png"), "--grid", "3x4"]) == 0
     out = capsys.readouterr().out
-    assert "mode variant 3x4" in out and "PSF extent" in out
+    assert "mode variant 3x4 (global model)" in out and "PSF extent" in out
     src, res = read_photo(d / "sharp.jpg"), read_photo(d / "out.jpg")
     assert res.icc_profile == src.icc_profile and res.exif is not None
     assert Image.open(d / "out.jpg").getexif()[0x010F] == "TestCam"

@@ -125,6 +125,11 @@ def test_the_model_is_checked_and_one_patch_needs_no_global_model(make_capture):
     uneven = [Patch(0, 240, 0, 200), Patch(0, 240, 150, 320)]
     with pytest.raises(InputError, match="equal windows"):
         deblur_with_psfs(img, uneven, [k, k], model="global")
+    _, report = deblur(img, cap, grid=(2, 2), return_report=True, iterations=1)
+    assert report.model == "global"
+    _, report = deblur(img, cap, grid=(2, 2), model="patches", return_report=True,
+                       iterations=1)
+    assert report.model == "patches"
     whole = [Patch(0, 240, 0, 320)]                  # one patch: already one model
     a = deblur_with_psfs(img, whole, [k], model="global")
     assert np.array_equal(a, deblur_with_psfs(img, whole, [k], model="patches"))

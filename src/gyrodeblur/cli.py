@@ -431,6 +431,8 @@ def cmd_deblur(args, say) -> None:
         field = report.field
         mode_txt = args.mode
         grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
+        if report.model == "global":
+            grid_txt += " (global model)"
     progress.close()
     drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
                if args.save_psf else None)

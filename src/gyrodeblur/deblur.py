@@ -136,6 +136,8 @@ class DeblurReport:
     field: PSFField
     seconds: float = 0.0
     notes: list = field(default_factory=list)
+    #: Forward model used (:data:`MODELS`): ``"global"`` or ``"patches"``.
+    model: str = "patches"
 
     @property
     def extent_range(self) -> tuple[int, int]:
@@ -819,7 +821,9 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
                            **options)
     if not return_report:
         return out
-    return out, DeblurReport(mode, method, field_.grid, field_, time.perf_counter() - t0, notes)
+    model = _check_model(options.get("model"), method, patches, image.shape[:2])
+    return out, DeblurReport(mode, method, field_.grid, field_, time.perf_counter() - t0, notes,
+                             model)
 
 
 def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),

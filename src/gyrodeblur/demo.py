@@ -84,7 +84,7 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = F
         "deblurred": {"psnr": psnr(sharp, restored, border), "ssim": ssim(sharp, restored, border)},
         "deblurred_invariant": {"psnr": psnr(sharp, invariant, border),
                                 "ssim": ssim(sharp, invariant, border)},
-        "method": report.method, "grid": list(report.grid),
+        "method": report.method, "grid": list(report.grid), "model": report.model,
         "psf_extent_px": list(report.extent_range), "seconds": report.seconds,
     }
     w = dict(overwrite=True)                 # the folder was checked above
@@ -104,6 +104,7 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = F
     say(f"  blurred    PSNR {res['blurred']['psnr']:6.2f} dB  SSIM {res['blurred']['ssim']:.3f}")
     say(f"  deblurred  PSNR {res['deblurred']['psnr']:6.2f} dB  SSIM {res['deblurred']['ssim']:.3f}"
         f"  ({report.method}, space-variant {report.grid[0]}x{report.grid[1]}, "
+        f"{report.model} model, "
         f"PSF extent {res['psf_extent_px'][0]}-{res['psf_extent_px'][1]} px, "
         f"{report.seconds:.2f} s)")
     say(f"  (space-invariant: PSNR {res['deblurred_invariant']['psnr']:.2f} dB; metrics leave "
