@@ -786,7 +786,9 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
         Also return a :class:`DeblurReport`.
     **options
         Method options: ``phi`` for ``"wiener"``; ``iterations``, ``noise_sigma``, ``weight``,
-        ``exponent`` for ``"sparse"`` (see :func:`gyrodeblur.sparse.sparse_deconvolve`).
+        ``exponent`` for ``"sparse"`` (see :func:`gyrodeblur.sparse.sparse_deconvolve`);
+        ``model`` (``"global"`` or ``"patches"``, see :func:`deblur_with_psfs`: by default
+        global for ``"sparse"`` up to :data:`GLOBAL_DEFAULT_MAX_PIXELS`).
 
     Returns
     -------
