@@ -648,10 +648,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
 #: Forward models of :func:`deblur_with_psfs`.
 MODELS = ("global", "patches")
 #: Largest photo (pixels) for which ``"global"`` is the default model. The refinement
-#: costs about twice the patch-wise solve (speed benchmark, session 29, 2 cores: 1 MP
-#: 1.0 -> 3.0 s, 3 MP 2.3 -> 7.2 s, 12 MP 8.1 -> 31.0 s and 1.0 -> 2.3 GB peak), so larger
-#: photos stay patch-wise by default, within issue 5's 12 MP budget (10 s, 2 GB);
-#: ``model="global"`` still asks for it at any size.
+#: costs about twice the patch-wise solve (speed benchmark, session 29, 4 x 8 steps,
+#: 2 cores: 1 MP 1.0 -> 3.0 s, 3 MP 2.3 -> 7.2 s, 12 MP 8.1 -> 31.0 s and 1.0 -> 2.3 GB
+#: peak), so larger photos stay patch-wise by default, within issue 5's 12 MP budget
+#: (10 s, 2 GB); ``model="global"`` still asks for it at any size.
 GLOBAL_DEFAULT_MAX_PIXELS = 4_000_000
 
 
