@@ -166,3 +166,13 @@ def test_refine_globally_refuses_bad_settings():
         refine_globally(g, g, blur, weight=0.0)
     with pytest.raises(ValueError, match="differ"):
         refine_globally(g[:-1], g[:-1], blur, weight=1e-3)
+
+
+def test_patches_and_psfs_may_be_given_as_iterators():
+    """The model is chosen from the patches without using up an iterator of them."""
+    img = np.full((96, 128), 0.5, np.float32)
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    psfs = [np.ones((1, 3))] * len(patches)
+    np.testing.assert_array_equal(
+        deblur_with_psfs(img, iter(patches), iter(psfs), iterations=1),
+        deblur_with_psfs(img, patches, psfs, iterations=1))

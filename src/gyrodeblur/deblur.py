@@ -594,9 +594,9 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     curve = get_transfer_curve(transfer)
     checked = check_image(image, "photo", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
-    model = _check_model(model, method, list(patches), checked.shape[:2])
-    encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
     patches, psfs = list(patches), list(psfs)
+    model = _check_model(model, method, patches, checked.shape[:2])
+    encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
     if len(psfs) != len(patches):
         raise InputError(None, f"{len(psfs)} PSFs for {len(patches)} patches: give one each")
     for i, k in enumerate(psfs):      # checked here, before any work; used as given
