@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from .fftutils import FFT_WORKERS, fast_shape
-from .sparse import _shrink_residual
+from .sparse import _dx, _dx_t_set, _dy, _dy_t_add, _shrink_residual
 from .tiling import Patch, blend_weights
 
 __all__ = ["InterpolatedBlur", "refine_globally", "DEFAULT_OUTER", "DEFAULT_CG_STEPS"]
@@ -187,31 +187,13 @@ class InterpolatedBlur:
         return out
 
 
-def _grad(u: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> None:
-    """Forward differences of ``u`` along x into ``gx`` and along y into ``gy`` (periodic
-    on the padded domain)."""
-    np.subtract(u[:, 1:], u[:, :-1], out=gx[:, :-1])
-    np.subtract(u[:, :1], u[:, -1:], out=gx[:, -1:])
-    np.subtract(u[1:], u[:-1], out=gy[:-1])
-    np.subtract(u[:1], u[-1:], out=gy[-1:])
-
-
-def _grad_t(gx: np.ndarray, gy: np.ndarray, out: np.ndarray, scratch: np.ndarray) -> None:
-    """``out = grad^T (gx, gy)``, the adjoint of :func:`_grad` (``scratch``: a work array
-    of the same shape)."""
-    np.subtract(gx[:, :-1], gx[:, 1:], out=out[:, 1:])
-    np.subtract(gx[:, -1:], gx[:, :1], out=out[:, :1])
-    np.subtract(gy[:-1], gy[1:], out=scratch[1:])
-    np.subtract(gy[-1:], gy[:1], out=scratch[:1])
-    out += scratch
-
-
 _LAPLACIAN = np.array([[0, -1, 0], [-1, 4, -1], [0, -1, 0]], np.float32)
 
 
 def _add_grad_t_grad(v: np.ndarray, rho: float, out: np.ndarray, scratch: np.ndarray) -> None:
-    """``out += rho * grad^T grad v`` (:func:`_grad`'s periodic differences): the
-    5-point Laplacian ``4 v - (the four neighbours)``, in two OpenCV passes."""
+    """``out += rho * grad^T grad v``, ``grad`` the periodic forward differences of
+    :mod:`gyrodeblur.sparse` (``_dx``, ``_dy``): the 5-point Laplacian
+    ``4 v - (the four neighbours)``, in two OpenCV passes."""
     cv2.filter2D(v, -1, _LAPLACIAN, dst=scratch, borderType=cv2.BORDER_CONSTANT)
     scratch[0] -= v[-1]                   # the neighbours across the periodic edges
     scratch[-1] -= v[0]
@@ -313,7 +295,8 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
         blur.adjoint(image_sized, out=out)
         _add_grad_t_grad(v, rho, out, scratch=t3)
 
-    _grad(u, gx, gy)
+    _dx(u, gx)
+    _dy(u, gy)
     beta = _BETA0
     for it in range(outer):
         rho = weight * beta
@@ -326,7 +309,8 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
         np.subtract(t1, wy, out=wy)
         np.subtract(wx, dx, out=t1)
         np.subtract(wy, dy, out=t2)
-        _grad_t(t1, t2, b, scratch=t1)
+        _dx_t_set(t1, b)
+        _dy_t_add(t2, b)
         b *= np.float32(rho)
         m = masked
         if one_sided is not None:            # active set of the one-sided pixels
@@ -358,7 +342,8 @@ def _solve_channel(g, u0, blur: InterpolatedBlur, weight, p, outer, cg_steps, ba
             cv2.scaleAdd(d, rr_new / rr, r, dst=d)    # d = r + (rr_new / rr) d
             rr = rr_new
         # dual update, then continuation (the scaled dual rescaled: the true one stays)
-        _grad(u, gx, gy)
+        _dx(u, gx)
+        _dy(u, gy)
         dx += gx
         dx -= wx
         dy += gy
