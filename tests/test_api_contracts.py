@@ -192,3 +192,77 @@ def test_logs_and_captures_are_hashable_and_refuse_complex_rates(make_capture):
     t = np.arange(5) * 0.01
     with pytest.raises(InputError, match="real numbers"):
         GyroLog(t, np.ones((5, 3)) * (1 + 1j))
+
+
+def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_capture):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    blurred = simulate_blur(scene, cap)
+    # None is not a transfer curve (it read as "none", i.e. linear, instead of the default)
+    with pytest.raises(InputError, match="transfer curve is a name"):
+        deblur(blurred, cap, transfer=None)
+    with pytest.raises(InputError, match="transfer curve is a name"):
+        simulate_blur(scene, cap, transfer=None)
+    # a flag given as a string is truthy: "no" clipped the output
+    for kw in ({"clip": "no"}, {"align": "yes"}, {"clip": 1}):
+        with pytest.raises(TypeError, match=f"{next(iter(kw))} must be True or False"):
+            deblur(blurred, cap, **kw)
+    with pytest.raises(TypeError, match="quantize must be True or False"):
+        simulate_blur(scene, cap, quantize="no")
+    calls = []
+    with pytest.raises(TypeError, match="progress must be a callable"):
+        deblur(blurred, cap, progress=5)
+    deblur(blurred, cap, progress=lambda done, total: calls.append((done, total)))
+    assert calls and calls[-1][0] == calls[-1][1]
+    # a capture left out
+    from gyrodeblur.psf import render_psf, trace
+    for call in (lambda: simulate_blur(scene, None), lambda: render_psf(None, 10, 10),
+                 lambda: trace(None, 10.0, 10.0, 3), lambda: deblur(blurred, {"fx": 1})):
+        with pytest.raises(TypeError, match="capture must be a Capture"):
+            call()
+    # simulate's numbers, named
+    with pytest.raises(TypeError, match="snr_db must be a number"):
+        simulate_blur(scene, cap, snr_db="abc")
+    with pytest.raises(TypeError, match="snr_db must be a number"):
+        simulate_blur(scene, cap, snr_db=[40])
+    with pytest.raises(TypeError, match="seed must be a whole number"):
+        simulate_blur(scene, cap, snr_db=40, seed="x")
+    assert np.array_equal(simulate_blur(scene, cap, snr_db=40, seed=[1, 2]),
+                          simulate_blur(scene, cap, snr_db=40, seed=[1, 2]))
+
+
+def test_simulate_refuses_encoded_photos_that_are_offset_negated_or_unscaled(
+        scene, make_capture):
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    for bad in (scene - 0.5, -scene):
+        with pytest.raises(InputError, match="below black"):
+            simulate_blur(bad, cap, transfer="srgb")
+    with pytest.raises(InputError, match="values up to 2[0-9][0-9]"):
+        simulate_blur(scene * 255, cap, transfer="srgb")
+    # linear values are blurred as they are: the warp is linear in them
+    hdr = scene.copy()
+    hdr[40:44, 60:64] = 20.0                 # a light far above 1
+    out = simulate_blur(hdr, cap, order=1)
+    assert out.max() > 1.5
+    assert np.allclose(simulate_blur(scene - 0.5, cap), simulate_blur(scene, cap) - 0.5,
+                       atol=1e-5)
+
+
+def test_psf_positions_and_timing_rows_are_checked(make_capture):
+    from gyrodeblur.psf import render_psf, trace
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    with pytest.raises(InputError, match="pixel position must be finite"):
+        trace(cap, np.nan, 10.0, 3)
+    for row in (np.nan, "a", 24000, -3):
+        with pytest.raises(InputError, match="row must be"):
+            render_psf(cap, 64, 48, row=row)
+        with pytest.raises(InputError, match="row must be"):
+            trace(cap, 64.0, 48.0, 3, row=row)
+    assert render_psf(cap, 64, 48, row=47.5).sum() == pytest.approx(1.0, abs=1e-5)
+    # a frame row's timing is used: row 0's under a rolling shutter is the global shutter's
+    rolling = make_capture([0.0, 2.0, 0.0], width=128, height=96, f=120.0, readout=0.02)
+    global_ = make_capture([0.0, 2.0, 0.0], width=128, height=96, f=120.0)
+    at_row0 = trace(rolling, 64.0, 48.0, 5, row=0)
+    assert np.allclose(at_row0, trace(global_, 64.0, 48.0, 5), atol=0.05)
+    # its own row starts 10 ms later: the yaw has moved its light 2.4 px further to -x
+    shift = trace(rolling, 64.0, 48.0, 5) - at_row0
+    assert np.allclose(shift[:, 0], -120.0 * 2.0 * 0.01, atol=0.1)

@@ -289,3 +289,22 @@ def test_command_line_takes_the_log_s_axes(tmp_path, capsys):
     assert not np.array_equal(turned, same)
     assert main(base + ["--orientation", "XXZ"]) == 2
     assert "error:" in capsys.readouterr().err
+
+
+def test_planning_options_that_are_not_times_or_sizes_are_named(tmp_path):
+    from gyrodeblur.dataset import plan_window, read_sharp
+    from gyrodeblur.imageio import write_photo
+    t = np.arange(0.0, 3.0, 0.005)
+    log = GyroLog(t, np.tile([0.1, 0.3, 0.05], (t.size, 1)))
+    for kw, what in (({"readout": -1.0}, "readout must be"), ({"margin": np.nan}, "margin must be"),
+                     ({"focal": 0.0}, "focal must be")):
+        with pytest.raises(InputError, match=what):
+            plan_window(log, "x", 0, 200, 150, **kw)
+    cap, meta = plan_window(log, "x", 0, 200, 150)
+    assert meta["readout_time"] == pytest.approx(cap.readout_time)
+    path = tmp_path / "sharp.png"
+    write_photo(path, np.full((20, 30, 3), 0.5, np.float32))
+    for bad in (0, -5, 1, 2.5):
+        with pytest.raises(InputError, match="max_size must be"):
+            read_sharp(path, bad)
+    assert read_sharp(path, 10).shape == (7, 10, 3)

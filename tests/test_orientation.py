@@ -45,3 +45,20 @@ def test_quaternion_helpers_match_scipy():
     v = np.array([[0.1, -0.2, 0.3], [0.0, 0.0, 0.0], [1e-10, 0, 0]])
     assert np.allclose(quat_to_matrix(quat_from_rotvec(v)), Rotation.from_rotvec(v).as_matrix(),
                        atol=1e-12)
+
+
+def test_bad_samples_are_refused_not_turned_into_nan_rotations():
+    import pytest
+    t = np.arange(10) / 200.0
+    w = np.tile([0.1, 0.2, 0.3], (10, 1))
+    with pytest.raises(ValueError, match="strictly increasing"):
+        Orientation(t[::-1], w, 0.0)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        Orientation(np.r_[t[:5], t[4:9]], w, 0.0)
+    bad = w.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="rates must be finite"):
+        Orientation(t, bad, 0.0)
+    with pytest.raises(ValueError, match="t_ref must be a finite"):
+        Orientation(t, w, np.nan)
+    assert np.allclose(Orientation(t, w, 0.0).matrices(0.0), np.eye(3))

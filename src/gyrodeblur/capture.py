@@ -38,7 +38,7 @@ from .errors import InputError
 from .gyrolog import RATE_UNITS, TIME_UNITS, GyroLog, check_coverage, check_format, read_gyro_log
 from .orientation import Orientation
 
-__all__ = ["Capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"]
+__all__ = ["Capture", "check_capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"]
 
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
@@ -73,7 +73,9 @@ class Capture:
     exposure_time : float
         Seconds each row integrates light (> 0).
     readout_time : float
-        Seconds between the first and the last row's start (>= 0; 0 = global shutter).
+        Seconds the sensor takes to read all rows out: row ``y`` starts
+        ``readout_time * y / height`` after the first (the last one row's time before
+        ``readout_time``; >= 0; 0 = global shutter).
     camera : Camera
         Intrinsics in pixels.
     log : GyroLog
@@ -398,6 +400,15 @@ def _section(data: dict, key: str, source: str) -> dict:
     if not isinstance(v, dict):
         raise InputError(source, f"{key!r} must be a JSON object, got {v!r}")
     return _given(v)
+
+
+def check_capture(capture, what: str = "capture") -> "Capture":
+    """``capture`` unchanged when it is a :class:`Capture`, else a ``TypeError`` that says
+    where one comes from (a capture left out or given as a dict or a path)."""
+    if not isinstance(capture, Capture):
+        raise TypeError(f"{what} must be a Capture (see gyrodeblur.capture.load_capture), "
+                        f"got {type(capture).__name__}")
+    return capture
 
 
 def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | None = None,

@@ -67,7 +67,8 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
                    help="camera-clock seconds when row 0 starts exposing")
     g.add_argument("--exposure-time", type=float, metavar="S", help="seconds each row integrates")
     g.add_argument("--readout-time", type=float, metavar="S",
-                   help="seconds from the first row's start to the last row's (0 = global shutter)")
+                   help="seconds to read all rows out: row y starts y/height of it after "
+                        "row 0 (0 = global shutter)")
     for k in ("fx", "fy", "cx", "cy"):
         g.add_argument(f"--{k}", type=float, metavar="PX",
                        help=f"intrinsic {k} in pixels of the capture's camera.width x height "

@@ -74,7 +74,7 @@ __all__ = [
 #: Defaults of :func:`build_cases` (units: seconds, fraction of the width, dB, px).
 DEFAULTS = {
     "exposure": (0.010, 0.040),   # s; a range is sampled uniformly per case
-    "readout": 0.030,             # s, first row's start to last row's start
+    "readout": 0.030,             # s, readout of all rows (row y starts y/H of it later)
     "focal": 0.8,                 # fx = focal * width (px); 0.8 ~ a 28 mm-equivalent lens
     "snr_db": 40.0,               # image noise, dB (std(blurred) / std(noise))
     "windows_per_photo": 3,
@@ -189,6 +189,9 @@ def read_sharp(path: str | os.PathLike, max_size: int | None = None) -> np.ndarr
     downscaled (in linear light, anti-aliased) so its longer side is ``max_size``."""
     from .imageio import read_photo
 
+    if max_size is not None and (isinstance(max_size, bool) or not isinstance(
+            max_size, (int, np.integer)) or max_size < 2):
+        raise InputError(None, f"max_size must be a whole number of pixels >= 2, got {max_size!r}")
     img = read_photo(path).pixels
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
@@ -295,6 +298,13 @@ def plan_window(log: GyroLog, stem: str, k: int, width: int, height: int, *,
         Window, timing, seeds and :func:`shake_stats`.
     """
     e_lo, e_hi = _exposure_range(exposure)
+    for name, value in (("readout", readout), ("margin", margin)):
+        if not (isinstance(value, (int, float, np.integer, np.floating))
+                and not isinstance(value, bool) and 0 <= value < np.inf):
+            raise InputError(None, f"{name} must be a number of seconds >= 0, got {value!r}")
+    if not (isinstance(focal, (int, float, np.integer, np.floating))
+            and not isinstance(focal, bool) and 0 < focal < np.inf):
+        raise InputError(None, f"focal must be a positive multiple of the width, got {focal!r}")
     rng = np.random.default_rng([int(seed), zlib.crc32(stem.encode()), int(k)])
     e = round(float(rng.uniform(e_lo, e_hi)) if e_hi > e_lo else e_lo, 6)
     dur = readout + e

@@ -19,7 +19,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .capture import Capture
+from .arguments import check_callback, check_flag
+from .capture import Capture, check_capture
 from .errors import InputError
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
@@ -591,6 +592,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     method = method or DEFAULT_METHOD
     if method not in METHODS:
         raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    clip = check_flag(clip, "clip")
+    check_callback(progress, "progress")
     curve = get_transfer_curve(transfer)
     checked = check_image(image, "photo", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
@@ -800,9 +803,12 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     image = check_image(image, "photo", max_value=PHOTO_MAX,
                         min_value=PHOTO_MIN)
     patch_grid(image.shape[:2], (1, 1), 0.0)        # a photo too small for any mode: said
-    if not isinstance(capture, Capture):
-        raise TypeError(f"capture must be a Capture (see gyrodeblur.capture.load_capture), "
-                        f"got {type(capture).__name__}")
+    check_capture(capture)
+    check_flag(clip, "clip")
+    check_callback(progress, "progress")
+    get_transfer_curve(transfer)                   # refused before the PSFs are rendered
+    if align is not None:
+        align = check_flag(align, "align")
     method = method or DEFAULT_METHOD
     defaults = METHOD_DEFAULTS.get(method, _OTHER_DEFAULTS)
     if mode == "invariant":
@@ -882,6 +888,8 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
 
     image = check_image(image, "photo", max_value=PHOTO_MAX,
                         min_value=PHOTO_MIN)
+    check_flag(clip, "clip")
+    check_callback(progress, "progress")
     H, W = image.shape[:2]
     lin = get_transfer_curve(transfer).decode(split_alpha(image)[0])     # not the mask
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin

@@ -98,9 +98,15 @@ class Orientation:
         omega = np.asarray(omega, dtype=np.float64)
         if t.ndim != 1 or t.size < 2 or omega.shape != (t.size, 3):
             raise ValueError("need N >= 2 times and an (N, 3) array of rates")
+        dt = np.diff(t)
+        if not (np.all(np.isfinite(t)) and np.all(dt > 0)):
+            raise ValueError("sample times must be finite and strictly increasing")
+        if not np.all(np.isfinite(omega)):
+            raise ValueError("rates must be finite (no NaN or infinity)")
+        if not np.isfinite(t_ref):
+            raise ValueError(f"t_ref must be a finite time in seconds, got {t_ref!r}")
         self.t = t
         self.t_ref = float(t_ref)
-        dt = np.diff(t)
         self._phi = 0.5 * (omega[1:] + omega[:-1]) * dt[:, None]      # (N-1, 3) rad
         self._q = _compose(quat_from_rotvec(self._phi))
         q_ref = self._interp(np.array([self.t_ref]))[0]

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .capture import Capture
+from .capture import Capture, check_capture
 from .errors import InputError
 
 __all__ = ["trace", "landing_pixel", "render_psf", "splat", "lanczos_splat", "PSFField",
@@ -55,8 +55,30 @@ def trace(capture: Capture, x0: float, y0: float, n: int, row: float | None = No
     (:func:`landing_pixel`), at the midpoints of ``n`` equal steps of ``p``'s row's
     exposure (``row``: that row's timing instead, e.g. the middle row's for one PSF of the
     whole photo). To first order these are where the point's light goes."""
+    check_capture(capture)
     n = _sample_count(n)
+    x0, y0 = _pixel_position(x0, y0)
+    row = _timing_row(capture, row)
     return _trace_from(capture, x0, y0, landing_pixel(capture, x0, y0, row=row), n, row)
+
+
+def _timing_row(capture: Capture, row) -> float | None:
+    """``row`` (a rolling-shutter timing row) as a float, ``None`` unchanged; InputError
+    for one that is not a finite number or lies outside the frame's rows (a row's timing
+    off the sensor would extrapolate the gyro past the exposure)."""
+    if row is None:
+        return None
+    try:
+        if isinstance(row, (str, bytes, bool, np.bool_)):
+            raise TypeError
+        r = float(row)
+    except (TypeError, ValueError):
+        raise InputError(None, f"row must be a number (a row of the frame), got {row!r}") from None
+    H = capture.camera.height
+    if not (np.isfinite(r) and -0.5 <= r <= H - 0.5):
+        raise InputError(None, f"row must be a row of the {H}-row frame (-0.5 to {H - 0.5:g}), "
+                               f"got {row!r}")
+    return r
 
 
 def _sample_count(n) -> int:
@@ -313,12 +335,13 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     if not (isinstance(max_step, (int, float, np.floating, np.integer)) and max_step > 0
             and np.isfinite(max_step)):
         raise InputError(None, f"max_step must be a positive number of pixels, got {max_step!r}")
-    cam = capture.camera
+    cam = check_capture(capture).camera
     if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, np.integer))
                                or not 0 <= radius <= max(cam.width, cam.height)):
         raise InputError(None, f"radius must be a whole number of pixels from 0 to "
                                f"{max(cam.width, cam.height)}, got {radius!r}")
     x, y = _pixel_position(x, y)
+    row = _timing_row(capture, row)
     pts = _adaptive_trace(capture, x, y, max_step, row)
     offsets = pts - np.array([x, y])
     if centred:

@@ -13,10 +13,11 @@ import numpy as np
 from scipy import ndimage
 
 from .bands import for_row_bands
-from .capture import Capture
-from .images import check_image, join_alpha, split_alpha
+from .capture import Capture, check_capture
+from .arguments import check_flag, check_real
+from .images import PHOTO_MAX, PHOTO_MIN, check_image, join_alpha, split_alpha
 from .psf import check_blur_span
-from .tonecurve import TransferCurve, get_transfer_curve
+from .tonecurve import LINEAR, TransferCurve, get_transfer_curve
 
 __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
 
@@ -108,10 +109,25 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     if n_samples is not None and (isinstance(n_samples, bool) or not isinstance(
             n_samples, (int, np.integer)) or n_samples < 1):
         raise ValueError(f"n_samples must be a positive whole number or None, got {n_samples!r}")
-    if snr_db is not None and not np.isfinite(float(snr_db)):
-        raise ValueError(f"snr_db must be a finite number of dB or None, got {snr_db!r}")
+    if snr_db is not None:
+        snr_db = check_real(snr_db, "snr_db")
+    try:
+        if isinstance(seed, (bool, np.bool_)):
+            raise TypeError
+        np.random.SeedSequence(seed)
+    except (TypeError, ValueError):
+        raise TypeError(f"seed must be a whole number >= 0 (or a sequence of them) or None, "
+                        f"got {seed!r}") from None
+    quantize = check_flag(quantize, "quantize")
+    check_capture(capture)
     curve = get_transfer_curve(transfer, "transfer")
-    img, alpha = split_alpha(check_image(sharp, "sharp image"))   # alpha: a mask, kept
+    # an encoded photo (sRGB) holds neither values far below black (offset or negated) nor
+    # far above 1 (0-255, not scaled); linear values are blurred as they are (a linear
+    # operator: lights far above 1, or a zero-mean test texture)
+    linear = curve.name == LINEAR.name
+    img, alpha = split_alpha(check_image(
+        sharp, "sharp image", min_value=-np.inf if linear else PHOTO_MIN,
+        max_value=np.inf if linear else PHOTO_MAX))                   # alpha: a mask, kept
     img = curve.decode(img)
     H, W = img.shape[:2]
     cam = capture.camera

@@ -387,7 +387,10 @@ def get_transfer_curve(name: str | TransferCurve, source: str | None = "--transf
     """
     if isinstance(name, TransferCurve):
         return name
-    key = str(name).strip().lower()
+    if not isinstance(name, str):        # None would read as "none", i.e. linear
+        raise InputError(source, f"a transfer curve is a name ({', '.join(sorted(_CURVES))}) "
+                                 f"or a TransferCurve, got {name!r}")
+    key = name.strip().lower()
     try:
         return _CURVES[key]
     except KeyError:

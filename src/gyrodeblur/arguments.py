@@ -1,0 +1,40 @@
+"""Checks of the plain keyword arguments that the public functions take.
+
+A flag given as ``"no"`` is truthy, a progress callback given as a number fails only
+after the work has started, and ``float("abc")`` fails without naming the argument. These
+helpers say which argument is wrong before any work is done.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["check_flag", "check_callback", "check_real"]
+
+
+def check_flag(value, name: str) -> bool:
+    """``value`` as a ``bool``; a ``TypeError`` naming ``name`` for anything but a
+    ``bool`` or ``numpy.bool_`` (``"no"`` and ``1`` are refused, not read as true)."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise TypeError(f"{name} must be True or False, got {value!r}")
+
+
+def check_callback(value, name: str):
+    """``value`` unchanged when it is ``None`` or callable, else a ``TypeError``."""
+    if value is None or callable(value):
+        return value
+    raise TypeError(f"{name} must be a callable or None, got {value!r}")
+
+
+def check_real(value, name: str, *, allow_inf: bool = False) -> float:
+    """``value`` as a ``float``; a ``TypeError`` naming ``name`` for anything but a real
+    number (a ``bool``, a string or a list is refused), a ``ValueError`` for NaN (and for
+    an infinity unless ``allow_inf``)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
+                                                                      np.floating)):
+        raise TypeError(f"{name} must be a number, got {value!r}")
+    x = float(value)
+    if np.isnan(x) or (np.isinf(x) and not allow_inf):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return x
