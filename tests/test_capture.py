@@ -124,6 +124,10 @@ def test_not_json(tmp_path):
     (tmp_path / "c.json").write_text("{nope")
     with pytest.raises(InputError, match="c.json: not valid JSON"):
         load_capture(tmp_path / "c.json")
+    (tmp_path / "c.json").write_text('{"exposure_start": "unterminated}')
+    with pytest.raises(InputError, match=r"not valid JSON \(Unterminated string starting at: "
+                                         r"line 1, column 20\)"):
+        load_capture(tmp_path / "c.json")
 
 
 def test_unknown_keys_are_warned_of_and_notes_are_not(capture_files):

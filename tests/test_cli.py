@@ -117,6 +117,17 @@ def test_alpha_is_passed_through_and_leaves_the_colours_alone(capture_dir, capsy
     assert main(["deblur", str(d / "rgba.png"), "--capture", str(d / "cap.json"),
                  "-o", str(d)]) == 2
     assert "is a folder" in capsys.readouterr().err
+    # grey + alpha comes out as grey + alpha, the alpha exactly as it went in
+    grey = rgb.mean(axis=2)
+    Image.fromarray(np.dstack([np.round(grey * 255), np.round(alpha * 255)]).astype(np.uint8),
+                    "LA").save(d / "la.png")
+    assert main(["deblur", str(d / "la.png"), "--capture", str(d / "cap.json"), "--grid",
+                 "2x2", "-o", str(d / "out_la.png")]) == 0
+    with Image.open(d / "out_la.png") as im:
+        assert im.mode == "LA"
+        out = np.asarray(im)
+    np.testing.assert_array_equal(out[..., 1], np.round(alpha * 255).astype(np.uint8))
+    assert 0.0 < out[..., 0].std() / 255.0 < 0.5
 
 
 def test_a_photo_turned_from_the_sensor_layout_is_deblurred_as_the_sensor_read_it(capture_dir,
@@ -191,6 +202,8 @@ def test_bad_inputs_exit_2_and_write_nothing(capture_dir, capsys):
     ("t_s,x,y,z\n50,0,0,0\n50.1,0,0,0\n50.6,0,0,0\n51,0,0,0\n", "gap"),
     ("t_s,x,y,z\n50.31,0,0,0\n50.32,0,0,0\n", "covers"),
     ("t_s,x,y,z\n50,90,90,90\n50.5,90,90,90\n51,90,90,90\n", "deg/s"),
+    ("t_s,x,y,z\n50,0,0,0\n50.3,1e30,0,0\n50.6,0,0,0\n51,0,0,0\n",
+     "sample 2 (t = 50.300000 s) has a rate of 1e+30 rad/s, beyond any gyro's range"),
 ])
 def test_bad_gyro_logs_via_cli(capture_dir, capsys, content, match):
     d = capture_dir
@@ -205,6 +218,9 @@ def test_missing_log_and_unknown_format(capture_dir, capsys):
     d = capture_dir
     assert "not found" in _run_error(["psf", "--capture", str(d / "cap.json"), "--gyro",
                                       str(d / "nope.csv"), "--at", "5,5", "-o", str(d / "p.npy")], capsys)
+    assert "/dev/null: not a regular file" in _run_error(
+        ["psf", "--capture", str(d / "cap.json"), "--gyro", "/dev/null", "--at", "5,5", "-o",
+         str(d / "p.npy")], capsys)
     doc = json.loads((d / "cap.json").read_text())
     doc["gyro"]["format"] = "bag"
     (d / "cap.json").write_text(json.dumps(doc))
@@ -445,6 +461,11 @@ def test_simulate_blurs_light_brighter_than_white_and_refuses_16_bit_jpeg_first(
                       "-o", str(d / "x.jpg"), "--bit-depth", "16"], capsys)
     assert "x.jpg: JPEG stores 8 bits per sample" in msg
     assert not (d / "x.jpg").exists()
+    # a float TIFF without a profile is taken as sRGB: 8x white is not an encoded value
+    msg = _run_error(["simulate", str(d / "lamp8.tif"), "--capture", str(d / "cap.json"),
+                      "-o", str(d / "c8.tif")], capsys)
+    assert "lamp8.tif: samples up to 8" in msg and "give --transfer linear" in msg
+    assert not (d / "c8.tif").exists()
 
 
 def test_a_jpeg_is_deconvolved_for_its_compression_error_as_well(capture_dir, capsys):
@@ -727,3 +748,21 @@ def test_argument_errors_are_one_line_and_options_that_would_be_ignored_are_refu
             (["simulate", str(d / "sharp.jpg"), "--capture", cap, "--seed", "7"], "--seed")):
         assert flag in _run_error(argv + ["-o", str(d / "o.png")], capsys)
     assert not (d / "o.png").exists()
+
+
+def test_negative_lists_need_no_equals_sign_and_calibrate_writes_json_only(capture_dir, capsys):
+    d = capture_dir
+    out = d / "p.npy"
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "100,80", "-o", str(out),
+                 "--bias", "-0.01,0.02,0"]) == 0
+    with_bias = np.load(out)
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "100,80", "-o", str(out),
+                 "--overwrite"]) == 0
+    assert not np.allclose(with_bias, np.load(out))       # the bias was read, and applied
+    msg = _run_error(["psf", "--capture", str(d / "cap.json"), "--at", "-1,-1", "-o",
+                      str(d / "q.npy")], capsys)
+    assert "--at: (-1, -1) is not a pixel" in msg
+    msg = _run_error(["calibrate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                      "-o", str(d / "x.png")], capsys)
+    assert "x.png: the corrected capture description is JSON" in msg
+    assert not (d / "x.png").exists()

@@ -231,6 +231,13 @@ def test_android_round_trip(tmp_path, trace):
     assert np.allclose(log.t, trace.t, atol=1e-9)
     assert np.allclose(log.omega, trace.omega)
     assert read_gyro_log(p).t.size == trace.t.size          # format guessed
+    # a dump cut short in its last line (the logger stopped) keeps what came before it; a
+    # short gyro line before the last is refused
+    p.write_text("\n".join(lines + ["4 503001"]) + "\n")
+    assert np.allclose(read_android_events(p).omega, trace.omega)
+    p.write_text("\n".join(lines[:5] + ["4 503001"] + lines[5:]) + "\n")
+    with pytest.raises(InputError, match="line 6: a gyroscope event"):
+        read_android_events(p)
 
 
 def test_shared_android_log(shared_data):

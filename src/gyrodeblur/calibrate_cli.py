@@ -123,6 +123,10 @@ def calibrate_command(args, say, load_capture) -> None:
         caps.append(load_capture(a, ph, say))
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)
+    # after the inputs' check: "it is an input" says more than "not .json"
+    if not os.fspath(args.output).lower().endswith(".json"):
+        raise InputError(args.output, "the corrected capture description is JSON: give an "
+                                      "output ending in .json")
     from .icc import said_transfer_curve
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,

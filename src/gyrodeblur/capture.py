@@ -450,7 +450,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         except RecursionError:
             raise InputError(src, "not valid JSON (nested too deeply)") from None
         except json.JSONDecodeError as exc:
-            raise InputError(src, f"not valid JSON ({exc.msg} at line {exc.lineno})") from None
+            raise InputError(src, f"not valid JSON ({exc.msg}: line {exc.lineno}, column "
+                                  f"{exc.colno})") from None
         except UnicodeDecodeError:
             raise InputError(src, "cannot read: not UTF-8 text (save it as UTF-8; UTF-16, as "
                                   "some Windows editors write, is not read)") from None

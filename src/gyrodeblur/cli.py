@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import time
 import warnings
@@ -16,7 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from .errors import InputError
-from .images import join_alpha, split_alpha, to_photo_layout, to_sensor_layout
+from .images import PHOTO_MAX, join_alpha, split_alpha, to_photo_layout, to_sensor_layout
 from .tiling import DEFAULT_OVERLAP
 
 #: Kernel size (px) of ``deblur --blind`` when ``--kernel-size`` is not given.
@@ -312,10 +313,6 @@ def cmd_simulate(args, say) -> None:
 
     given = read_photo(args.sharp, scene=True)
     _check_output(args.output, given, args.overwrite, bit_depth=args.bit_depth)
-    brightest = float(split_alpha(given.pixels)[0].max())
-    if brightest > 1:
-        say(f"{args.sharp}: samples up to {brightest:.3g} (white = 1) are light brighter than "
-            "the clip level: blurred as they are, clipped after the blur")
     photo = replace(given, pixels=to_sensor_layout(given.pixels, args.photo_rotation))
     if args.snr_db is not None and not np.isfinite(args.snr_db):
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
@@ -326,6 +323,15 @@ def cmd_simulate(args, say) -> None:
     cap = _load_capture(args, photo, say)
     _check_not_over_capture(cap, args.overwrite, args.output)
     curve = said_transfer_curve(given, args.transfer, say)
+    brightest = float(split_alpha(given.pixels)[0].max())
+    if brightest > PHOTO_MAX and curve.name != "linear":
+        raise InputError(args.sharp, f"samples up to {brightest:.3g} (white = 1) are light far "
+                                     f"brighter than white, which an encoded ({curve.name}) "
+                                     "photo cannot hold: for a scene in linear light give "
+                                     "--transfer linear")
+    if brightest > 1:
+        say(f"{args.sharp}: samples up to {brightest:.3g} (white = 1) are light brighter than "
+            "the clip level: blurred as they are, clipped after the blur")
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
     blurred = simulate_blur(colour, cap, snr_db=args.snr_db, seed=args.seed,
@@ -618,9 +624,30 @@ def _photos(args) -> str | None:
     return ", ".join(p for p in paths if p) or None
 
 
+#: Options whose value is a comma-separated list of numbers, which may start with a minus.
+_NUMBER_LIST_OPTIONS = ("--bias", "--at")
+_NEGATIVE_LIST = re.compile(r"^-(\d|\.\d)[\d.eE+-]*(,[^,]*)+$")
+
+
+def joined_negative_lists(argv: list[str]) -> list[str]:
+    """``argv`` with ``--bias -0.01,0.02,0`` written as ``--bias=-0.01,0.02,0``: argparse
+    takes a value that starts with a minus and is not a plain number for an option, and
+    says ``expected one argument``; a bias or a position is often negative."""
+    out, i = [], 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok in _NUMBER_LIST_OPTIONS and i + 1 < len(argv) and _NEGATIVE_LIST.match(argv[i + 1]):
+            out.append(f"{tok}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(joined_negative_lists(sys.argv[1:] if argv is None else list(argv)))
 
     def say(msg: str) -> None:
         print(msg)

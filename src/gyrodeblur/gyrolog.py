@@ -65,6 +65,9 @@ __all__ = [
 FORMATS = ("gcsv", "csv", "android")
 #: A median rate above this (rad/s) almost surely means deg/s read as rad/s.
 IMPLAUSIBLE_MEDIAN_RATE = 35.0
+#: No gyro measures a rate above this (rad/s, about 11500 deg/s, well over the widest
+#: ranges of MEMS gyros, +-4000 deg/s): a sample beyond it is corrupt (or in another unit).
+MAX_GYRO_RATE = 200.0
 #: A log's median rate above this (rad/s, 115 deg/s) is a fast pan from start to end: where
 #: no unit was stated, deg/s read as rad/s is likelier (a hand-held phone's median is
 #: 0.05-0.7 rad/s; the same in deg/s reads as 3-40).
@@ -137,6 +140,12 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         raise InputError(source, f"timestamps are not increasing (sample {i + 2}: "
                                  f"{float(t[i + 1]):.6f} s after {float(t[i]):.6f} s)")
     med = float(np.median(np.linalg.norm(w, axis=1)))
+    peak = np.max(np.abs(w), axis=1)
+    if med <= IMPLAUSIBLE_MEDIAN_RATE and np.any(peak > MAX_GYRO_RATE):
+        i = int(np.argmax(peak > MAX_GYRO_RATE))
+        raise InputError(source, f"gyro sample {i + 1} (t = {float(t[i]):.6f} s) has a rate of "
+                                 f"{float(peak[i]):.4g} rad/s, beyond any gyro's range "
+                                 f"({MAX_GYRO_RATE:g} rad/s): a corrupt sample?")
     if med > IMPLAUSIBLE_MEDIAN_RATE:
         raise InputError(source, f"median angular rate {med:.1f} rad/s is implausible for a "
                                  "hand-held camera; are the rates in deg/s? (set the rate unit)")
@@ -254,7 +263,8 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if os.path.isdir(path):
         raise InputError(path, "is a folder, not a gyro log")
     if not os.path.isfile(path):
-        raise InputError(path, "gyro log not found")
+        raise InputError(path, "not a regular file (a device or a pipe), not a gyro log"
+                         if os.path.exists(path) else "gyro log not found")
     format = _guess_format(path) if format is None else check_format(format)
     unknown = sorted(set(options) - set(_CSV_OPTIONS))
     if unknown:
@@ -582,18 +592,24 @@ def read_android_events(path: str | os.PathLike) -> GyroLog:
     """
     path = os.fspath(path)
     lines = _read_lines(path)
+    last = max((k for k, line in enumerate(lines, start=1) if line.strip()), default=0)
     rows = []
     for k, line in enumerate(lines, start=1):
         parts = line.split()
         if not parts or parts[0] != "4":      # comments, other sensors (of any length)
             continue
-        if len(parts) != 5:
-            raise InputError(path, f"line {k}: a gyroscope event (type 4) must read "
-                                   f"'4 timestamp_ns x y z', got {len(parts)} values")
         try:
-            rows.append([float(p) for p in parts[1:]])
-        except ValueError:
-            raise InputError(path, f"line {k}: not a number in {line!r}") from None
+            if len(parts) != 5:
+                raise InputError(path, f"line {k}: a gyroscope event (type 4) must read "
+                                       f"'4 timestamp_ns x y z', got {len(parts)} values")
+            try:
+                rows.append([float(p) for p in parts[1:]])
+            except ValueError:
+                raise InputError(path, f"line {k}: not a number in {line!r}") from None
+        except InputError:
+            if k == last and rows:     # a logger stopped in the middle of its last line
+                break
+            raise
     if not rows:
         raise InputError(path, "no gyroscope events (type 4) in the file")
     a = _without_repeats(np.asarray(rows, dtype=np.float64))

@@ -122,6 +122,9 @@ class Photo:
         A PNG's file gamma (its ``gAMA`` chunk: encoded = linear ** ``png_gamma``, e.g.
         1.0 for linear data, 0.45455 as written beside sRGB), where it has no ``sRGB``
         chunk; else ``None``.
+    grey_alpha : bool
+        The file holds grey and alpha: ``pixels`` are RGBA with R = G = B, and
+        :func:`write_photo` with ``like`` this photo writes grey and alpha again.
 
     Notes
     -----
@@ -137,6 +140,7 @@ class Photo:
     icc_profile: bytes | None = None
     quantization: dict | None = None
     png_gamma: float | None = None
+    grey_alpha: bool = False
 
     def __post_init__(self):
         if self.bit_depth not in (8, 16):
@@ -189,10 +193,13 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
         raise InputError(p, f"image too large to read safely ({exc})") from None
     except _DECODE_ERRORS as exc:
         raise InputError(p, f"cannot decode the image ({_reason(exc)})") from None
+    grey_alpha = ints.ndim == 3 and ints.shape[2] == 2
+    if grey_alpha:                  # the grey copied to R, G and B: one layout for colour
+        ints = _grey_alpha_to_rgba(ints)
     pixels, bit_depth = _to_float(p, ints, keep_bright=scene)
     return Photo(pixels=pixels, bit_depth=bit_depth, format=fmt, path=p,
                  exif=_normalise_exif(exif), icc_profile=icc or None, quantization=tables,
-                 png_gamma=gamma)
+                 png_gamma=gamma, grey_alpha=grey_alpha)
 
 
 #: Most pixels a photo may have (Pillow's own guard, 89 MP with a warning and 179 MP
@@ -278,7 +285,7 @@ def _read_pillow_pixels(path: str, im: Image.Image) -> np.ndarray:
     if im.format == "PNG" and raw in ("RGB;16B", "RGBA;16B"):
         return _pillow_16bit_colour(path, im)
     if im.format == "PNG" and raw == "LA;16B":
-        return _grey_alpha_to_rgba(_pillow_png16_grey_alpha(im))
+        return _pillow_png16_grey_alpha(im)
     im.load()
     return _pillow_to_array(path, im)
 
@@ -304,8 +311,6 @@ def _pillow_to_array(path: str, im: Image.Image) -> np.ndarray:
     arr = np.asarray(im)
     if arr.dtype.kind == "u" and arr.dtype.itemsize == 2:
         arr = arr.astype(np.uint16)  # native byte order
-    if im.mode == "LA":
-        arr = _grey_alpha_to_rgba(arr)
     return arr
 
 
@@ -467,9 +472,7 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
     arr = _with_plain_alpha(arr, extra)
     if arr.ndim == 3 and arr.shape[-1] == 1:
         arr = arr[..., 0]
-    if arr.ndim == 3 and arr.shape[-1] == 2:
-        arr = _grey_alpha_to_rgba(arr)
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (3, 4)):
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (2, 3, 4)):
         raise InputError(path, f"unsupported TIFF layout (samples of shape {arr.shape})")
     return arr, icc
 
@@ -768,6 +771,9 @@ def write_photo(
         warnings.warn(f"{p}: JPEG stores 8 bits per sample: the 16-bit photo is written at 8 "
                       "(.png or .tif keep 16)", stacklevel=2)
 
+    if like is not None and like.grey_alpha and channels == 4:   # grey + alpha again
+        pixels = np.stack([pixels[..., :3].mean(axis=2), pixels[..., 3]], axis=2)
+        channels = 2
     ints = _to_integers(pixels, depth)
     exif = _normalise_exif(like.exif) if like is not None else None
     icc = like.icc_profile if like is not None else None
@@ -885,10 +891,11 @@ def _to_integers(pixels: np.ndarray, bit_depth: int) -> np.ndarray:
 
 
 def _icc_fits(icc: bytes, channels: int) -> bool:
-    """Whether an ICC profile's data colour space suits grey (1) or RGB(A) pixels."""
+    """Whether an ICC profile's data colour space suits grey (1, 2 with alpha) or RGB(A)
+    pixels."""
     space = bytes(icc[16:20])
     if space == b"GRAY":
-        return channels == 1
+        return channels in (1, 2)
     if space == b"RGB ":
         return channels in (3, 4)
     return False
@@ -962,10 +969,11 @@ def _png_filter(rows: np.ndarray, prior: np.ndarray, bpp: int) -> np.ndarray:
 
 
 def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None) -> None:
-    """16-bit grey, RGB or RGBA PNG with numpy + zlib (Pillow cannot write 16-bit colour)."""
+    """16-bit grey, grey + alpha, RGB or RGBA PNG with numpy + zlib (Pillow cannot write
+    16-bit colour)."""
     height, width = ints.shape[:2]
     channels = 1 if ints.ndim == 2 else ints.shape[2]
-    colour_type = {1: 0, 3: 2, 4: 6}[channels]
+    colour_type = {1: 0, 2: 4, 3: 2, 4: 6}[channels]
     raw = np.ascontiguousarray(ints, dtype=">u2").view(np.uint8).reshape(height, -1)
     f.write(b"\x89PNG\r\n\x1a\n")
     f.write(_png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 16, colour_type, 0, 0, 0)))
@@ -1010,8 +1018,8 @@ def _write_tiff(f, ints, *, exif, icc, quality) -> None:
             exif_obj, extratags = None, []  # damaged EXIF: write the pixels without it
     tifffile.imwrite(
         f, ints,
-        photometric="minisblack" if channels == 1 else "rgb",
-        extrasamples=("unassalpha",) if channels == 4 else None,
+        photometric="minisblack" if channels <= 2 else "rgb",
+        extrasamples=("unassalpha",) if channels in (2, 4) else None,
         compression="zlib", predictor=True, iccprofile=icc or None,
         metadata=None, software=False, byteorder="<", bigtiff=False, extratags=extratags,
     )
