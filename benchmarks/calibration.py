@@ -190,6 +190,7 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         "registered_gap_db": r_cal - r_true,
         "aligned_psnr_calibrated": a_cal, "aligned_gap_db": a_cal - p_true,
         "stated_sd": stated_sd(res.estimates),
+        "blur_gain": res.blur_gain,
         "seconds": secs,
         "estimates": format_estimates(res.estimates),
         "notes": res.notes,

@@ -122,6 +122,16 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
     assert res.ranking and res.ranking[0][1] == 0.0
     assert not any("uncertain" in note for note in res.notes)
     assert res.offset_rivals == [] and not any("ambiguous" in note for note in res.notes)
+    assert res.blur_gain > 10 and not any("little of the blur" in n for n in res.notes)
+
+
+def test_a_sharp_photo_given_a_shaken_log_is_said_to_show_no_blur(case):
+    """The sharp original with the capture that blurred it: whatever the search finds,
+    no blur at all explains the patches better, and the user is told."""
+    sharp, true, _ = case
+    res = calibrate([quantize_8bit(sharp)], _corrupt(true))
+    assert res.blur_gain < 1.0
+    assert any("show little of the blur the gyro log implies" in n for n in res.notes)
 
 
 def test_cli_calibrate_turns_each_photo_back(cli_dir, capsys):

@@ -117,6 +117,10 @@ best other candidate mapping; below :data:`AXES_CONFIDENT_NATS` (8) the mapping 
 as uncertain, with a note that says what to do (on the benchmark every wrong mapping was
 below 5 and every gap from 8.9 up was right).
 
+Last, the calibrated PSFs must explain the patches better than no blur at all (each with
+its own fitted envelope) by :data:`_NO_BLUR_MARGIN`; a sharp photo, or a log or exposure
+start that belong to another shot, gets a warning rather than confident estimates.
+
 Limits (measured, see ``benchmarks/calibration.py``): blur of a few pixels carries almost
 no information; scenes dominated by horizontal and vertical edges can prefer a mapping
 that turns the blur by 90 degrees; focal length and bias trade off along nearly uniform
@@ -134,8 +138,8 @@ import numpy as np
 
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
-from .calibration_fit import (BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, CalibrationFit,
-                              relative_ranking, shortlist, with_twin)
+from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS,
+                              CalibrationFit, relative_ranking, shortlist, with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .calibration_workers import StepRunner, available_workers
@@ -176,6 +180,10 @@ class CalibrationResult:
         Wall-clock time of the calibration.
     notes : list of str
         Decisions worth reporting (twin tie-break, registration, patches).
+    blur_gain : float
+        How much better (tempered nats) the calibrated PSFs explain the patches than no
+        blur at all; under :data:`_NO_BLUR_MARGIN` the notes warn that the photos show
+        little of the blur the log implies (``nan`` when not measured).
     offset_rivals : list of (float, float, float)
         Other basins of the winning mapping that the search reached: their time offset
         (s), readout time (s) and how much higher their objective is (tempered nats), for
@@ -192,6 +200,7 @@ class CalibrationResult:
     seconds: float = 0.0
     notes: list = field(default_factory=list)
     offset_rivals: list = field(default_factory=list)
+    blur_gain: float = float("nan")
 
     @property
     def capture(self) -> Capture:
@@ -223,6 +232,11 @@ _KEEP_MAPPING_NATS = 2.0
 _TYPICAL_GYRO_NOISE = 0.007
 _TYPICAL_GYRO_RATE = 200.0
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
+#: The calibrated PSFs must explain the patches better than no blur at all by this much
+#: (tempered nats), else a warning. On the 24-case benchmark the blurred photos' gains were
+#: 3.4 (7 px of blur) to 140; the sharp originals given the same captures (six cases) and a
+#: sharp photo given a capture of 27 px blur scored 4.5, 0.7, 0.2, -3.7, -26, -43 and -46.
+_NO_BLUR_MARGIN = 1.0
 
 
 def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
@@ -412,6 +426,12 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
 
     theta = search.theta_of(x, M, fit.ubar)
     unc = _uncertainties(x, fit.idx, Fm, sc, fit.ubar)
+    blur_gain = float(fit.fine.gain_over_no_blur(theta).sum()) / _TEMPERATURE
+    if blur_gain < _NO_BLUR_MARGIN:
+        note(f"warning: the photo(s) show little of the blur the gyro log implies: no blur at "
+             f"all explains the patches {'better' if blur_gain < 0 else 'about as well'} "
+             f"({-blur_gain:+.1f}). If the photo is sharp, or the log, the exposure start or "
+             "the photo belong to another shot, the estimates mean nothing", "  ")
     out_caps = []
     for cap in captures:
         try:
@@ -434,7 +454,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     secs = time.perf_counter() - t_start
     notes.append(f"{fit.coarse.evaluations} coarse and {fit.fine.evaluations} fine cost "
                  f"evaluations, {secs:.1f} s")
-    return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes, rivals)
+    return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes, rivals,
+                             blur_gain)
 
 
 def standing_candidate(results: list, given: np.ndarray, margin: float) -> tuple:

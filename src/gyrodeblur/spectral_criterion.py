@@ -440,6 +440,16 @@ class PatchSpectra:
         return float(c.sum()), scores.sum(0), F, scores
 
     # -- phase: sparsity of deconvolved patches ---------------------------------------
+    def gain_over_no_blur(self, theta: Corrections) -> np.ndarray:
+        """Per patch, how much better (untempered nats) the PSFs of ``theta`` explain the
+        patch than no blur at all (a point, splatted as the traces are), each with an
+        envelope fitted to it: near zero or below, the patch shows none of that blur."""
+        S_blur = self.spectra(theta)
+        H0 = self.otf(np.zeros((len(self.points), 1, 2)))
+        S_none = self.model((H0.real ** 2 + H0.imag ** 2).astype(np.float32))
+        c_blur, c_none = (self._whittle(S * self.fast_envelope(S)) for S in (S_blur, S_none))
+        return c_none - c_blur
+
     def sparsity(self, theta: Corrections) -> np.ndarray:
         """Per patch, normalised gradient sparsity ``|grad u|_1 / |grad u|_2`` (x sqrt n)
         of the Wiener-deconvolved patch (Gaussian-model optimal filter)."""
