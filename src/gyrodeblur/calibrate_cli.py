@@ -105,7 +105,8 @@ def calibrate_command(args, say, load_capture) -> None:
     # before reading anything; the inputs are checked once the captures name their logs
     check_destination(args.output, None, args.overwrite, image=False, inputs=args.photos)
     photos = [read_photo(p) for p in args.photos]
-    photos = [replace(ph, pixels=to_sensor_layout(ph.pixels, deg)) for ph, deg in zip(photos, turns)]
+    photos = [replace(ph, pixels=to_sensor_layout(ph.stored_channels, deg))
+              for ph, deg in zip(photos, turns)]
     given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
     paths = [c for entry in given for c in entry.split(",") if c] or given[:1]
     if len(paths) not in (1, len(photos)):

@@ -313,7 +313,8 @@ def cmd_simulate(args, say) -> None:
 
     given = read_photo(args.sharp, scene=True)
     _check_output(args.output, given, args.overwrite, bit_depth=args.bit_depth)
-    photo = replace(given, pixels=to_sensor_layout(given.pixels, args.photo_rotation))
+    photo = replace(given, pixels=to_sensor_layout(given.stored_channels,
+                                                     args.photo_rotation))
     if args.snr_db is not None and not np.isfinite(args.snr_db):
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
     if args.seed is not None and args.seed < 0:
@@ -354,7 +355,8 @@ def cmd_deblur(args, say) -> None:
 
     given = read_photo(args.photo)
     _check_output(args.output, given, args.overwrite)
-    photo = replace(given, pixels=to_sensor_layout(given.pixels, args.photo_rotation))
+    photo = replace(given, pixels=to_sensor_layout(given.stored_channels,
+                                                     args.photo_rotation))
     if args.save_psf:
         _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
                       inputs=[args.photo])

@@ -142,6 +142,13 @@ class Photo:
     png_gamma: float | None = None
     grey_alpha: bool = False
 
+    @property
+    def stored_channels(self) -> np.ndarray:
+        """``pixels`` with the channels the file stores: grey + alpha as ``(H, W, 2)``
+        (the work of one channel, not three equal ones), else ``pixels`` itself.
+        :func:`write_photo` with ``like`` this photo takes either."""
+        return self.pixels[..., [0, 3]] if self.grey_alpha else self.pixels
+
     def __post_init__(self):
         if self.bit_depth not in (8, 16):
             raise ValueError(f"bit_depth must be 8 or 16, not {self.bit_depth!r}")
