@@ -131,7 +131,13 @@ def test_a_sharp_photo_given_a_shaken_log_is_said_to_show_no_blur(case):
     sharp, true, _ = case
     res = calibrate([quantize_8bit(sharp)], _corrupt(true))
     assert res.blur_gain < 1.0
-    assert any("show little of the blur the gyro log implies" in n for n in res.notes)
+    assert any("the photo shows little of the blur the gyro log implies" in n
+               for n in res.notes)
+    # in a session, the sharp one among blurred photos is named (not outweighed by them)
+    later = _true_capture(0.8)
+    res = calibrate([_blur(sharp, true), quantize_8bit(sharp)], [true, later])
+    assert any("photo 2 shows little of the blur" in n for n in res.notes)
+    assert not any("photo 1" in n and "little of the blur" in n for n in res.notes)
 
 
 def test_cli_calibrate_turns_each_photo_back(cli_dir, capsys):

@@ -759,6 +759,8 @@ def test_negative_lists_need_no_equals_sign_and_calibrate_writes_json_only(captu
     assert main(["psf", "--capture", str(d / "cap.json"), "--at", "100,80", "-o", str(out),
                  "--overwrite"]) == 0
     assert not np.allclose(with_bias, np.load(out))       # the bias was read, and applied
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "100,80", "-o", str(out),
+                 "--overwrite", "--time-offset", "-4e-3"]) == 0   # an exponent, negative
     msg = _run_error(["psf", "--capture", str(d / "cap.json"), "--at", "-1,-1", "-o",
                       str(d / "q.npy")], capsys)
     assert "--at: (-1, -1) is not a pixel" in msg

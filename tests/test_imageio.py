@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import math
 import os
@@ -410,13 +411,32 @@ def test_bad_pixels_are_refused(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
-def test_grey_and_alpha_are_written_as_they_are_read(tmp_path):
-    """An (H, W, 2) array is grey + alpha: stored as RGBA, as such a file is read."""
+@pytest.mark.parametrize("name,depth", [("la.png", 8), ("la16.png", 16), ("la.tif", 8),
+                                        ("la16.tif", 16)])
+def test_grey_and_alpha_are_written_as_they_are_read(tmp_path, name, depth):
+    """An (H, W, 2) array is grey + alpha, and is stored as grey + alpha. Such a file reads
+    as RGBA with equal colours (``grey_alpha``; ``stored_channels`` gives the two), and
+    written ``like`` it, RGBA goes back to grey + alpha, with a grey ICC profile kept."""
+    import tifffile
+    from PIL import ImageCms
     la = np.dstack([np.linspace(0, 1, 20).reshape(4, 5), np.full((4, 5), 0.6)]).astype(np.float32)
-    back = read_photo(write_photo(tmp_path / "la.png", la)).pixels
-    assert back.shape == (4, 5, 4)
-    assert np.allclose(back[..., :3], la[..., :1], atol=0.5 / 255)
-    assert np.allclose(back[..., 3], la[..., 1], atol=0.5 / 255)
+    path = write_photo(tmp_path / name, la, bit_depth=depth)
+    if name.endswith(".tif"):
+        assert tifffile.imread(path).shape == (4, 5, 2)
+    else:                         # IHDR: bit depth, colour type 4 (grey + alpha)
+        assert open(path, "rb").read()[24:26] == bytes([depth, 4])
+    photo = read_photo(path)
+    assert photo.grey_alpha and photo.bit_depth == depth and photo.pixels.shape == (4, 5, 4)
+    step = 0.5 / (2 ** depth - 1)
+    assert np.allclose(photo.pixels[..., :3], la[..., :1], atol=step)
+    assert np.allclose(photo.stored_channels, la, atol=step)
+    grey_icc = ImageCms.ImageCmsProfile(ImageCms.createProfile("LAB")).tobytes()
+    grey_icc = grey_icc[:16] + b"GRAY" + grey_icc[20:]       # a grey data colour space
+    photo = dataclasses.replace(photo, icc_profile=grey_icc)
+    out = write_photo(tmp_path / ("b_" + name), photo.pixels, like=photo)
+    again = read_photo(out)
+    assert again.grey_alpha and again.icc_profile == grey_icc
+    assert np.array_equal(again.pixels, photo.pixels)
 
 
 @pytest.mark.parametrize("name", ["out.bmp", "out"])

@@ -181,9 +181,10 @@ class CalibrationResult:
     notes : list of str
         Decisions worth reporting (twin tie-break, registration, patches).
     blur_gain : float
-        How much better (tempered nats) the calibrated PSFs explain the patches than no
-        blur at all; under :data:`_NO_BLUR_MARGIN` the notes warn that the photos show
-        little of the blur the log implies (``nan`` when not measured).
+        How much better (tempered nats, per :data:`_N_PATCHES` patches) the calibrated
+        PSFs explain the patches than no blur at all, for the photo where that is least;
+        under :data:`_NO_BLUR_MARGIN` the notes warn that the photo shows little of the
+        blur the log implies (``nan`` when not measured).
     offset_rivals : list of (float, float, float)
         Other basins of the winning mapping that the search reached: their time offset
         (s), readout time (s) and how much higher their objective is (tempered nats), for
@@ -426,12 +427,18 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
 
     theta = search.theta_of(x, M, fit.ubar)
     unc = _uncertainties(x, fit.idx, Fm, sc, fit.ubar)
-    blur_gain = float(fit.fine.gain_over_no_blur(theta).sum()) / _TEMPERATURE
-    if blur_gain < _NO_BLUR_MARGIN:
-        note(f"warning: the photo(s) show little of the blur the gyro log implies: no blur at "
-             f"all explains the patches {'better' if blur_gain < 0 else 'about as well'} "
-             f"({-blur_gain:+.1f}). If the photo is sharp, or the log, the exposure start or "
-             "the photo belong to another shot, the estimates mean nothing", "  ")
+    gains = _gains_per_photo(fit.fine, theta, len(images))
+    blur_gain = float(np.nanmin(gains)) if np.isfinite(gains).any() else float("nan")
+    weak = [k + 1 for k, g in enumerate(gains) if g < _NO_BLUR_MARGIN]
+    if weak:
+        which = ("the photo shows" if len(images) == 1 else
+                 f"photo{'s' if len(weak) > 1 else ''} {', '.join(map(str, weak))} show"
+                 + ("" if len(weak) > 1 else "s"))
+        note(f"warning: {which} little of the blur the gyro log implies: no blur at all "
+             f"explains the patches {'better' if blur_gain < 0 else 'about as well'} (the "
+             f"calibrated PSFs gain only {blur_gain:+.1f} nats over none). If a photo is "
+             "sharp, or the log, the exposure start or the photo belong to another shot, "
+             "the estimates mean nothing", "  ")
     out_caps = []
     for cap in captures:
         try:
@@ -456,6 +463,20 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
                  f"evaluations, {secs:.1f} s")
     return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes, rivals,
                              blur_gain)
+
+
+def _gains_per_photo(spectra, theta, n_photos: int) -> np.ndarray:
+    """Per photo, how much better (tempered nats, per :data:`_N_PATCHES` patches) the PSFs
+    of ``theta`` explain its patches than no blur at all (``nan`` for a photo without
+    patches)."""
+    g = spectra.gain_over_no_blur(theta) / _TEMPERATURE
+    owner = np.array([i for i, _, _ in spectra.points])
+    out = np.full(n_photos, np.nan)
+    for k in range(n_photos):
+        mine = owner == k
+        if mine.any():
+            out[k] = g[mine].sum() * _N_PATCHES / mine.sum()
+    return out
 
 
 def standing_candidate(results: list, given: np.ndarray, margin: float) -> tuple:

@@ -5,8 +5,8 @@ JSON schema (stable; other tools write it)::
     {
       "exposure_start": 1012.345678,   # s, camera clock: the first row starts exposing
       "exposure_time": 0.030,          # s each row integrates light
-      "readout_time": 0.030,           # s from the first row's start to the last row's
-                                       # start (rolling shutter; 0 = global shutter)
+      "readout_time": 0.030,           # s to read all rows out: row y starts y/height
+                                       # of it later (rolling shutter; 0 = global)
       "camera": {"fx": 819.2, "fy": 819.2, "cx": 511.5, "cy": 381.5,
                  "width": 1024, "height": 764},          # pixels, OpenCV convention
       "gyro": {"path": "gyro.gcsv",    # relative to the JSON file

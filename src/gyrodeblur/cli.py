@@ -626,19 +626,22 @@ def _photos(args) -> str | None:
     return ", ".join(p for p in paths if p) or None
 
 
-#: Options whose value is a comma-separated list of numbers, which may start with a minus.
-_NUMBER_LIST_OPTIONS = ("--bias", "--at")
-_NEGATIVE_LIST = re.compile(r"^-(\d|\.\d)[\d.eE+-]*(,[^,]*)+$")
+#: A value that starts with a minus and reads as a number or a list of them (``-1e-3``,
+#: ``-0.01,0.02,0``): argparse takes it for an option unless it is a plain decimal.
+_NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d)[\d.eE+\-, ]*$")
 
 
 def joined_negative_lists(argv: list[str]) -> list[str]:
-    """``argv`` with ``--bias -0.01,0.02,0`` written as ``--bias=-0.01,0.02,0``: argparse
-    takes a value that starts with a minus and is not a plain number for an option, and
-    says ``expected one argument``; a bias or a position is often negative."""
+    """``argv`` with ``--bias -0.01,0.02,0`` written as ``--bias=-0.01,0.02,0`` (and
+    ``--time-offset -1e-3`` as ``--time-offset=-1e-3``): argparse reads a value that
+    starts with a minus and is not a plain decimal as an option, and says ``expected one
+    argument``; a bias, a position or a time offset is often negative. Only long options
+    are joined (no command's flag is followed by a negative number)."""
     out, i = [], 0
     while i < len(argv):
         tok = argv[i]
-        if tok in _NUMBER_LIST_OPTIONS and i + 1 < len(argv) and _NEGATIVE_LIST.match(argv[i + 1]):
+        if (tok.startswith("--") and "=" not in tok and i + 1 < len(argv)
+                and _NEGATIVE_VALUE.match(argv[i + 1])):
             out.append(f"{tok}={argv[i + 1]}")
             i += 2
             continue

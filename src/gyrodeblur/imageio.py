@@ -147,7 +147,9 @@ class Photo:
         """``pixels`` with the channels the file stores: grey + alpha as ``(H, W, 2)``
         (the work of one channel, not three equal ones), else ``pixels`` itself.
         :func:`write_photo` with ``like`` this photo takes either."""
-        return self.pixels[..., [0, 3]] if self.grey_alpha else self.pixels
+        if self.grey_alpha and self.pixels.ndim == 3 and self.pixels.shape[2] == 4:
+            return self.pixels[..., [0, 3]]
+        return self.pixels
 
     def __post_init__(self):
         if self.bit_depth not in (8, 16):
@@ -734,8 +736,10 @@ def write_photo(
     ----------
     path : str or os.PathLike
         Output file; ``.jpg``/``.jpeg``, ``.png`` or ``.tif``/``.tiff`` selects the format.
-    pixels : ndarray, shape (H, W), (H, W, 1), (H, W, 3) or (H, W, 4)
+    pixels : ndarray, shape (H, W), (H, W, 1), (H, W, 2), (H, W, 3) or (H, W, 4)
         Floating-point samples; clipped to ``[0, 1]`` and rounded to the nearest integer.
+        ``(H, W, 2)`` is grey + alpha, written as such; so is RGBA when ``like`` was read
+        from a grey + alpha file (its colours averaged: they are equal there).
     like : Photo, optional
         The input photo: its EXIF block and ICC profile are written with the pixels
         (where the format allows; an ICC profile whose colour space does not fit the
@@ -771,7 +775,7 @@ def write_photo(
     if not 1 <= int(quality) <= 100:
         raise ValueError(f"quality must be within 1-100, not {quality!r}")
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
-    if fmt == "JPEG" and channels == 4:
+    if fmt == "JPEG" and channels in (2, 4):
         raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
     check_destination(p, like, overwrite)
     if fmt == "JPEG" and bit_depth is None and like is not None and like.bit_depth == 16:
@@ -803,9 +807,7 @@ def _check_pixels(pixels) -> np.ndarray:
         raise ValueError(f"pixels must be floats in [0, 1], not {arr.dtype}")
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
-    if arr.ndim == 3 and arr.shape[2] == 2:   # grey + alpha: stored as RGBA, as read
-        arr = _grey_alpha_to_rgba(arr)
-    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (3, 4))) or 0 in arr.shape:
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] in (2, 3, 4))) or 0 in arr.shape:
         raise ValueError(f"pixels must have shape (H, W) or (H, W, 1 to 4), not {arr.shape}")
     if np.isnan(arr).any():
         raise ValueError("pixels contain NaN")

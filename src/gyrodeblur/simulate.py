@@ -79,7 +79,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         cost a deblur of them several dB.
     snr_db : float, optional
         Add Gaussian noise with standard deviation ``std(blurred) / 10**(snr_db / 20)``.
-    seed : int, optional
+    seed : int, sequence of int, numpy Generator or SeedSequence, optional
         Seed of the noise generator.
     quantize : bool
         Clip to [0, 1] and round to 8-bit levels (k / 255).
@@ -98,6 +98,15 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     -------
     ndarray, float32, same shape as ``sharp``, encoded as ``sharp`` was.
 
+    Raises
+    ------
+    InputError
+        ``sharp`` is not a float image, or, encoded by a curve other than linear, holds
+        values far below black (under :data:`~gyrodeblur.images.PHOTO_MIN`: offset or
+        negated) or far above white (over :data:`~gyrodeblur.images.PHOTO_MAX`: 0-255).
+    TypeError
+        ``capture``, ``snr_db``, ``seed`` or ``quantize`` of the wrong kind.
+
     Notes
     -----
     Sampling: ``scipy.ndimage.map_coordinates`` of ``order`` (the cubic spline's
@@ -114,10 +123,10 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     try:
         if isinstance(seed, (bool, np.bool_)):
             raise TypeError
-        np.random.SeedSequence(seed)
+        np.random.default_rng(seed)
     except (TypeError, ValueError):
-        raise TypeError(f"seed must be a whole number >= 0 (or a sequence of them) or None, "
-                        f"got {seed!r}") from None
+        raise TypeError(f"seed must be a whole number >= 0 (or a sequence of them), a numpy "
+                        f"Generator or SeedSequence, or None, got {seed!r}") from None
     quantize = check_flag(quantize, "quantize")
     check_capture(capture)
     curve = get_transfer_curve(transfer, "transfer")
