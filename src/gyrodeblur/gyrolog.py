@@ -145,8 +145,8 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         i = int(np.argmax(peak > MAX_GYRO_RATE))
         raise InputError(source, f"gyro sample {i + 1} (t = {float(t[i]):.6f} s) has a rate of "
                                  f"{float(peak[i]):.4g} rad/s, beyond any gyro's range "
-                                 f"({MAX_GYRO_RATE:g} rad/s): a corrupt sample, or rates in deg/s read "
-                                 "as rad/s? (set the rate unit)")
+                                 f"({MAX_GYRO_RATE:g} rad/s): a corrupt sample, or rates in "
+                                 "deg/s read as rad/s? (set the rate unit)")
     if med > IMPLAUSIBLE_MEDIAN_RATE:
         raise InputError(source, f"median angular rate {med:.1f} rad/s is implausible for a "
                                  "hand-held camera; are the rates in deg/s? (set the rate unit)")
