@@ -19,6 +19,7 @@ from gyrodeblur.calibrate import PARAMETERS, calibrate
 from gyrodeblur.calibration_fit import TWIN, CalibrationFit, _twin_parameters
 from gyrodeblur.calibration_patches import CalibrationPhoto
 from gyrodeblur.calibration_search import SearchSpace
+from gyrodeblur.calibration_workers import StepRunner
 from gyrodeblur.calibrate_cli import format_estimates
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture, load_capture
@@ -348,6 +349,54 @@ def test_everything_fixed_returns_the_given_capture(case):
     np.testing.assert_array_equal(got.axes, true.axes)
 
 
+def test_a_wide_offset_range_finds_clocks_a_quarter_second_apart(case):
+    """Clocks known only roughly: a 250 ms offset lies far outside the default search
+    (+-40 ms); with ``offset_range=0.3`` it is found, and where the log does not cover
+    the asked range (it starts 0.25 s before the exposure as given) a note says where the
+    search stopped."""
+    _, true, blurred = case
+    bad = _corrupt(true, offset=0.25)
+    lines = []
+    res = calibrate([blurred], bad, offset_range=0.3, say=lines.append)
+    got = res.capture
+    assert axes_to_letters(got.axes) == TRUE_AXES
+    assert abs(got.time_offset - true.time_offset) < 0.003
+    cut = [n for n in res.notes if "covers the exposure only for time offsets" in n]
+    assert len(cut) == 1 and "asked: +-300 ms" in cut[0]
+
+
+def test_a_wide_search_starts_each_mapping_from_its_distinct_coarse_minima(case):
+    """Over a wide range each mapping's coarse row carries its further distinct minima
+    (the candidates are started from them too: a far basin can lead the coarse grid and
+    lose once refined); over the default range it carries none."""
+    from gyrodeblur.calibration_fit import WIDE_APART
+    _, true, blurred = case
+    photos = [CalibrationPhoto(blurred, true, "srgb", 0)]
+    rows = {}
+    for reach in (0.04, 0.3):
+        fit = CalibrationFit(photos, SearchSpace(photos, set(), reach), set(),
+                             BiasPrior(np.zeros(3)), 9, 1, lambda msg: None)
+        rows[reach] = fit.coarse_row(True, true.axes)
+    assert rows[0.04][5] == ()
+    score, tau0, _, _, M, others = rows[0.3]
+    assert len(others) == 2 and np.array_equal(M, true.axes)
+    assert abs(tau0) < 0.003                      # the truth leads here
+    assert all(abs(t - tau0) > WIDE_APART for t, _ in others)
+    assert abs(others[0][0] - others[1][0]) > WIDE_APART
+    starts = fit.candidates([rows[0.3]], StepRunner(fit, 1))[0]
+    assert abs(starts[1][0]) < 0.003                   # the best start is the truth's...
+    assert any(abs(xa[0] - others[0][0]) < 0.02 for xa in starts[3])   # ...and the far ones stay
+
+
+def test_the_offset_range_is_checked(case):
+    _, true, blurred = case
+    for bad in (0, -0.01, float("nan"), True, 6.0, "0.1"):
+        with pytest.raises(InputError, match="must be seconds in"):
+            calibrate([blurred], true, offset_range=bad)
+    with pytest.raises(InputError, match="time offset is fixed"):
+        calibrate([blurred], true, offset_range=0.5, fix="offset")
+
+
 def test_bad_fix_name_is_an_input_error(case):
     _, true, blurred = case
     with pytest.raises(InputError, match="unknown parameter"):
@@ -512,6 +561,20 @@ def test_cli_values_given_on_the_command_line_are_kept(cli_dir, case, capsys):
     assert "time offset" in text and "(fixed)" in text and refined.exists()
 
 
+def test_cli_offset_range_reaches_the_search_and_needs_a_free_offset(cli_dir, capsys):
+    d = cli_dir
+    out = d / "out" / "wide.png"
+    assert main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--refine",
+                 "--offset-range", "0.1", "--fix", "axes,bias,focal,readout", "--orientation",
+                 TRUE_AXES, "--grid", "2x3", "--quiet", "-o", str(out)]) == 0
+    assert "searching time offsets within +-100 ms of the given one" in capsys.readouterr().out
+    rc = main(["calibrate", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+               "--time-offset", "0.004", "--offset-range", "0.04", "-o", str(d / "out" / "w.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--offset-range" in err and "time offset is fixed" in err
+    assert not (d / "out" / "w.json").exists()
+
+
 def test_cli_fix_needs_refine(cli_dir, capsys):
     d = cli_dir
     rc = main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--fix",
@@ -520,7 +583,8 @@ def test_cli_fix_needs_refine(cli_dir, capsys):
 
 
 @pytest.mark.parametrize("option, value, bad, says", [("--downscale", "0.5", "2", "(0, 1]"),
-                                                     ("--workers", "2", "0", ">= 1")])
+                                                     ("--workers", "2", "0", ">= 1"),
+                                                     ("--offset-range", "0.1", "-1", "(0, 5]")])
 def test_cli_calibration_options_need_refine_and_a_valid_value(cli_dir, capsys, option, value,
                                                                bad, says):
     d = cli_dir

@@ -5,6 +5,7 @@ the twin step on a blurred photo) is tested in test_calibrate.py."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gyrodeblur.axes import parse_axes
 from gyrodeblur.calibration_fit import (TWIN, _phase_prefers_twin, _twin_parameters,
@@ -94,3 +95,32 @@ def test_the_twin_needs_a_clear_phase_preference():
     assert not _phase_prefers_twin(0.5, clear)           # the refined twin scores worse
     assert not _phase_prefers_twin(-0.8, clear[:1])      # one patch: no standard error
 
+
+
+def test_the_line_fit_finds_distinct_minima_best_first():
+    """Two patches whose cost curves dip at two time shifts 0.2 s apart (a far basin
+    leads the coarse grid): both minima come back, best first, each at its readout
+    error; the slope beside the best is not a minimum of its own."""
+    from gyrodeblur.calibration_search import line_fit, line_fit_minima
+    taus = np.arange(-0.3, 0.3 + 1e-9, 0.002)
+    u = np.array([-0.25, 0.25])                     # patch rows about the pivot
+
+    def dip(at, depth, width=0.004):
+        return -depth * np.exp(-0.5 * ((taus - at) / width) ** 2)
+
+    # the readout error kap shifts patch j's dip by kap * u_j: dips at tau0 - kap u_j
+    kap = 0.008
+    C = np.stack([dip(0.10 - kap * u[0], 5) + dip(-0.10, 4),
+                  dip(0.10 - kap * u[1], 5) + dip(-0.10, 4)], 1)
+    kappas = np.array([-0.008, 0.0, 0.008])
+    got = line_fit_minima(C, taus, u, kappas, 3, 0.02)
+    assert got[0][:3] == line_fit(C, taus, u, kappas)
+    assert got[0][1] == pytest.approx(0.10, abs=1e-9) and got[0][2] == pytest.approx(kap)
+    assert got[1][1] == pytest.approx(-0.10, abs=1e-9) and got[1][2] == 0.0
+    assert got[1][0] > got[0][0]
+    # the rest of the curve is flat ground: no third minimum there, nor on a dip's slope
+    assert len(got) == 2
+    assert line_fit_minima(np.zeros_like(C), taus, u, kappas, 3, 0.02) == []
+    one = C[:1]
+    assert line_fit_minima(one, taus[:1], u, kappas, 3, 0.02) == [line_fit(one, taus[:1], u,
+                                                                            kappas)]

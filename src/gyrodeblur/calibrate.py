@@ -149,7 +149,8 @@ from .images import check_image
 from .gyrolog import rate_noise
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
-           "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate"]
+           "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
+           "MAX_OFFSET_RANGE"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
@@ -238,9 +239,21 @@ _CANDIDATES = 5            # mappings refined at full working scale (+ the best'
 #: 3.4 (7 px of blur) to 140; the sharp originals given the same captures (six cases) and a
 #: sharp photo given a capture of 27 px blur scored 4.5, 0.7, 0.2, -3.7, -26, -43 and -46.
 _NO_BLUR_MARGIN = 1.0
+#: Seconds searched, by default, on each side of the given time offset (tens of ms is
+#: the typical error of a phone's gyro and camera timestamps).
+DEFAULT_OFFSET_RANGE = 0.04
+#: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
+#: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
+#: per second of log searched on one photo, so 5 s either side is over three minutes
+#: (give the exposure start to a second or better).
+MAX_OFFSET_RANGE = 5.0
+#: Calibration seconds per second of time shifts searched beyond the default's, one photo,
+#: 2 cores (benchmark, session 31: 26.4 s a photo over 1.02 s, 5.1 s over 0.08 s).
+_SECONDS_PER_SPAN = 20.0
+_RANGE_SLACK = 0.001       # s: a log that cuts the asked range by less is not mentioned
 
 
-def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
+def calibrate(images, captures, *, fix=(), offset_range: float = DEFAULT_OFFSET_RANGE,
               transfer="srgb", n_patches: int | None = None, say=None,
               mappings=None, downscale: float = 1.0,
               workers: int | None = None) -> CalibrationResult:
@@ -259,7 +272,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     fix : iterable of str, or str
         Parameters not to estimate, from :data:`PARAMETERS` (a string: comma-separated).
     offset_range : float
-        Seconds searched on each side of the given time offset.
+        Seconds searched on each side of the given time offset (default
+        :data:`DEFAULT_OFFSET_RANGE`, 40 ms; more than 0, at most
+        :data:`MAX_OFFSET_RANGE`), as far as the gyro log covers it (a note says where
+        it stops); the refinement may end up to 10 ms beyond. Where the two clocks are
+        known only roughly, give more. The coarse ranking scans the range every 2 ms for
+        each axis mapping, and over more than 0.1 s each candidate mapping is started
+        from its three best distinct coarse minima: about 40 s more per second on each
+        side, on 2 cores (on the calibration benchmark, 26 s a photo for +-0.51 s against
+        5 s for the default).
     transfer : str or TransferCurve, or a list of them
         Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
         :class:`~gyrodeblur.tonecurve.TransferCurve`, e.g. from
@@ -306,8 +327,14 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
     if workers is not None and not _is_count(workers):
         raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
-    if not (isinstance(offset_range, (int, float, np.number)) and 0 <= offset_range < np.inf):
-        raise InputError(None, f"offset_range must be a number of seconds >= 0, got {offset_range!r}")
+    if isinstance(offset_range, bool) or not (isinstance(offset_range, (int, float, np.number))
+                                              and 0 < offset_range <= MAX_OFFSET_RANGE):
+        raise InputError("--offset-range", f"must be seconds in (0, {MAX_OFFSET_RANGE:g}] on "
+                                           f"each side of the given time offset (to keep the "
+                                           f"offset, fix it), got {offset_range!r}")
+    if "offset" in fix and offset_range != DEFAULT_OFFSET_RANGE:
+        raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
+                                           "offset): there is no range to search")
     if n_patches is not None and not _is_count(n_patches):
         raise InputError(None, f"n_patches must be a whole number >= 1, got {n_patches!r}")
     work_caps = captures
@@ -329,6 +356,17 @@ def calibrate(images, captures, *, fix=(), offset_range: float = 0.04,
     def note(msg: str, indent: str = "") -> None:
         notes.append(msg)
         say_(indent + msg)
+
+    if "offset" not in fix and (search.tau_lo > -offset_range + _RANGE_SLACK
+                                or search.tau_hi < offset_range - _RANGE_SLACK):
+        note(f"the gyro log covers the exposure only for time offsets "
+             f"{search.tau_lo * 1e3:+.0f} to {search.tau_hi * 1e3:+.0f} ms from the given one "
+             f"(asked: +-{offset_range * 1e3:.0f} ms): searched there")
+    elif offset_range > DEFAULT_OFFSET_RANGE:
+        extra = _SECONDS_PER_SPAN * (search.tau_hi - search.tau_lo - 2 * DEFAULT_OFFSET_RANGE)
+        say_(f"searching time offsets within +-{offset_range * 1e3:.0f} ms of the given one: "
+             f"about {extra:.0f} s more than the default +-{DEFAULT_OFFSET_RANGE * 1e3:.0f} ms "
+             f"(on 2 cores)")
 
     # the bias that the log's typical rate implies, when the log is long (hand motion
     # averages out over seconds; a gyro's bias does not)

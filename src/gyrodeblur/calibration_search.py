@@ -14,7 +14,7 @@ from .calibration_patches import CalibrationPhoto
 from .errors import InputError
 from .spectral_criterion import Corrections, PatchSpectra
 
-__all__ = ["SearchSpace", "psf_extent_and_path", "line_fit", "objective",
+__all__ = ["SearchSpace", "psf_extent_and_path", "line_fit", "line_fit_minima", "objective",
            "lm_refine", "X_NAMES"]
 
 #: Names of the parameter vector's coordinates.
@@ -111,14 +111,47 @@ def line_fit(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas) -> tuple[fl
     if len(taus) == 1:
         return float(C.sum()), float(taus[0]), 0.0
     best = (np.inf, float(taus[0]), 0.0)
-    for kap in kappas:
-        tot = np.zeros(len(taus))
-        for j in range(C.shape[1]):
-            tot += np.interp(taus - kap * u[j], taus, C[:, j])
+    for kap, tot in zip(kappas, _line_totals(C, taus, u, kappas)):
         i = int(np.argmin(tot))
         if tot[i] < best[0]:
             best = (float(tot[i]), float(taus[i]), float(kap))
     return best
+
+
+def line_fit_minima(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas, n: int,
+                    apart: float) -> list[tuple[float, float, float]]:
+    """Up to ``n`` distinct minima of :func:`line_fit`'s total over ``tau0`` (the best
+    ``kappa`` at each), best first: each the lowest within ``apart`` / 2 (s) either side
+    of it, lower than some point there (not flat ground), and more than ``apart`` from
+    every better one. ``taus`` is a regular grid (its first step sets the window). For a
+    search over a long stretch of log, where a far basin can lead the coarse grid yet
+    lose once refined."""
+    if len(taus) == 1:
+        return [line_fit(C, taus, u, kappas)]
+    totals = _line_totals(C, taus, u, kappas)
+    k_best = np.argmin(totals, axis=0)              # the first of equal kappas
+    tot = totals[k_best, np.arange(len(taus))]
+    half = max(1, int(round(0.5 * apart / abs(taus[1] - taus[0]))))
+    padded = np.pad(tot, half, constant_values=np.inf)
+    window = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+    around = np.where(np.isfinite(window), window, -np.inf).max(axis=1)
+    local = (tot <= window.min(axis=1)) & (tot < around)
+    out: list[tuple[float, float, float]] = []
+    for i in np.argsort(tot, kind="stable"):
+        if len(out) >= n:
+            break
+        if local[i] and all(abs(taus[i] - t) > apart for _, t, _ in out):
+            out.append((float(tot[i]), float(taus[i]), float(kappas[k_best[i]])))
+    return out
+
+
+def _line_totals(C: np.ndarray, taus: np.ndarray, u: np.ndarray, kappas) -> np.ndarray:
+    """``sum_i C_i(tau0 - kappa u_i)`` for every ``kappa`` (rows) and ``tau0`` in ``taus``."""
+    out = np.zeros((len(kappas), len(taus)))
+    for row, kap in zip(out, kappas):
+        for j in range(C.shape[1]):
+            row += np.interp(taus - kap * u[j], taus, C[:, j])
+    return out
 
 
 def _penalty(prior, idx, extra):

@@ -124,6 +124,8 @@ def _ignored_options(args) -> None:
         raise InputError("--downscale", "applies with --refine only")
     if args.workers is not None and not args.refine:
         raise InputError("--workers", "applies with --refine only")
+    if args.offset_range is not None and not args.refine:
+        raise InputError("--offset-range", "applies with --refine only")
 
 
 def _load_capture(args, photo=None, say=None):
@@ -427,9 +429,10 @@ def cmd_deblur(args, say) -> None:
         jpeg_noise()
         if args.refine:
             from .calibrate import calibrate
-            from .calibrate_cli import format_estimates
+            from .calibrate_cli import format_estimates, offset_range_option
             res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
-                            workers=args.workers, transfer=curve)
+                            workers=args.workers, transfer=curve,
+                            **offset_range_option(args, fix))
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
@@ -476,6 +479,10 @@ def cmd_calibrate(args, say) -> None:
 DOWNSCALE_HELP = ("calibrate on the photos shrunk by this factor, 0 < F <= 1 (default 1): for "
                   "photos softer than their pixel grid, e.g. upscaled or heavily denoised, "
                   "try 0.5; the corrected capture keeps the given resolution")
+OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (default "
+                     "0.04); where the gyro and camera clocks are known only roughly, e.g. "
+                     "1: as far as the log covers it, about 40 s more per second on each "
+                     "side on 2 cores")
 WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
                 "(Linux; default: the CPUs available, up to 4; 1: none); the result is the "
                 "same for any number")
@@ -582,6 +589,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --refine: " + DOWNSCALE_HELP)
     s.add_argument("--workers", type=int, default=None, metavar="N",
                    help="with --refine: " + WORKERS_HELP)
+    s.add_argument("--offset-range", type=float, default=None, metavar="S",
+                   help="with --refine: " + OFFSET_RANGE_HELP)
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
     _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
@@ -611,6 +620,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "--fx/--fy or --orientation is fixed too)")
     s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
     s.add_argument("--workers", type=int, default=None, metavar="N", help=WORKERS_HELP)
+    s.add_argument("--offset-range", type=float, default=None, metavar="S",
+                   help=OFFSET_RANGE_HELP)
     _add_transfer_option(s)
     _add_rotation_option(s, per_photo=True)
     s.add_argument("--overwrite", action="store_true")
