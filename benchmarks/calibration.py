@@ -80,6 +80,15 @@ from gyrodeblur.metrics import default_border, psnr  # noqa: E402
 TARGETS = {"offset_ms": 3.0, "psnr_gap_db": -0.5, "seconds_12mp": 20.0}
 
 
+#: The largest time offset :func:`draw_errors` injects (s), and how much further than
+#: the injected range a wide search (``--offset-range``) looks (s).
+MAX_INJECTED_OFFSET = 0.03
+WIDE_SEARCH_SLACK = 0.01
+#: The widest ``--offset-range`` (s): its logs (2 S + 0.35 s either side) then stay under
+#: the 8 s from which calibrate weighs the log's typical rate as a bias, so the runs pair.
+MAX_BENCH_RANGE = 1.8
+
+
 def draw_errors(capture, rng: np.random.Generator, *, none: bool = False) -> dict:
     """The errors to inject: a time offset, a bias, readout and focal factors and a wrong
     axis mapping (one of the 23 proper signed permutations other than ``capture``'s).
@@ -88,7 +97,7 @@ def draw_errors(capture, rng: np.random.Generator, *, none: bool = False) -> dic
         return {"offset_ms": 0.0, "bias": [0.0, 0.0, 0.0], "readout_factor": 1.0,
                 "focal_factor": 1.0, "axes": axes_to_letters(capture.axes)}
     while True:
-        off = float(rng.uniform(-0.03, 0.03))
+        off = float(rng.uniform(-MAX_INJECTED_OFFSET, MAX_INJECTED_OFFSET))
         if abs(off) >= 0.005:
             break
     bias = rng.uniform(-0.05, 0.05, 3)
@@ -117,23 +126,31 @@ def inject(capture, rng: np.random.Generator):
 
 
 def run_case(case, rng, *, say, method=None, n_patches=None, no_errors=False,
-             attribute=False) -> dict:
+             attribute=False, offset_range=None) -> dict:
     """Calibrate one case's photo alone, from its capture with errors injected."""
     return run_session([case], rng, say=say, method=method, n_patches=n_patches,
-                       no_errors=no_errors, attribute=attribute)[0]
+                       no_errors=no_errors, attribute=attribute, offset_range=offset_range)[0]
 
 
 def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False,
-                attribute=False) -> list[dict]:
+                attribute=False, offset_range=None) -> list[dict]:
     """Calibrate the photos of one session together: every case's capture gets the same
     injected errors (one gyro, one camera; none with ``no_errors``), and ``calibrate`` sees
     all the photos at once. One row per photo (``seconds`` is the whole session's
-    calibration time)."""
+    calibration time).
+
+    ``offset_range`` (s): clocks known only roughly. The injected time offset is the
+    usual draw scaled from +-30 ms to +-``offset_range`` (the other errors as usual, so
+    the runs pair), and ``calibrate`` searches +-(``offset_range`` + 10 ms)."""
     errors = draw_errors(cases[0].capture, rng, none=no_errors)
+    search = {}
+    if offset_range is not None:
+        errors["offset_ms"] *= offset_range / MAX_INJECTED_OFFSET
+        search = {"offset_range": offset_range + WIDE_SEARCH_SLACK}
     bads = [corrupt(case.capture, errors) for case in cases]
     t0 = time.perf_counter()
     try:
-        res = calibrate([case.blurred for case in cases], bads, n_patches=n_patches)
+        res = calibrate([case.blurred for case in cases], bads, n_patches=n_patches, **search)
     except InputError as exc:
         for case in cases:
             say(f"  {case.name:24s} calibration refused: {exc}")
@@ -519,6 +536,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                          "each side of its exposure (default: the dataset's 0.3 s); with 8 s "
                          "or more in all, calibrate also takes a prior on the bias from the "
                          "log's typical rate")
+    ap.add_argument("--offset-range", type=float, default=None, metavar="S",
+                    help="clocks known only roughly: inject time offsets of up to +-S s (the "
+                         "usual +-30 ms draws scaled) and search +-(S + 0.01) s, each capture "
+                         "given 2 S + 0.35 s of the source trace on each side (at least)")
     ap.add_argument("--no-errors", action="store_true",
                     help="inject nothing: calibrate the true captures (how far calibration "
                          "moves a right capture; the PSNR gap is what that costs)")
@@ -537,11 +558,21 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                 else "calibration_burst" if args.burst else "calibration")
         if args.log_seconds is not None:
             stem += f"_log{args.log_seconds:g}s"
+        if args.offset_range is not None:
+            stem += f"_offsets{args.offset_range:g}s"
         if args.no_errors:
             stem += "_no_errors"
         args.out = _common.RESULTS / (stem + ".json")
     if args.log_seconds is not None and args.log_seconds < 0:
         ap.error(f"--log-seconds: must be >= 0, got {args.log_seconds:g}")
+    if args.offset_range is not None and not 0 < args.offset_range <= MAX_BENCH_RANGE:
+        ap.error(f"--offset-range: must be in (0, {MAX_BENCH_RANGE:g}] s (beyond, the logs "
+                 f"reach the 8 s of the bias prior), got {args.offset_range:g}")
+    if args.offset_range is not None and args.no_errors:
+        ap.error("--offset-range injects offsets; --no-errors injects nothing: give one")
+    if args.offset_range is not None and args.attribute:
+        ap.error("--attribute recalibrates over the default offset range: not with "
+                 "--offset-range")
     if args.quick:                       # --quick changes only the defaults
         if args.cases is None:
             args.cases = 2
@@ -565,8 +596,11 @@ def main(argv: list[str] | None = None) -> int:
     cases = _common.get_cases(dataset=args.dataset, **opts)
     if args.cases:
         cases = cases[:args.cases]
-    if args.log_seconds is not None:
-        cases = with_long_logs(cases, args.log_seconds, args.gyro or dataset_gyro(args.dataset))
+    log_seconds = args.log_seconds
+    if args.offset_range is not None:
+        log_seconds = max(log_seconds or 0.0, 2 * args.offset_range + 0.35)
+    if log_seconds is not None:
+        cases = with_long_logs(cases, log_seconds, args.gyro or dataset_gyro(args.dataset))
     rows, session_secs = [], []
     injected = ("nothing injected" if args.no_errors
                 else f"errors injected with seed {args.seed}")
@@ -583,7 +617,7 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng([args.seed, 6 if args.burst else 7, k])
             got = run_session(group, rng, say=say, method=args.method,
                               n_patches=args.patches, no_errors=args.no_errors,
-                              attribute=args.attribute)
+                              attribute=args.attribute, offset_range=args.offset_range)
             rows += got
             session_secs.append(got[0]["seconds"])
     else:
@@ -592,7 +626,7 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng([args.seed, 6, k])
             rows.append(run_case(case, rng, say=say, method=args.method,
                                  n_patches=args.patches, no_errors=args.no_errors,
-                                 attribute=args.attribute))
+                                 attribute=args.attribute, offset_range=args.offset_range))
     summary = summarise(rows)
     if args.sessions or args.burst:
         summary["sessions"] = len(sessions)
@@ -609,7 +643,8 @@ def main(argv: list[str] | None = None) -> int:
     result = {"benchmark": "calibration", "quick": args.quick, "seed": args.seed,
               "mode": ("sessions" if args.sessions else "bursts" if args.burst
                        else "single photos"),
-              "log_seconds": args.log_seconds, "no_errors": args.no_errors,
+              "log_seconds": log_seconds, "offset_range": args.offset_range,
+              "no_errors": args.no_errors,
               "targets": TARGETS, "summary": summary, "cases": rows,
               "total_seconds": time.perf_counter() - t_start, "machine": _common.machine_info()}
     _common.write_json(args.out, result)
