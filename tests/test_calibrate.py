@@ -388,6 +388,29 @@ def test_a_wide_search_starts_each_mapping_from_its_distinct_coarse_minima(case)
     assert any(abs(xa[0] - others[0][0]) < 0.02 for xa in starts[3])   # ...and the far ones stay
 
 
+def test_a_long_time_shift_grid_is_costed_in_chunks_each_shift_as_alone(case, monkeypatch):
+    """The coarse costs over more time shifts than one chunk holds (a wide search) are
+    those of each shift costed on its own: chunks bound the memory, not the result."""
+    import gyrodeblur.spectral_criterion as sc
+    _, true, blurred = case
+    photos = [CalibrationPhoto(blurred, true, "srgb", 0)]
+    fit = CalibrationFit(photos, SearchSpace(photos, set(), 0.04), set(),
+                         BiasPrior(np.zeros(3)), 9, 1, lambda msg: None)
+    theta = fit.theta0.copy(axes=true.axes)
+    taus = np.arange(-0.02, 0.0201, 0.002)                   # 21 shifts
+    monkeypatch.setattr(sc, "_TAU_CHUNK", 8)                 # 3 chunks
+    before = fit.coarse.evaluations
+    made, spectra = [], fit.coarse.spectra
+    monkeypatch.setattr(fit.coarse, "spectra",
+                        lambda th, tl=None, **kw: made.append(len(tl)) or spectra(th, tl, **kw))
+    chunked = fit.coarse.costs(theta, taus)
+    assert made == [8, 8, 5]                                 # never more than a chunk
+    assert fit.coarse.evaluations == before + 1 and chunked.shape == (21, len(fit.coarse.points))
+    alone = np.concatenate([fit.coarse.costs(theta, taus[k:k + 1]) for k in range(21)])
+    # the same to float32's precision (the batched spectra round a little differently)
+    np.testing.assert_allclose(chunked, alone, rtol=1e-6)
+
+
 def test_the_offset_range_is_checked(case):
     _, true, blurred = case
     for bad in (0, -0.01, float("nan"), True, 6.0, "0.1"):

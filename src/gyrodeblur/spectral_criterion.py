@@ -49,6 +49,10 @@ _FMIN_BINS = 2.5           # frequencies below this many bins are dropped (windo
 _ENVELOPE_ITERS = 3        # Fisher-scoring steps of an envelope fitted per evaluation ...
 _ENVELOPE_ITERS_HELD = 6   # ... and of one fitted to be held
 _FLOOR_MAX_STEP = 3.0      # largest change of the log noise floor per envelope-fit step
+#: Time shifts whose spectra are made at once by :meth:`PatchSpectra.costs` (a wide offset
+#: search's coarse grid has one every 2 ms: +-0.5 s held 0.76 GB at once, +-5 s would hold
+#: about 8 GB per worker; the default +-40 ms grid has 41)
+_TAU_CHUNK = 128
                            # (normal steps: up to about 2.3)
 
 
@@ -283,16 +287,25 @@ class PatchSpectra:
     def costs(self, theta: Corrections, taus=None, rows=None) -> np.ndarray:
         """Per-patch costs, ``(n_patch,)`` or ``(n_tau, n_patch)`` when ``taus`` (extra
         time shifts) is given: the Whittle cost of the patch periodograms under the model
-        spectra with their envelopes, profiled over the scale and the noise."""
+        spectra with their envelopes, profiled over the scale and the noise. More than
+        :data:`_TAU_CHUNK` time shifts are taken that many at a time (each shift's costs
+        are its own; the memory stays that of one chunk: about 1.5 MB per shift)."""
+        self.evaluations += 1
+        if taus is not None and len(taus) > _TAU_CHUNK:
+            taus = np.asarray(taus, float)
+            return np.concatenate([self._costs(theta, taus[k:k + _TAU_CHUNK], rows)
+                                   for k in range(0, len(taus), _TAU_CHUNK)])
+        c = self._costs(theta, taus, rows)
+        return c if taus is not None else c[0]
+
+    def _costs(self, theta: Corrections, taus, rows) -> np.ndarray:
+        """:meth:`costs` of one batch of time shifts, ``(n_tau, n_patch)``."""
         S = self.spectra(theta, taus, rows=rows)
         if self.E is not None:
             S = S * np.tile(self.E, (S.shape[0] // len(self.points), 1))
         elif self.envelope:
             S = S * self.fast_envelope(S)
-        c = self._whittle(S)
-        self.evaluations += 1
-        c = c.reshape(-1, len(self.points))
-        return c if taus is not None else c[0]
+        return self._whittle(S).reshape(-1, len(self.points))
 
     def cost(self, theta: Corrections) -> float:
         return float(self.costs(theta).sum())
