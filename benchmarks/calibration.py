@@ -143,14 +143,15 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
     usual draw scaled from +-30 ms to +-``offset_range`` (the other errors as usual, so
     the runs pair), and ``calibrate`` searches +-(``offset_range`` + 10 ms)."""
     errors = draw_errors(cases[0].capture, rng, none=no_errors)
-    search = {}
+    search = None                        # calibrate's default range
     if offset_range is not None:
         errors["offset_ms"] *= offset_range / MAX_INJECTED_OFFSET
-        search = {"offset_range": offset_range + WIDE_SEARCH_SLACK}
+        search = offset_range + WIDE_SEARCH_SLACK
     bads = [corrupt(case.capture, errors) for case in cases]
     t0 = time.perf_counter()
     try:
-        res = calibrate([case.blurred for case in cases], bads, n_patches=n_patches, **search)
+        res = calibrate([case.blurred for case in cases], bads, n_patches=n_patches,
+                        offset_range=search)
     except InputError as exc:
         for case in cases:
             say(f"  {case.name:24s} calibration refused: {exc}")

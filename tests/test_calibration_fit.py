@@ -25,8 +25,9 @@ def _capture() -> Capture:
 
 
 def _row(score, letters):
-    """A coarse-ranking row: (score, time shift, readout error, focal, mapping)."""
-    return (score, 0.0, 0.0, 1.0, parse_axes(letters))
+    """A coarse-ranking row: (score, time shift, readout error, focal, mapping, further
+    minima)."""
+    return (score, 0.0, 0.0, 1.0, parse_axes(letters), ())
 
 
 def test_the_shortlist_takes_each_ranking_in_turn_and_each_mapping_once():

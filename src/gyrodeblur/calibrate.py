@@ -253,7 +253,7 @@ _SECONDS_PER_SPAN = 20.0
 _RANGE_SLACK = 0.001       # s: a log that cuts the asked range by less is not mentioned
 
 
-def calibrate(images, captures, *, fix=(), offset_range: float = DEFAULT_OFFSET_RANGE,
+def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
               transfer="srgb", n_patches: int | None = None, say=None,
               mappings=None, downscale: float = 1.0,
               workers: int | None = None) -> CalibrationResult:
@@ -271,7 +271,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = DEFAULT_OFFSET_
         one bias change and one axis mapping for all.
     fix : iterable of str, or str
         Parameters not to estimate, from :data:`PARAMETERS` (a string: comma-separated).
-    offset_range : float
+    offset_range : float, optional
         Seconds searched on each side of the given time offset (default
         :data:`DEFAULT_OFFSET_RANGE`, 40 ms; more than 0, at most
         :data:`MAX_OFFSET_RANGE`), as far as the gyro log covers it (a note says where
@@ -280,7 +280,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float = DEFAULT_OFFSET_
         each axis mapping, and over more than 0.1 s each candidate mapping is started
         from its three best distinct coarse minima: about 40 s more per second on each
         side, on 2 cores (on the calibration benchmark, 26 s a photo for +-0.51 s against
-        5 s for the default).
+        5 s for the default). Refused with the offset fixed.
     transfer : str or TransferCurve, or a list of them
         Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
         :class:`~gyrodeblur.tonecurve.TransferCurve`, e.g. from
@@ -327,14 +327,16 @@ def calibrate(images, captures, *, fix=(), offset_range: float = DEFAULT_OFFSET_
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
     if workers is not None and not _is_count(workers):
         raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
+    if offset_range is None:
+        offset_range = DEFAULT_OFFSET_RANGE
+    elif "offset" in fix:
+        raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
+                                           "offset): there is no range to search")
     if isinstance(offset_range, bool) or not (isinstance(offset_range, (int, float, np.number))
                                               and 0 < offset_range <= MAX_OFFSET_RANGE):
         raise InputError("--offset-range", f"must be seconds in (0, {MAX_OFFSET_RANGE:g}] on "
                                            f"each side of the given time offset (to keep the "
                                            f"offset, fix it), got {offset_range!r}")
-    if "offset" in fix and offset_range != DEFAULT_OFFSET_RANGE:
-        raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
-                                           "offset): there is no range to search")
     if n_patches is not None and not _is_count(n_patches):
         raise InputError(None, f"n_patches must be a whole number >= 1, got {n_patches!r}")
     work_caps = captures

@@ -13,7 +13,7 @@ from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix, repeated_pho
 from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
-__all__ = ["format_estimates", "fixed_parameters", "offset_range_option", "calibrate_command"]
+__all__ = ["format_estimates", "fixed_parameters", "calibrate_command"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -74,17 +74,6 @@ def fixed_parameters(args) -> set[str]:
     return fix
 
 
-def offset_range_option(args, fix: set) -> dict:
-    """``{"offset_range": S}`` for :func:`~gyrodeblur.calibrate.calibrate` when
-    ``--offset-range S`` was given, else nothing (the function's default); refused with
-    the offset among the ``fix``-ed parameters, whatever ``S``."""
-    value = getattr(args, "offset_range", None)
-    if value is not None and "offset" in fix:
-        raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
-                                           "offset): there is no range to search")
-    return {} if value is None else {"offset_range": value}
-
-
 def _refuse_repeats(paths, photos) -> None:
     """One photo given twice would count its evidence twice (:func:`calibrate.calibrate`
     refuses it too); said here with the files' names, whether the same file or a copy."""
@@ -143,7 +132,7 @@ def calibrate_command(args, say, load_capture) -> None:
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
                     downscale=args.downscale, workers=args.workers, transfer=curves,
-                    **offset_range_option(args, fix))
+                    offset_range=args.offset_range)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):

@@ -248,10 +248,10 @@ class CalibrationFit:
         other starts' results)."""
         # a mapping's coarse minimum, and over a wide range its further distinct ones
         jobs = [(k, (t, kap, r[4])) for k, r in enumerate(rows)
-                for t, kap in ((r[1], r[2]),) + tuple(r[5] if len(r) > 5 else ())]
-        found = steps.map("candidate_starts", [job for _, job in jobs])
-        starts = [[x0 for (j, _), xs in zip(jobs, found) if j == k for x0 in xs]
-                  for k in range(len(rows))]
+                for t, kap in ((r[1], r[2]),) + r[5]]
+        starts = [[] for _ in rows]
+        for (k, _), xs in zip(jobs, steps.map("candidate_starts", [job for _, job in jobs])):
+            starts[k] += xs
         refined = iter(steps.map("refine", [(r[4], x0, 4) for r, xs in zip(rows, starts)
                                             for x0 in xs]))
         out = []

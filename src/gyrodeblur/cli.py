@@ -429,10 +429,10 @@ def cmd_deblur(args, say) -> None:
         jpeg_noise()
         if args.refine:
             from .calibrate import calibrate
-            from .calibrate_cli import format_estimates, offset_range_option
+            from .calibrate_cli import format_estimates
             res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
                             workers=args.workers, transfer=curve,
-                            **offset_range_option(args, fix))
+                            offset_range=args.offset_range)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture

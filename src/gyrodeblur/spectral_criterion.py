@@ -49,11 +49,11 @@ _FMIN_BINS = 2.5           # frequencies below this many bins are dropped (windo
 _ENVELOPE_ITERS = 3        # Fisher-scoring steps of an envelope fitted per evaluation ...
 _ENVELOPE_ITERS_HELD = 6   # ... and of one fitted to be held
 _FLOOR_MAX_STEP = 3.0      # largest change of the log noise floor per envelope-fit step
+                           # (normal steps: up to about 2.3)
 #: Time shifts whose spectra are made at once by :meth:`PatchSpectra.costs` (a wide offset
 #: search's coarse grid has one every 2 ms: +-0.5 s held 0.76 GB at once, +-5 s would hold
 #: about 8 GB per worker; the default +-40 ms grid has 41)
 _TAU_CHUNK = 128
-                           # (normal steps: up to about 2.3)
 
 
 @dataclass
