@@ -599,18 +599,19 @@ def read_android_events(path: str | os.PathLike) -> GyroLog:
         parts = line.split()
         if not parts or parts[0] != "4":      # comments, other sensors (of any length)
             continue
-        try:
-            if len(parts) != 5:
-                raise InputError(path, f"line {k}: a gyroscope event (type 4) must read "
-                                       f"'4 timestamp_ns x y z', got {len(parts)} values")
+        problem = None
+        if len(parts) != 5:
+            problem = (f"line {k}: a gyroscope event (type 4) must read "
+                       f"'4 timestamp_ns x y z', got {len(parts)} values")
+        else:
             try:
                 rows.append([float(p) for p in parts[1:]])
             except ValueError:
-                raise InputError(path, f"line {k}: not a number in {line!r}") from None
-        except InputError:
+                problem = f"line {k}: not a number in {line!r}"
+        if problem:
             if k == last and rows:     # a logger stopped in the middle of its last line
                 break
-            raise
+            raise InputError(path, problem)
     if not rows:
         raise InputError(path, "no gyroscope events (type 4) in the file")
     a = _without_repeats(np.asarray(rows, dtype=np.float64))
