@@ -105,4 +105,64 @@ def test_the_search_never_ends_worse_than_the_given_parameters(shared_data):
     res = calibrate([case.blurred], given, fix=set(PARAMETERS) - {"focal"})
     gains = [float(m.group(1)) for n in res.notes
              for m in [re.search(r"improves the objective by only (-?[\d.]+)", n)] if m]
-    assert gains and all(g >= -0.5 for g in gains), res.notes     # kept, not worse
+    assert all(g >= -0.5 for g in gains), res.notes                # if kept, not worse
+    if not gains:          # moved: towards the truth (since the kernels are unwarped, to 0.9 %)
+        scale = res.capture.camera.fx / case.capture.camera.fx
+        assert abs(scale - 1) < abs(0.9574 - 1) / 2, scale
+
+
+def _tilting_patch(rate, axis: int):
+    """The centre patch of a 400 x 300 photo (f 400 px, exposure 20 ms, readout 30 ms)
+    taken while the camera turns at a constant ``rate`` (rad/s) about camera ``axis``."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import PatchSpectra
+
+    t = np.arange(0.0, 1.0, 0.005)
+    w = np.zeros((t.size, 3))
+    w[:, axis] = rate
+    cap = Capture(0.5, 0.02, 0.03, Camera.centred(400, 300, 400.0), GyroLog(t, w))
+    img = 0.5 + 0.1 * np.random.default_rng(0).normal(size=(300, 400))
+    photo = CalibrationPhoto(np.clip(img, 0, 1), cap, "linear", 0)
+    return PatchSpectra([photo], [(0, 199.5, 149.5)], 1.0, 64)
+
+
+def test_the_kernel_is_seen_through_the_rolling_shutters_stretch():
+    """Physics: a camera pitching at a constant rate w moves each row's content by
+    ``f w (t_row + s T)``; rows are read ``r / H`` s apart, so the photo is the scene
+    stretched by ``1 - f w r / H`` along y, and a patch's spectrum shows the streak of
+    length ``f w T`` in the photo's own pixels: ``f w T / (1 - f w r / H)`` (here 8 px /
+    0.96). A yaw's shear leaves a horizontal streak's length alone."""
+    from gyrodeblur.spectral_criterion import Corrections
+
+    th = Corrections(axes=np.eye(3))
+    n = 128
+    for rate in (1.0, -1.0):
+        p = _tilting_patch(rate, axis=0)
+        d = p.displacements(th, [(0, 199.5, 149.5, 149.5, 0.0)])[0]
+        c = 400.0 * rate * 0.03 / 300
+        want = 400.0 * abs(rate) * 0.02 * (n - 1) / n / (1 - c)
+        assert abs(np.ptp(d[:, 1]) - want) < 0.02, (rate, np.ptp(d[:, 1]), want)
+        assert np.ptp(d[:, 0]) < 0.01
+        p = _tilting_patch(rate, axis=1)
+        d = p.displacements(th, [(0, 199.5, 149.5, 149.5, 0.0)])[0]
+        assert abs(np.ptp(d[:, 0]) - 400.0 * 0.02 * (n - 1) / n) < 0.02, np.ptp(d[:, 0])
+
+
+def test_the_focal_length_alone_is_found_on_a_rolling_shutter_photo(shared_data):
+    """A benchmark photo (lai_manmade_01, its second shake window, 15 px of blur, a 30 ms
+    readout) with everything but the focal length true and fixed, given 5 % short: the
+    criterion finds it within 1 %. Before the kernels were mapped by the rolling shutter's
+    local warp it settled 2.9 % short (and 1.5-3 % off on 8 of the benchmark's 24 cases)."""
+    from gyrodeblur.calibrate import PARAMETERS, calibrate
+    from gyrodeblur.dataset import build_cases
+
+    case = build_cases([shared_data / "photos" / "lai_manmade_01.png"],
+                       shared_data / "gyro" / "handheld_phone_210hz.csv",
+                       windows_per_photo=2)[1]
+    given = case.capture.replace(camera=case.capture.camera.with_focal_scale(0.95))
+    res = calibrate([case.blurred], given, fix=set(PARAMETERS) - {"focal"})
+    scale = res.capture.camera.fx / case.capture.camera.fx
+    assert abs(scale - 1) < 0.01, (scale, res.notes)

@@ -22,7 +22,9 @@ log f cos 2a, log f sin 2a}, fitted to ``P ~ E S + s`` on 4x4-binned spectra (we
 least squares, then damped Fisher scoring) at a given parameter set and then held while
 the parameters move (refitted every few steps). What is left to the PSF is mostly the fine
 structure of ``|H|^2``, its zeros and ripples. ``|H|`` comes from the exact trace of the
-patch centre, rendered as a sum of narrow Gaussians (0.75 px): the cost is a smooth
+patch centre's pixel, mapped by the inverse of the photo's local warp there (the rolling
+shutter shears and stretches the patch, and its blur with it:
+:meth:`PatchSpectra.displacements`), rendered as a sum of narrow Gaussians (0.75 px): the cost is a smooth
 function of the parameters (bilinear splatting makes it jagged, because its low-pass
 changes with the PSF's sub-pixel position). A patch spans rows exposed at different times
 (rolling shutter), so ``|H|^2`` is averaged over three of its rows.
@@ -54,6 +56,8 @@ _FLOOR_MAX_STEP = 3.0      # largest change of the log noise floor per envelope-
 #: search's coarse grid has one every 2 ms: +-0.5 s held 0.76 GB at once, +-5 s would hold
 #: about 8 GB per worker; the default +-40 ms grid has 41)
 _TAU_CHUNK = 128
+_WARP_STEP = 2.0           # px: finite-difference step of the local warp (full resolution)
+_WARP_SAMPLES = 8          # times over the exposure at which the local warp is averaged
 
 
 @dataclass
@@ -177,30 +181,73 @@ class PatchSpectra:
         return O
 
     def displacements(self, theta: Corrections, items) -> np.ndarray:
-        """``(B, n, 2)`` trace of each item ``(photo, x, y, row, tau)`` relative to
-        ``(x, y)``, in working-scale pixels (full-resolution coordinates in)."""
-        n = self.n
+        """``(B, n, 2)`` blur kernel of each item ``(photo, x, y, row, tau)`` as the
+        spectrum of a patch centred on pixel ``(x, y)`` sees it, in working-scale pixels
+        (full-resolution coordinates in; ``row`` times the exposure).
+
+        The kernel of the pixel ``p`` itself is the gather form ``p - x0_p(t)``
+        (``x0_p(t) = K R(t) K^-1 p``, the reference-time position of the scene point that
+        ``p`` records at ``t``, over its row's exposure). Around ``p`` the photo is also
+        warped: nearby pixels see scene points ``x0_p(t) + M(t) dp`` (``M = dx0_p/dp``;
+        with a rolling shutter ``M`` holds the image velocity times the readout rate, a
+        shear or a stretch of several per cent), so the patch is the blurred scene resampled
+        by ``M``'s mean ``Mbar``, and its spectrum shows the kernel mapped by
+        ``Mbar^-1``. Without that map the criterion took the stretch for a focal error (1.5 to
+        2.5 % on the benchmark's true captures, its sign following the shake)."""
+        n, m, h = self.n, _WARP_SAMPLES, _WARP_STEP
         out = np.empty((len(items), n, 2))
         s = (np.arange(n) + 0.5) / n
+        sw = (np.arange(m) + 0.5) / m
+        # the local warp from the pixel's neighbours h px either side in x (its own row
+        # times) and in y (h rows later and earlier), at fewer times than the kernel: it is
+        # a mean over the exposure
+        rows_w = np.array([0.0, h, -h])
         groups: dict = {}
         for b, it in enumerate(items):
             groups.setdefault(it[0], []).append(b)
         for i, idx in groups.items():
+            x, y, row, tau = np.array([items[b][1:] for b in idx], float).T
+            B = len(idx)
             cap = self.photos[i].cap
-            arr = np.array([items[b][1:] for b in idx], float)
-            taus = arr[:, 3] + theta.offset
-            tref = cap.exposure_start
             readout = max(0.0, cap.readout_time + theta.readout)
-            T = tref + readout * arr[:, 2:3] / cap.camera.height + cap.exposure_time * s[None, :]
-            O = self._orientation(i, theta, min(T.min(), tref) - taus.max(),
-                                  max(T.max(), tref) - taus.min())
-            qref = quat_conjugate(O.quaternions(tref - taus))
-            q = O.quaternions(T - taus[:, None])
-            R = quat_to_matrix(quat_multiply(qref[:, None, :], q))       # (b, n, 3, 3)
+            t_row = cap.exposure_start + readout * row / cap.camera.height        # (B,)
+            T = np.concatenate([
+                t_row[:, None] + cap.exposure_time * s,
+                (t_row[:, None, None] + readout * rows_w[:, None] / cap.camera.height
+                 + cap.exposure_time * sw).reshape(B, 3 * m)], axis=1)
+            R = self._rotations(theta, i, T, tau)
             cam = cap.camera.with_focal_scale(theta.focal)
-            d = np.einsum("bnji,bj->bni", R, cam.rays(arr[:, 0], arr[:, 1]))   # R^T ray
-            out[idx] = (cam.project(d) - arr[:, None, 0:2]) * self.scale
+            # p - x0_p(t) of the pixel and of its four neighbours (full-resolution px)
+            o = self._gather(cam, R[:, :n], x, y)
+            Rw = R[:, n:].reshape(B, 3, m, 3, 3)[:, [0, 0, 1, 2]]
+            ow = self._gather(cam, Rw, x[:, None] + [h, -h, 0, 0], y[:, None] + [0, 0, h, -h])
+            dx = (ow[:, 0] - ow[:, 1]).mean(1) / (2 * h)    # d offsets / dp, exposure mean
+            dy = (ow[:, 2] - ow[:, 3]).mean(1) / (2 * h)
+            Mbar = np.eye(2)[None] - np.stack([dx, dy], axis=-1)        # d x0_p / dp
+            out[idx] = (o @ np.linalg.inv(Mbar).transpose(0, 2, 1)) * self.scale
         return out
+
+    def _rotations(self, theta: Corrections, i: int, T: np.ndarray, tau: np.ndarray):
+        """``R(t)`` ``(B, k, 3, 3)`` relative to the exposure start (camera frame) at the
+        camera times ``T`` ``(B, k)`` (s) of photo ``i``, its ``B`` patches' own time shifts
+        ``tau`` (s) added to the offset: the scene point that pixel ``p`` records at ``t``
+        lies at ``K R(t) K^-1 p`` at the reference time."""
+        cap = self.photos[i].cap
+        taus = tau + theta.offset
+        tref = cap.exposure_start
+        O = self._orientation(i, theta, min(T.min(), tref) - taus.max(),
+                              max(T.max(), tref) - taus.min())
+        qref = quat_conjugate(O.quaternions(tref - taus))
+        q = O.quaternions(T - taus[:, None])
+        return quat_to_matrix(quat_multiply(qref[:, None, :], q))
+
+    @staticmethod
+    def _gather(cam, R: np.ndarray, x, y) -> np.ndarray:
+        """``p - K R K^-1 p`` ``(..., k, 2)`` for pixels ``p = (x, y)`` ``(...)`` and
+        rotations ``R`` ``(..., k, 3, 3)``."""
+        x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+        src = cam.project(np.einsum("...nij,...j->...ni", R, cam.rays(x, y)))
+        return np.stack([x, y], -1)[..., None, :] - src
 
     def otf(self, disp: np.ndarray) -> np.ndarray:
         """Complex OTF ``(B, P, P//2+1)`` of Gaussian-splatted traces (sum 1)."""
