@@ -92,7 +92,9 @@ def test_the_search_never_ends_worse_than_the_given_parameters(shared_data):
     thousands of nats at a focal length 2.5-3 % long but not 2 or 3.5 %. The search
     started there and ended 166 nats worse than the given focal length it had been
     refined from. Steps that raise the cost are now halved or refused, so the best found
-    is at least as good as the given parameters (the keep note's improvement >= 0)."""
+    is at least as good as the given parameters (the keep note's improvement >= 0). Since
+    the kernels are seen through the rolling shutter's local warp (session 32) the search
+    moves off the given focal length here, and must then end nearer the truth (0.9 % long)."""
     import re
 
     from gyrodeblur.calibrate import PARAMETERS, calibrate
@@ -149,6 +151,7 @@ def test_the_kernel_is_seen_through_the_rolling_shutters_stretch():
         p = _tilting_patch(rate, axis=1)
         d = p.displacements(th, [(0, 199.5, 149.5, 149.5, 0.0)])[0]
         assert abs(np.ptp(d[:, 0]) - 400.0 * 0.02 * (n - 1) / n) < 0.02, np.ptp(d[:, 0])
+        assert np.ptp(d[:, 1]) < 0.01, np.ptp(d[:, 1])   # a transposed map would tilt it
 
 
 def test_the_focal_length_alone_is_found_on_a_rolling_shutter_photo(shared_data):

@@ -188,9 +188,10 @@ class PatchSpectra:
         The kernel of the pixel ``p`` itself is the gather form ``p - x0_p(t)``
         (``x0_p(t) = K R(t) K^-1 p``, the reference-time position of the scene point that
         ``p`` records at ``t``, over its row's exposure). Around ``p`` the photo is also
-        warped: nearby pixels see scene points ``x0_p(t) + M(t) dp`` (``M = dx0_p/dp``;
-        with a rolling shutter ``M`` holds the image velocity times the readout rate, a
-        shear or a stretch of several per cent), so the patch is the blurred scene resampled
+        warped: nearby pixels see scene points ``x0_p(t) + M(t) dp`` (``M = dx0_p/dp``:
+        the rotation's own roll and perspective terms and, with a rolling shutter, the
+        image velocity times the readout rate, a shear or a stretch of several per cent,
+        which dominates), so the patch is the blurred scene resampled
         by ``M``'s mean ``Mbar``, and its spectrum shows the kernel mapped by
         ``Mbar^-1``. Without that map the criterion took the stretch for a focal error (1.5 to
         2.5 % on the benchmark's true captures, its sign following the shake)."""
