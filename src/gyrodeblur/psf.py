@@ -118,8 +118,17 @@ def _gather_offsets(capture: Capture, px, py, n: int, row=None) -> np.ndarray:
     timing = py if row is None else np.full(py.shape, float(row))
     times = (capture.row_start(timing)[..., None]
              + capture.exposure_time * (np.arange(n) + 0.5) / n)            # (..., n)
-    R = capture.orientation.matrices(times)                                 # (..., n, 3, 3)
-    src = cam.project(np.einsum("...nij,...j->...ni", R, cam.rays(px, py)))  # R ray
+    return offsets_under_rotation(cam, capture.orientation.matrices(times), px, py)
+
+
+def offsets_under_rotation(camera, R: np.ndarray, px, py) -> np.ndarray:
+    """``(..., n, 2)``: ``p - K R K^-1 p`` (pixels) for pixels ``p = (px, py)`` (arrays of
+    one shape ``(...)``) and camera-frame rotations ``R`` ``(..., n, 3, 3)``: with ``R`` the
+    orientation at ``n`` times relative to the reference, how far the scene point each
+    pixel records then lay from it at the reference time (the gather form)."""
+    px = np.asarray(px, np.float64)
+    py = np.asarray(py, np.float64)
+    src = camera.project(np.einsum("...nij,...j->...ni", R, camera.rays(px, py)))  # R ray
     return np.stack([px, py], axis=-1)[..., None, :] - src
 
 

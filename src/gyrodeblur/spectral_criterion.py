@@ -24,10 +24,10 @@ the parameters move (refitted every few steps). What is left to the PSF is mostl
 structure of ``|H|^2``, its zeros and ripples. ``|H|`` comes from the exact trace of the
 patch centre's pixel, mapped by the inverse of the photo's local warp there (the rolling
 shutter shears and stretches the patch, and its blur with it:
-:meth:`PatchSpectra.displacements`), rendered as a sum of narrow Gaussians (0.75 px): the cost is a smooth
-function of the parameters (bilinear splatting makes it jagged, because its low-pass
-changes with the PSF's sub-pixel position). A patch spans rows exposed at different times
-(rolling shutter), so ``|H|^2`` is averaged over three of its rows.
+:meth:`PatchSpectra.displacements`), rendered as a sum of narrow Gaussians (0.75 px): the
+cost is a smooth function of the parameters (bilinear splatting makes it jagged, because
+its low-pass changes with the PSF's sub-pixel position). A patch spans rows exposed at
+different times (rolling shutter), so ``|H|^2`` is averaged over three of its rows.
 
 See :mod:`gyrodeblur.calibrate` for how the criterion is searched.
 """
@@ -42,6 +42,7 @@ import scipy.fft as sfft
 from .calibration_patches import CalibrationPhoto
 from .capture import Capture
 from .orientation import Orientation, quat_conjugate, quat_multiply, quat_to_matrix
+from .psf import offsets_under_rotation
 
 __all__ = ["Corrections", "PatchSpectra", "whittle_profiled", "envelope_basis"]
 
@@ -194,7 +195,8 @@ class PatchSpectra:
         which dominates), so the patch is the blurred scene resampled
         by ``M``'s mean ``Mbar``, and its spectrum shows the kernel mapped by
         ``Mbar^-1``. Without that map the criterion took the stretch for a focal error (1.5 to
-        2.5 % on the benchmark's true captures, its sign following the shake)."""
+        3.2 % on 11 of the benchmark's 24 cases, the rest true, its sign following the
+        shake)."""
         n, m, h = self.n, _WARP_SAMPLES, _WARP_STEP
         out = np.empty((len(items), n, 2))
         s = (np.arange(n) + 0.5) / n
@@ -219,9 +221,10 @@ class PatchSpectra:
             R = self._rotations(theta, i, T, tau)
             cam = cap.camera.with_focal_scale(theta.focal)
             # p - x0_p(t) of the pixel and of its four neighbours (full-resolution px)
-            o = self._gather(cam, R[:, :n], x, y)
+            o = offsets_under_rotation(cam, R[:, :n], x, y)
             Rw = R[:, n:].reshape(B, 3, m, 3, 3)[:, [0, 0, 1, 2]]
-            ow = self._gather(cam, Rw, x[:, None] + [h, -h, 0, 0], y[:, None] + [0, 0, h, -h])
+            ow = offsets_under_rotation(cam, Rw, x[:, None] + [h, -h, 0, 0],
+                                        y[:, None] + [0, 0, h, -h])
             dx = (ow[:, 0] - ow[:, 1]).mean(1) / (2 * h)    # d offsets / dp, exposure mean
             dy = (ow[:, 2] - ow[:, 3]).mean(1) / (2 * h)
             Mbar = np.eye(2)[None] - np.stack([dx, dy], axis=-1)        # d x0_p / dp
@@ -241,14 +244,6 @@ class PatchSpectra:
         qref = quat_conjugate(O.quaternions(tref - taus))
         q = O.quaternions(T - taus[:, None])
         return quat_to_matrix(quat_multiply(qref[:, None, :], q))
-
-    @staticmethod
-    def _gather(cam, R: np.ndarray, x, y) -> np.ndarray:
-        """``p - K R K^-1 p`` ``(..., k, 2)`` for pixels ``p = (x, y)`` ``(...)`` and
-        rotations ``R`` ``(..., k, 3, 3)``."""
-        x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-        src = cam.project(np.einsum("...nij,...j->...ni", R, cam.rays(x, y)))
-        return np.stack([x, y], -1)[..., None, :] - src
 
     def otf(self, disp: np.ndarray) -> np.ndarray:
         """Complex OTF ``(B, P, P//2+1)`` of Gaussian-splatted traces (sum 1)."""
