@@ -62,6 +62,15 @@ them in order and decides what to keep (5) and what to report.
    across +-30 %, at the winner's mid-row time, focal length and bias: with the middle rows
    well timed, a readout 30-40 % off can hold a basin of its own (on the 36-case benchmark:
    offsets within 3 ms 27 -> 28/36, mean PSNR gap -3.29 -> -3.13 dB, 12 % more time).
+   When the best two mappings among the candidates are within
+   :data:`AXES_CONFIDENT_NATS` of each other, the coarse ranking is run again with the
+   bias moved by one prior sd either way on x and y (the eight such points, the fitted
+   envelope only, every other time shift, one mapping of each mirror-twin pair), and its
+   shortlist's candidates join the first ones (:func:`_widened_if_uncertain`): a bias a
+   few hundredths of a rad/s off can reshape a short blur enough to keep the right
+   mapping out of the first shortlist (on the 24-case benchmark, session 33: right mapping
+   22 -> 23/24, offsets within 3 ms 21 -> 22/24; the six photos that widened took
+   13.7-18.3 s, the others 7.2-10.3 s).
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
    rolling shutter separate the two. The winner's "mirror twin" starts from the same
@@ -138,7 +147,7 @@ import numpy as np
 
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
-from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS,
+from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, TWIN,
                               CalibrationFit, relative_ranking, shortlist, with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
@@ -396,6 +405,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     # 2. candidates at full working scale, the best refined further
     top = with_twin(short[:_CANDIDATES], rankings[0])
     results = sorted(fit.candidates(top, steps), key=lambda r: r[0])
+    if "bias" not in fix and len(cand) > 1:
+        results = _widened_if_uncertain(fit, cand, steps, results, bias_prior, say_)
     noise = _gyro_noise_level(captures)
     mapping_margin = _keep_margin(noise) * _KEEP_MAPPING_NATS / _KEEP_MARGIN
     best, chosen = results[0], standing_candidate(results, c0.axes, mapping_margin)
@@ -503,6 +514,52 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                  f"evaluations, {secs:.1f} s")
     return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes, rivals,
                              blur_gain)
+
+
+def _widened_if_uncertain(fit, cand, steps, results, bias_prior, say) -> list:
+    """``results`` (candidate rows ``(objective, x, M, alts)``, best first), and when the
+    best two mappings among them are within :data:`AXES_CONFIDENT_NATS` of each other, the
+    candidates of a second coarse ranking with the bias moved (:func:`_bias_steps`) added.
+
+    The coarse ranking is made at the given bias (the prior's), and a bias that is off by a
+    few hundredths of a rad/s changes a short blur's shape enough to push the right mapping
+    out of the shortlist: on the calibration benchmark's lai_manmade_02_w0 (7 px of blur,
+    the given bias 0.045 rad/s off along y) a wrong mapping then won by 8 nats, while from
+    the truth's basin the right one wins by 16. The second ranking runs on the fitted
+    envelope only, every other time shift, and on one mapping of each mirror-twin pair
+    (their spectra are nearly equal); its best five and the first one's twin are refined
+    like the first candidates, and all compete."""
+    gap = _gap_to_other_mappings(results, results[0][2], results[0][0])
+    if not (np.isfinite(gap) and gap < AXES_CONFIDENT_NATS):
+        return results
+    say(f"  the best mappings are within {gap:.1f} of each other: the coarse ranking again "
+        f"with the bias moved by one prior sd")
+    wide = fit.coarse_rankings(_one_of_each_twin_pair(cand), steps,
+                               bias_steps=_bias_steps(bias_prior, results[0][2]),
+                               envelopes=(True,), stride=2)
+    more = shortlist(wide)[:_CANDIDATES]
+    r = more[0]                 # and its mirror twin, the bias step mirrored as well
+    more.append(r[:4] + (TWIN @ r[4], r[5], None if r[6] is None else TWIN @ r[6]))
+    return sorted(results + fit.candidates(more, steps), key=lambda r: r[0])
+
+
+def _one_of_each_twin_pair(cand: list) -> list:
+    """The mappings of ``cand`` less the mirror twin (``TWIN @ M``) of any before it."""
+    out = []
+    for M in cand:
+        if not any(np.allclose(TWIN @ M, N) for N in out):
+            out.append(M)
+    return out
+
+
+def _bias_steps(bias_prior, M) -> list:
+    """The bias steps (rad/s, camera frame) of the widened coarse ranking: the eight
+    points one prior sd (under mapping ``M``) either way or none on each of the x and y
+    axes, bar none on both. Pitch and yaw bias change a PSF's length and direction; a
+    roll bias hardly shows at the coarse scale."""
+    sd = bias_prior.for_mapping(M)[1]
+    return [np.array([i * sd[0], j * sd[1], 0.0])
+            for i in (-1, 0, 1) for j in (-1, 0, 1) if i or j]
 
 
 def _gains_per_photo(spectra, theta, n_photos: int) -> np.ndarray:

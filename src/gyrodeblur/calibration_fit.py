@@ -182,11 +182,14 @@ class CalibrationFit:
             return None
         return lambda v: reg.residuals(self.search.theta_of(v, M, self.ubar))
 
-    def start_vec(self, tau0, kap, M, fo=1.0):
+    def start_vec(self, tau0, kap, M, fo=1.0, bias_step=None):
         """A start from a line fit (time shift ``tau0`` at the middle row, readout error
-        ``kap``), focal scale ``fo`` and the prior's bias."""
+        ``kap``), focal scale ``fo`` and the prior's bias (moved by ``bias_step``, rad/s,
+        camera frame, when given)."""
         x = np.zeros(6)
         x[3:6] = self.bias_prior.for_mapping(M)[0]
+        if bias_step is not None:
+            x[3:6] += bias_step
         x[1] = kap
         x[0] = 0.0 if "offset" in self.fix else tau0 + kap * (0.5 - self.ubar)
         x[2] = np.log(fo)
@@ -206,37 +209,51 @@ class CalibrationFit:
                          self.extra_for(M)), x0
 
     # -- steps --------------------------------------------------------------------------
-    def coarse_rankings(self, cand, steps) -> list[list]:
-        """Per coarse criterion (flat, then fitted envelope), the mappings' rows
-        ``(score, time shift, readout error, 1.0, M, others)`` (see :meth:`coarse_row`),
-        best first (the rows computed by
-        ``steps``, a :class:`gyrodeblur.calibration_workers.StepRunner`)."""
-        rows = steps.map("coarse_row", [(envelope, M) for envelope in (False, True) for M in cand])
+    def coarse_rankings(self, cand, steps, bias_steps=(None,), envelopes=(False, True),
+                        stride: int = 1) -> list[list]:
+        """Per coarse criterion (flat, then fitted envelope; or those of ``envelopes``), the
+        mappings' rows ``(score, time shift, readout error, 1.0, M, others, bias step)``
+        (see :meth:`coarse_row`), best first (the rows computed by ``steps``, a
+        :class:`gyrodeblur.calibration_workers.StepRunner`). With several ``bias_steps``
+        (rad/s, camera frame, each added to the prior's bias; ``None``: none) each
+        mapping's row is its best over them; ``stride`` > 1 takes every stride-th time
+        shift of the coarse grid."""
+        jobs = [(envelope, M, b, stride) for envelope in envelopes for M in cand
+                for b in bias_steps]
+        rows = steps.map("coarse_row", jobs)
+        per = len(cand) * len(bias_steps)
         rankings = []
-        for k, envelope in enumerate((False, True)):
-            scored = sorted(rows[k * len(cand):(k + 1) * len(cand)], key=lambda r: r[0])
+        for k, envelope in enumerate(envelopes):
+            mine = rows[k * per:(k + 1) * per]
+            best = [min(mine[j:j + len(bias_steps)], key=lambda r: r[0])
+                    for j in range(0, per, len(bias_steps))]
+            scored = sorted(best, key=lambda r: r[0])
             rankings.append(scored)
             ranking = relative_ranking(scored)
             self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
                      + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
         return rankings
 
-    def coarse_row(self, envelope: bool, M) -> tuple:
+    def coarse_row(self, envelope: bool, M, bias_step=None, stride: int = 1) -> tuple:
         """Mapping ``M``'s row of a coarse ranking (per-patch envelopes fitted to each
-        evaluation or flat): the per-patch costs over the time shifts combined along the
-        readout line, ``(score, time shift, readout error, 1.0, M, others)``. ``others``:
-        over a wide offset range (:data:`WIDE_SPAN`), the ``(time shift, readout error)``
-        of up to :data:`WIDE_MINIMA` - 1 further distinct minima; else empty."""
+        evaluation or flat) at the prior's bias plus ``bias_step`` (rad/s, camera frame;
+        ``None``: none): the per-patch costs over the time shifts combined along the
+        readout line, ``(score, time shift, readout error, 1.0, M, others, bias_step)``.
+        ``others``: over a wide offset range (:data:`WIDE_SPAN`), the ``(time shift,
+        readout error)`` of up to :data:`WIDE_MINIMA` - 1 further distinct minima; else
+        empty."""
         self.coarse.envelope = envelope
-        C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.bias_prior.for_mapping(M)[0]),
-                              taus=self.taus)
-        tot, tau0, kap = line_fit(C, self.taus, self.uc, self.kappas)
+        bias = self.bias_prior.for_mapping(M)[0]
+        if bias_step is not None:
+            bias = bias + bias_step
+        taus = self.taus[::stride]
+        C = self.coarse.costs(self.theta0.copy(axes=M, bias=bias), taus=taus)
+        tot, tau0, kap = line_fit(C, taus, self.uc, self.kappas)
         others = ()
-        if self.taus[-1] - self.taus[0] > WIDE_SPAN:
-            minima = line_fit_minima(C, self.taus, self.uc, self.kappas, WIDE_MINIMA,
-                                     WIDE_APART)
+        if taus[-1] - taus[0] > WIDE_SPAN:
+            minima = line_fit_minima(C, taus, self.uc, self.kappas, WIDE_MINIMA, WIDE_APART)
             others = tuple((t, k) for _, t, k in minima if abs(t - tau0) > WIDE_APART)
-        return tot, tau0, kap, 1.0, M, others
+        return tot, tau0, kap, 1.0, M, others, bias_step
 
     def candidates(self, rows, steps) -> list:
         """The coarse ``rows`` (``(score, time shift, readout error, 1.0, M, others)``) at
@@ -247,7 +264,7 @@ class CalibrationFit:
         wait for each other. Per mapping, in the order of ``rows``: (objective, x, M, the
         other starts' results)."""
         # a mapping's coarse minimum, and over a wide range its further distinct ones
-        jobs = [(k, (t, kap, r[4])) for k, r in enumerate(rows)
+        jobs = [(k, (t, kap, r[4], r[6])) for k, r in enumerate(rows)
                 for t, kap in ((r[1], r[2]),) + r[5]]
         starts = [[] for _ in rows]
         for (k, _), xs in zip(jobs, steps.map("candidate_starts", [job for _, job in jobs])):
@@ -265,7 +282,7 @@ class CalibrationFit:
             out.append((fx, x, M, [a for a in alts if a is not x]))
         return out
 
-    def candidate_starts(self, tau0, kap, M) -> list:
+    def candidate_starts(self, tau0, kap, M, bias_step=None) -> list:
         """Mapping ``M``'s starts at the working scale: per-patch time shifts x focal grid
         with the envelopes held from the coarse start (``tau0``, ``kap``), combined along
         the readout line; the best few that differ in time shift (at the pivot row) or
@@ -279,11 +296,11 @@ class CalibrationFit:
             tm = tm[(tm >= search.tau_lo - 1e-9) & (tm <= search.tau_hi + 1e-9)]
             if tm.size == 0:
                 tm = np.array([float(np.clip(tau0, search.tau_lo, search.tau_hi))])
-        self.fine.set_envelope(search.theta_of(self.start_vec(tau0, kap, M), M, self.ubar))
+        x_start = self.start_vec(tau0, kap, M, bias_step=bias_step)
+        self.fine.set_envelope(search.theta_of(x_start, M, self.ubar))
         starts = []
         for fo in self.fgrid:
-            C = self.fine.costs(self.theta0.copy(axes=M, focal=fo,
-                                                 bias=self.bias_prior.for_mapping(M)[0]),
+            C = self.fine.costs(self.theta0.copy(axes=M, focal=fo, bias=x_start[3:6]),
                                 taus=tm, rows=(0.0,))
             for kp in self.kappas:
                 tot, t0, k1 = line_fit(C, tm, self.uc, [kp])
@@ -296,7 +313,7 @@ class CalibrationFit:
             if all(abs((r[1] - c[1]) + (r[2] - c[2]) * (0.5 - self.ubar)) > _DISTINCT_SHIFT
                    or abs(r[2] - c[2]) > _DISTINCT_READOUT for c in chosen):
                 chosen.append(r)
-        return [self.start_vec(c[1], c[2], M, c[3]) for c in chosen]
+        return [self.start_vec(c[1], c[2], M, c[3], bias_step) for c in chosen]
 
     def refine_winner(self, M, x, alts, steps):
         """The winning mapping's refinement from its best start, its other starts, the
