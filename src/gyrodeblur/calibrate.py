@@ -70,7 +70,11 @@ them in order and decides what to keep (5) and what to report.
    few hundredths of a rad/s off can reshape a short blur enough to keep the right
    mapping out of the first shortlist (on the 24-case benchmark, session 33: right mapping
    22 -> 23/24, offsets within 3 ms 21 -> 22/24; the six photos that widened took
-   13.7-18.3 s, the others 7.2-10.3 s).
+   13.7-18.3 s, the others 7.2-10.3 s). A mapping that only this second ranking found
+   (neither the first candidates' best nor its twin) stands on a bias a prior sd or more
+   from the given one, and is reported as uncertain as the first candidates were close
+   (on the benchmark the one wrong mapping left, on a fence of vertical bars, won that
+   way by 16 nats).
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
    rolling shutter separate the two. The winner's "mirror twin" starts from the same
@@ -176,7 +180,9 @@ class CalibrationResult:
     estimates : dict
         ``name -> (before, after, uncertainty)`` for ``offset`` (s), ``readout`` (s),
         ``focal`` (scale), ``bias`` (rad/s, 3-vector), ``axes`` (letters; "uncertainty" =
-        the objective gap to the best other candidate mapping, tempered nats). Fixed
+        the objective gap to the best other candidate mapping, tempered nats; for a
+        mapping that only the widened coarse ranking found, at most the gap between the
+        first candidates, see :func:`_widened_if_uncertain`). Fixed
         parameters have ``before == after`` and uncertainty ``None``; the others a
         one-sigma figure.
     ranking : list of (letters, cost)
@@ -405,8 +411,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     # 2. candidates at full working scale, the best refined further
     top = with_twin(short[:_CANDIDATES], rankings[0])
     results = sorted(fit.candidates(top, steps), key=lambda r: r[0])
+    first_best, gap_first = results[0][2], None
     if "bias" not in fix and len(cand) > 1:
-        results = _widened_if_uncertain(fit, cand, steps, results, bias_prior, say_)
+        results, gap_first = _widened_if_uncertain(fit, cand, steps, results, bias_prior, say_)
     noise = _gyro_noise_level(captures)
     mapping_margin = _keep_margin(noise) * _KEEP_MAPPING_NATS / _KEEP_MARGIN
     best, chosen = results[0], standing_candidate(results, c0.axes, mapping_margin)
@@ -466,15 +473,28 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             x, fx, Fm, sc = twin
         note(msg, "  ")
 
+    # a mapping that only the widened ranking found stands on a bias far from the given
+    # one: it is as uncertain as the first candidates were close
+    wide_only = gap_first is not None and not kept and not (
+        np.allclose(M, first_best) or np.allclose(M, TWIN @ first_best))
+    if wide_only and not gap <= gap_first:
+        gap = gap_first
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         rival = _best_other_mapping(results, M)
         runner = None if rival is None else rival[2]
-        note(f"warning: the axis mapping is uncertain: the next best"
-             f"{' (' + (axes_to_letters(runner) or 'given') + ')' if runner is not None else ''}"
-             + (f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g})" if gap >= 0 else
-                f" scores {-gap:.1f} better, by less than the margin kept for the given one")
-             + "; the blur says little about its direction. Give the mapping (--orientation)"
-             " if it is known, or calibrate on several photos of the session", "  ")
+        if wide_only:
+            why = (f" {axes_to_letters(M) or 'the mapping found'} won only once the search "
+                   f"moved the bias by a prior sd (at the given bias the best mappings were "
+                   f"within {gap_first:.1f} of each other)")
+        else:
+            why = (" the next best"
+                   + (f" ({axes_to_letters(runner) or 'given'})" if runner is not None else "")
+                   + (f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g})" if gap >= 0
+                      else f" scores {-gap:.1f} better, by less than the margin kept for the "
+                           "given one"))
+        note("warning: the axis mapping is uncertain:" + why + "; the blur says little about "
+             "its direction. Give the mapping (--orientation) if it is known, or calibrate on "
+             "several photos of the session", "  ")
 
     theta = search.theta_of(x, M, fit.ubar)
     unc = _uncertainties(x, fit.idx, Fm, sc, fit.ubar)
@@ -516,10 +536,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                              blur_gain)
 
 
-def _widened_if_uncertain(fit, cand, steps, results, bias_prior, say) -> list:
+def _widened_if_uncertain(fit, cand, steps, results, bias_prior, say) -> tuple[list, float | None]:
     """``results`` (candidate rows ``(objective, x, M, alts)``, best first), and when the
     best two mappings among them are within :data:`AXES_CONFIDENT_NATS` of each other, the
-    candidates of a second coarse ranking with the bias moved (:func:`_bias_steps`) added.
+    candidates of a second coarse ranking with the bias moved (:func:`_bias_steps`) added;
+    and that gap (``None`` when nothing was added).
 
     The coarse ranking is made at the given bias (the prior's), and a bias that is off by a
     few hundredths of a rad/s changes a short blur's shape enough to push the right mapping
@@ -531,7 +552,7 @@ def _widened_if_uncertain(fit, cand, steps, results, bias_prior, say) -> list:
     like the first candidates, and all compete."""
     gap = _gap_to_other_mappings(results, results[0][2], results[0][0])
     if not (np.isfinite(gap) and gap < AXES_CONFIDENT_NATS):
-        return results
+        return results, None
     say(f"  the best mappings are within {gap:.1f} of each other: the coarse ranking again "
         f"with the bias moved by one prior sd")
     wide = fit.coarse_rankings(_one_of_each_twin_pair(cand), steps,
@@ -540,7 +561,7 @@ def _widened_if_uncertain(fit, cand, steps, results, bias_prior, say) -> list:
     more = shortlist(wide)[:_CANDIDATES]
     r = more[0]                 # and its mirror twin, the bias step mirrored as well
     more.append(r[:4] + (TWIN @ r[4], r[5], None if r[6] is None else TWIN @ r[6]))
-    return sorted(results + fit.candidates(more, steps), key=lambda r: r[0])
+    return sorted(results + fit.candidates(more, steps), key=lambda r: r[0]), gap
 
 
 def _one_of_each_twin_pair(cand: list) -> list:
