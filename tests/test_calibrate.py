@@ -834,8 +834,8 @@ def test_the_widened_ranking_takes_each_mappings_best_bias_step(case):
     fit = CalibrationFit(photos, SearchSpace(photos, set(), 0.04), set(), prior, 9, 1,
                          lambda msg: None)
     steps = _bias_steps(prior, true.axes)
-    assert len(steps) == 8 and all(abs(abs(s[0]) + abs(s[1]) - 0.05) < 1e-12 or
-                                   abs(abs(s[0]) + abs(s[1]) - 0.1) < 1e-12 for s in steps)
+    want = {(0.05 * i, 0.05 * j, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1) if i or j}
+    assert len(steps) == 8 and {tuple(np.round(s, 12)) for s in steps} == want
     (row,), = fit.coarse_rankings([true.axes], StepRunner(fit, 1), bias_steps=steps,
                                   envelopes=(True,), stride=2)
     np.testing.assert_allclose(row[6], [-0.05, 0.0, 0.0])

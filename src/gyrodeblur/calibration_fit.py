@@ -256,9 +256,10 @@ class CalibrationFit:
         return tot, tau0, kap, 1.0, M, others, bias_step
 
     def candidates(self, rows, steps) -> list:
-        """The coarse ``rows`` (``(score, time shift, readout error, 1.0, M, others)``) at
-        the working scale: each mapping's starts (:meth:`candidate_starts`, from its coarse
-        minimum and from ``others``, its further minima over a wide range), then from all of
+        """The coarse ``rows`` (``(score, time shift, readout error, 1.0, M, others, bias
+        step)``) at the working scale: each mapping's starts (:meth:`candidate_starts`, from
+        its coarse minimum and from ``others``, its further minima over a wide range, at the
+        prior's bias moved by its bias step), then from all of
         them Levenberg-Marquardt, 4 iterations, in one batch of ``steps`` (a
         :class:`gyrodeblur.calibration_workers.StepRunner`), so that no mapping's starts
         wait for each other. Per mapping, in the order of ``rows``: (objective, x, M, the
