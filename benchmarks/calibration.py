@@ -209,6 +209,7 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         "aligned_psnr_calibrated": a_cal, "aligned_gap_db": a_cal - p_true,
         "stated_sd": stated_sd(res.estimates),
         "blur_gain": res.blur_gain,
+        "prior_distance": res.prior_distance,
         "seconds": secs,
         "estimates": format_estimates(res.estimates),
         "notes": res.notes,
@@ -471,6 +472,7 @@ def summarise(all_rows: list[dict]) -> dict:
         "bias_abs_error_median": float(np.median(np.abs([r["bias_error"] for r in rows]))),
         "uncertainty_coverage": coverage(rows),
         "offset_ambiguity": ambiguity(rows),
+        "mapping_warnings": mapping_warnings(rows),
         **({key: per_parameter(rows, key) for key in ("gap_if_known_db", "gap_if_only_db")}
            if all("gap_if_known_db" in r for r in rows) else {}),
     }
@@ -499,6 +501,17 @@ def ambiguity(rows: list[dict]) -> dict:
     return {"flagged": int(sum(flag)), "misses": int(sum(miss)),
             "misses_flagged": int(sum(m and f for m, f in zip(miss, flag))),
             "rival_within_3ms": int(sum(near))}
+
+
+def mapping_warnings(rows: list[dict]) -> dict:
+    """How well the warnings that question a mapping (uncertain, or estimates far from the
+    given values for the priors) separate the wrong mappings: photos warned, wrong
+    mappings, and wrong mappings warned."""
+    warned = [any("axis mapping is uncertain" in n or "lie far from the given values" in n
+                  for n in r.get("notes", ())) for r in rows]
+    wrong = [not r["axes_correct"] for r in rows]
+    return {"warned": int(sum(warned)), "wrong": int(sum(wrong)),
+            "wrong_warned": int(sum(w and f for w, f in zip(wrong, warned)))}
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -675,6 +688,11 @@ def report(s: dict, say) -> None:
         say(f"offset ambiguity warnings: {amb['flagged']} photo(s), {amb['misses_flagged']} of "
             f"the {amb['misses']} offset miss(es) among them; a reported rival within 3 ms of "
             f"the truth in {amb['rival_within_3ms']}")
+    mw = s.get("mapping_warnings")
+    if mw:
+        say(f"mapping warnings (uncertain, or estimates far from the given values): "
+            f"{mw['warned']} photo(s), {mw['wrong_warned']} of the {mw['wrong']} wrong "
+            f"mapping(s) among them")
     for key, what in (("gap_if_known_db", "with one parameter known (set right and fixed, "
                                           "the rest calibrated)"),
                       ("gap_if_only_db", "with only one parameter estimated (the rest right "

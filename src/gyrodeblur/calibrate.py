@@ -63,20 +63,21 @@ them in order and decides what to keep (5) and what to report.
    well timed, a readout 30-40 % off can hold a basin of its own (on the 36-case benchmark:
    offsets within 3 ms 27 -> 28/36, mean PSNR gap -3.29 -> -3.13 dB, 12 % more time).
    Before the winner is chosen, the coarse ranking is run again with the bias moved by
-   one prior sd either way on x and y (the eight such points, the fitted envelope only, every other time shift,
-   one mapping of each mirror-twin pair; :func:`_with_bias_widened`): a bias a few
-   hundredths of a rad/s off can reshape a short blur enough to keep the right mapping
-   out of the first shortlist. When the best two mappings among the first candidates are
-   within :data:`AXES_CONFIDENT_NATS` of each other, its best five join them (on the
-   24-case benchmark, session 33: right mapping 22 -> 23/24, offsets within 3 ms 21 ->
-   22/24); else only mappings not refined yet that score better with the bias moved
-   than any mapping did at the given bias (session 34: on a smoother synthetic hand shake
-   a wrong mapping had won by 37 nats, the right one ranking 4th at the given bias, 0.043
-   rad/s off, and first by far with it moved). The second ranking costs about 1-2 s. A
-   mapping that only it found (neither the first candidates' best nor its twin) stands
-   on a bias a prior sd or more from the given one, and is reported as uncertain as the
-   first candidates were close (on the benchmark the one wrong mapping left, on a fence
-   of vertical bars, won that way by 16 nats).
+   one prior sd either way on x and y (the eight such points, the fitted envelope only,
+   every other time shift, one mapping of each mirror-twin pair;
+   :func:`_with_bias_widened`): a bias a few hundredths of a rad/s off can reshape a
+   short blur enough to keep the right mapping out of the first shortlist. When the best
+   two mappings among the first candidates are within :data:`AXES_CONFIDENT_NATS` of each
+   other, its best five join them (on the 24-case benchmark, session 33: right mapping
+   22 -> 23/24, offsets within 3 ms 21 -> 22/24); else only mappings not refined yet
+   that score better with the bias moved than any mapping did at the given bias
+   (session 34: on a smoother synthetic hand shake a wrong mapping had won by 37 nats,
+   the right one ranking 4th at the given bias, 0.043 rad/s off, and first by far with
+   it moved). The second ranking costs about 1-2 s. A mapping that only it found
+   (neither the first candidates' best nor its twin) stands on a bias a prior sd or more
+   from the given one, and is reported as uncertain as the first candidates were close
+   (on the benchmark the one wrong mapping left, on a fence of vertical bars, won that
+   way by 16 nats).
 3. ``|H|`` cannot tell a PSF from its point reflection, and negating the camera's x and y
    rates (a proper rotation too) nearly reflects every PSF: only roll, perspective and the
    rolling shutter separate the two. The winner's "mirror twin" starts from the same
@@ -563,7 +564,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                              blur_gain, far)
 
 
-def _with_bias_widened(fit, cand, steps, results, bar, bias_prior, say) -> tuple[list, float | None]:
+def _with_bias_widened(fit, cand, steps, results, bar, bias_prior,
+                       say) -> tuple[list, float | None]:
     """``results`` (candidate rows ``(objective, x, M, alts)``, best first) and the
     candidates of a second coarse ranking with the bias moved (:func:`_bias_steps`); and
     the first candidates' gap between their best two mappings (``None`` when nothing was
@@ -599,13 +601,13 @@ def _with_bias_widened(fit, cand, steps, results, bar, bias_prior, say) -> tuple
         more = [r for r in wide if r[0] < bar and is_new(r[4])][:_CANDIDATES]
     if not more:
         return results, None
-    r = more[0]                 # and its mirror twin, the bias step mirrored as well
-    if not any(np.allclose(TWIN @ r[4], q[4]) for q in more):
-        more.append(r[:4] + (TWIN @ r[4], r[5], None if r[6] is None else TWIN @ r[6]))
     say("  " + (f"the best mappings are within {gap:.1f} of each other" if close else
                 f"{', '.join(axes_to_letters(q[4]) or 'given' for q in more)} score better "
                 f"with the bias moved than any mapping at the given one")
         + ": candidates from the coarse ranking with the bias moved by one prior sd")
+    r = more[0]                 # and its mirror twin, the bias step mirrored as well
+    if not any(np.allclose(TWIN @ r[4], q[4]) for q in more):
+        more.append(r[:4] + (TWIN @ r[4], r[5], None if r[6] is None else TWIN @ r[6]))
     return sorted(results + fit.candidates(more, steps), key=lambda r: r[0]), gap
 
 
