@@ -793,6 +793,17 @@ def test_a_log_that_pans_throughout_is_not_read_as_a_bias(case):
     assert np.all(np.abs(res.capture.bias) < 0.03)
 
 
+def _with_errors(true: Capture, offset: float, readout: float, focal: float, bias,
+                 axes: str) -> Capture:
+    """``true`` as the calibration benchmark corrupts it: the time offset moved by
+    ``offset`` (s), the readout time and focal length scaled by ``readout`` and ``focal``,
+    ``bias`` (rad/s, the log's axes) added, the axis mapping replaced by ``axes``."""
+    return true.replace(time_offset=true.time_offset + offset,
+                        readout_time=true.readout_time * readout,
+                        camera=true.camera.with_focal_scale(focal),
+                        bias=np.asarray(true.bias) + bias, axes=parse_axes(axes))
+
+
 def test_a_mapping_that_the_given_bias_hides_is_found_by_a_widened_ranking(shared_data):
     """A benchmark photo (lai_manmade_02, its first shake window: 7 px of blur) given the
     calibration benchmark's errors for it, among them a bias 0.045 rad/s off along y. At
@@ -807,11 +818,7 @@ def test_a_mapping_that_the_given_bias_hides_is_found_by_a_widened_ranking(share
                        shared_data / "gyro" / "handheld_phone_210hz.csv",
                        windows_per_photo=2)[0]
     true = case.capture
-    given = true.replace(time_offset=true.time_offset - 0.0198,
-                         readout_time=true.readout_time * 1.169,
-                         camera=true.camera.with_focal_scale(0.926),
-                         bias=np.asarray(true.bias) + [-0.013, -0.045, 0.044],
-                         axes=parse_axes("YZX"))
+    given = _with_errors(true, -0.0198, 1.169, 0.926, [-0.013, -0.045, 0.044], "YZX")
     lines = []
     res = calibrate([case.blurred], given, say=lines.append)
     assert axes_to_letters(res.capture.axes) == axes_to_letters(true.axes), res.notes
@@ -829,7 +836,7 @@ def test_a_confident_wrong_mapping_gives_way_to_one_the_moved_bias_ranks_first(s
     tremor bands, median rate 0.35 rad/s) on lai_manmade_02 (its second window: 11 px of
     blur), given a bias 0.043 rad/s off along the log's y and the other errors the
     calibration benchmark drew for it. At that bias the right mapping ranks 4th of 24 by
-    the fitted envelope and 6th or lower by the flat one, so it is never refined, and a
+    the fitted envelope and below the 6th by the flat one, so it is never refined, and a
     wrong one (``zYX``) wins by 37 nats over the next: confidently enough that the first
     widening (candidates within 8 nats) never runs. With the bias moved by a prior sd the
     right mapping ranks first, better than any mapping at the given bias, and wins."""
@@ -841,11 +848,7 @@ def test_a_confident_wrong_mapping_gives_way_to_one_the_moved_bias_ranks_first(s
     case = build_cases([shared_data / "photos" / "lai_manmade_02.png"], log,
                        windows_per_photo=2)[1]
     true = case.capture
-    given = true.replace(time_offset=true.time_offset + 0.0274,
-                         readout_time=true.readout_time * 0.986,
-                         camera=true.camera.with_focal_scale(1.043),
-                         bias=np.asarray(true.bias) + [0.018, -0.043, 0.009],
-                         axes=parse_axes("ZXY"))
+    given = _with_errors(true, 0.0274, 0.986, 1.043, [0.018, -0.043, 0.009], "ZXY")
     lines = []
     res = calibrate([case.blurred], given, say=lines.append)
     assert axes_to_letters(res.capture.axes) == axes_to_letters(true.axes), res.notes
@@ -870,11 +873,7 @@ def test_estimates_pushed_far_from_the_given_values_are_flagged(shared_data):
                        shared_data / "gyro" / "handheld_phone_210hz.csv",
                        windows_per_photo=2)[0]
     true = case.capture
-    given = true.replace(time_offset=true.time_offset - 0.0251,
-                         readout_time=true.readout_time * 1.133,
-                         camera=true.camera.with_focal_scale(0.944),
-                         bias=np.asarray(true.bias) + [-0.024, 0.036, 0.009],
-                         axes=parse_axes("xzy"))
+    given = _with_errors(true, -0.0251, 1.133, 0.944, [-0.024, 0.036, 0.009], "xzy")
     res = calibrate([case.blurred], given)
     flagged = any("lie far from the given values" in n for n in res.notes)
     assert flagged == (res.prior_distance > chi2.ppf(0.95, 5))
