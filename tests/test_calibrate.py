@@ -853,7 +853,7 @@ def test_a_confident_wrong_mapping_gives_way_to_one_the_moved_bias_ranks_first(s
     res = calibrate([case.blurred], given, say=lines.append)
     assert axes_to_letters(res.capture.axes) == axes_to_letters(true.axes), res.notes
     assert abs(res.capture.time_offset - true.time_offset) < 0.003
-    assert any("score better with the bias moved than any mapping at the given one" in line
+    assert any("better with the bias moved than any mapping at the given one" in line
                for line in lines), lines
     assert res.estimates["axes"][2] >= 8.0          # won by a wide margin: not flagged
     assert res.prior_distance < 5 and not any("lie far" in n for n in res.notes)

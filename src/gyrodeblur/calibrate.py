@@ -602,8 +602,9 @@ def _with_bias_widened(fit, cand, steps, results, bar, bias_prior,
     if not more:
         return results, None
     say("  " + (f"the best mappings are within {gap:.1f} of each other" if close else
-                f"{', '.join(axes_to_letters(q[4]) or 'given' for q in more)} score better "
-                f"with the bias moved than any mapping at the given one")
+                f"{', '.join(axes_to_letters(q[4]) or 'given' for q in more)} "
+                f"score{'s' if len(more) == 1 else ''} better with the bias moved than any "
+                f"mapping at the given one")
         + ": candidates from the coarse ranking with the bias moved by one prior sd")
     r = more[0]                 # and its mirror twin, the bias step mirrored as well
     if not any(np.allclose(TWIN @ r[4], q[4]) for q in more):
