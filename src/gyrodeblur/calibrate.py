@@ -156,7 +156,8 @@ from scipy.stats import chi2
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
 from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, TWIN,
-                              CalibrationFit, relative_ranking, shortlist, with_twin)
+                              CalibrationFit, in_twin_pair, relative_ranking, shortlist,
+                              with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .calibration_workers import StepRunner, available_workers
@@ -494,8 +495,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
 
     # a mapping that only the widened ranking found stands on a bias far from the given
     # one: it is as uncertain as the first candidates were close
-    wide_only = gap_first is not None and not kept and not (
-        np.allclose(M, first_best) or np.allclose(M, TWIN @ first_best))
+    wide_only = gap_first is not None and not kept and not in_twin_pair(first_best, M)
     if wide_only and not gap <= gap_first:
         gap = gap_first
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
@@ -590,15 +590,11 @@ def _with_bias_widened(fit, cand, steps, results, bar, bias_prior,
     wide = shortlist(fit.coarse_rankings(_one_of_each_twin_pair(cand), steps,
                                          bias_steps=_bias_steps(bias_prior, results[0][2]),
                                          envelopes=(True,), stride=2))
-    tried = [r[2] for r in results]
-
-    def is_new(M) -> bool:
-        return not any(np.allclose(M, N) or np.allclose(TWIN @ M, N) for N in tried)
-
     if close:
         more = wide[:_CANDIDATES]
     else:
-        more = [r for r in wide if r[0] < bar and is_new(r[4])][:_CANDIDATES]
+        more = [r for r in wide if r[0] < bar
+                and not any(in_twin_pair(r[4], q[2]) for q in results)][:_CANDIDATES]
     if not more:
         return results, None
     say("  " + (f"the best mappings are within {gap:.1f} of each other" if close else
@@ -616,7 +612,7 @@ def _one_of_each_twin_pair(cand: list) -> list:
     """The mappings of ``cand`` less the mirror twin (``TWIN @ M``) of any before it."""
     out = []
     for M in cand:
-        if not any(np.allclose(TWIN @ M, N) for N in out):
+        if not any(in_twin_pair(M, N) for N in out):
             out.append(M)
     return out
 

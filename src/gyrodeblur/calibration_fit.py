@@ -182,14 +182,18 @@ class CalibrationFit:
             return None
         return lambda v: reg.residuals(self.search.theta_of(v, M, self.ubar))
 
+    def moved_bias(self, M, bias_step=None) -> np.ndarray:
+        """The prior's bias under mapping ``M`` (rad/s, camera frame), moved by
+        ``bias_step`` when given."""
+        bias = self.bias_prior.for_mapping(M)[0]
+        return bias if bias_step is None else bias + bias_step
+
     def start_vec(self, tau0, kap, M, fo=1.0, bias_step=None):
         """A start from a line fit (time shift ``tau0`` at the middle row, readout error
         ``kap``), focal scale ``fo`` and the prior's bias (moved by ``bias_step``, rad/s,
         camera frame, when given)."""
         x = np.zeros(6)
-        x[3:6] = self.bias_prior.for_mapping(M)[0]
-        if bias_step is not None:
-            x[3:6] += bias_step
+        x[3:6] = self.moved_bias(M, bias_step)
         x[1] = kap
         x[0] = 0.0 if "offset" in self.fix else tau0 + kap * (0.5 - self.ubar)
         x[2] = np.log(fo)
@@ -243,11 +247,9 @@ class CalibrationFit:
         readout error)`` of up to :data:`WIDE_MINIMA` - 1 further distinct minima; else
         empty."""
         self.coarse.envelope = envelope
-        bias = self.bias_prior.for_mapping(M)[0]
-        if bias_step is not None:
-            bias = bias + bias_step
         taus = self.taus[::stride]
-        C = self.coarse.costs(self.theta0.copy(axes=M, bias=bias), taus=taus)
+        C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.moved_bias(M, bias_step)),
+                              taus=taus)
         tot, tau0, kap = line_fit(C, taus, self.uc, self.kappas)
         others = ()
         if taus[-1] - taus[0] > WIDE_SPAN:
@@ -435,6 +437,11 @@ class CalibrationFit:
             msg += f": {axes_to_letters(Mt)} taken"
             M = Mt
         return M, twin, msg
+
+
+def in_twin_pair(M, N) -> bool:
+    """Whether mapping ``N`` is ``M`` or its mirror twin (``TWIN @ M``)."""
+    return bool(np.allclose(M, N) or np.allclose(TWIN @ M, N))
 
 
 def with_twin(top: list, everything: list) -> list:
