@@ -2,12 +2,23 @@
 
 The gyro measures the body's angular velocity ``w`` (rad/s, camera frame). The camera's
 orientation ``R(t)`` maps camera-frame vectors at time ``t`` to the reference frame (the
-camera at the reference time): ``dR/dt = R [w]_x``. We integrate with unit quaternions
-composed in the body frame, ``q_{k+1} = q_k (x) exp(phi_k / 2)`` with the rotation vector
-``phi_k = (w_k + w_{k+1}) / 2 * (t_{k+1} - t_k)`` (the mean rate over the interval: exact
-for a constant rate, second order otherwise). Between samples the orientation is the
-geodesic (slerp) ``q_k (x) exp(s phi_k / 2)``, ``s`` in [0, 1], so any time can be asked
-for. Eq. 6.17 of the chapter (summing angles per axis) is the small-angle limit of this.
+camera at the reference time): ``dR/dt = R [w]_x``. Between samples the rate is a cubic
+Hermite curve through them, its slopes the central differences of the neighbouring samples
+(Catmull-Rom: local, so a sample moves the curve only in the two intervals either side,
+and two samples close in time cannot make it swing); within interval ``k`` the
+orientation is ``q_k (x) exp(phi_k(t) / 2)``, ``phi_k(t)`` the integral of that rate from
+``t_k`` (exact for a rate that stays along one axis; the neglected commutator term is of
+the order of the interval's rotation squared times its change of axis, under 1e-6 rad for
+a hand's shake at 50 Hz), and the intervals compose in the body frame,
+``q_{k+1} = q_k (x) exp(phi_k(t_{k+1}) / 2)``. Eq. 6.17 of the chapter (summing angles per
+axis) is the small-angle limit of this.
+
+A rate held constant over each interval (its two samples' mean, integrated by slerp) is
+the simpler choice and exact for a constant rate, as this one is; but a phone's hand shake
+has power up to 20-30 Hz, and logs are often taken at 50-100 Hz. On the shared hand-held
+log decimated from 210 Hz (scratch, session 35, eight 640 px benchmark photos), deblurring
+with the held-rate path lost 1.1 dB at 105 Hz and 5.6 dB at 52 Hz against the full log;
+the cubic rate lost 0.0 and 1.0 dB.
 """
 
 from __future__ import annotations
@@ -107,20 +118,53 @@ class Orientation:
             raise ValueError(f"t_ref must be a finite time in seconds, got {t_ref!r}")
         self.t = t
         self.t_ref = float(t_ref)
-        self._phi = 0.5 * (omega[1:] + omega[:-1]) * dt[:, None]      # (N-1, 3) rad
-        self._q = _compose(quat_from_rotvec(self._phi))
+        self.omega = omega
+        h = dt[:, None]
+        slope = np.empty_like(omega)                    # rad/s^2: central differences
+        if t.size > 2:
+            slope[1:-1] = (omega[2:] - omega[:-2]) / (t[2:] - t[:-2])[:, None]
+        slope[0] = (omega[1] - omega[0]) / dt[0]
+        slope[-1] = (omega[-1] - omega[-2]) / dt[-1]
+        # the rate on interval k in Hermite form: w_k, h m_k, w_k+1, h m_k+1 (rad/s)
+        self._hermite = np.stack([omega[:-1], h * slope[:-1], omega[1:], h * slope[1:]])
+        self._h = dt
+        self._q = _compose(quat_from_rotvec(self._rotvec(np.arange(t.size - 1), np.ones(t.size - 1))))
         q_ref = self._interp(np.array([self.t_ref]))[0]
         self._q_ref_inv = quat_conjugate(q_ref)
 
+    def _rotvec(self, k: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Rotation vector (rad) turned from ``t_k`` to ``t_k + s (t_k+1 - t_k)``, ``s`` in
+        [0, 1]: the integral of interval ``k``'s cubic Hermite rate."""
+        s2 = s * s
+        s3 = s2 * s
+        s4 = s3 * s
+        basis = np.stack([s - s3 + 0.5 * s4,                # integrals of the Hermite basis
+                          0.5 * s2 - 2.0 * s3 / 3.0 + 0.25 * s4,
+                          s3 - 0.5 * s4,
+                          0.25 * s4 - s3 / 3.0])
+        c = self._hermite[:, k]                          # (4, ..., 3)
+        return self._h[k][..., None] * np.einsum("j...,j...c->...c", basis, c)
+
     def _interp(self, times: np.ndarray) -> np.ndarray:
-        k = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, self.t.size - 2)
-        s = (times - self.t[k]) / (self.t[k + 1] - self.t[k])
-        return quat_multiply(self._q[k], quat_from_rotvec(self._phi[k] * s[..., None]))
+        n = self.t.size
+        k = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, n - 2)
+        s = np.clip((times - self.t[k]) / self._h[k], 0.0, 1.0)
+        q = quat_multiply(self._q[k], quat_from_rotvec(self._rotvec(k, s)))
+        # beyond the samples: the first (last) sample's rate, held
+        before = times < self.t[0]
+        after = times > self.t[-1]
+        if before.any() or after.any():
+            ext = np.where(before, times - self.t[0], np.where(after, times - self.t[-1], 0.0))
+            w = np.where(before[..., None], self.omega[0], self.omega[-1])
+            edge = np.where(before[..., None], self._q[0], self._q[-1])
+            q = np.where((before | after)[..., None],
+                         quat_multiply(edge, quat_from_rotvec(w * ext[..., None])), q)
+        return q
 
     def quaternions(self, times) -> np.ndarray:
         """Orientation relative to ``t_ref`` as unit quaternions ``(..., 4)`` (w, x, y, z).
 
-        Times outside the samples are extrapolated with the first/last interval's rate.
+        Times outside the samples are extrapolated with the first (last) sample's rate.
         """
         times = np.asarray(times, dtype=np.float64)
         return quat_multiply(self._q_ref_inv, self._interp(times))
