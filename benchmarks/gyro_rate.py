@@ -18,7 +18,7 @@ sRGB, 5 % border). Decimation aliases what the shake holds above the new Nyquist
 
 Usage::
 
-    python benchmarks/gyro_rate.py            # 12 cases, 640 px, factors 2 and 4
+    python benchmarks/gyro_rate.py            # 12 cases, 640 px, factors 2 and 4 (2 min)
     python benchmarks/gyro_rate.py --quick    # 3 cases, 320 px
 
 Writes ``benchmarks/results/gyro_rate.json``.
