@@ -75,10 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for case in cases:
         cap = case.capture
-        rate = (cap.log.t.size - 1) / (cap.log.t[-1] - cap.log.t[0])
         border = default_border(case.sharp.shape)
-        row = {"case": case.name, "blur_px": case.meta.get("blur_px"), "rate_hz": rate,
-               "psnr": {}}
+        row = {"case": case.name, "blur_px": case.meta.get("blur_px"),
+               "rate_hz": (cap.log.t.size - 1) / (cap.log.t[-1] - cap.log.t[0]), "psnr": {}}
         for name, factor, how in variants:
             c = cap if factor == 1 else cap.replace(log=decimated(cap.log, factor, how))
             with _common.quiet():
@@ -86,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
         say(f"  {case.name:22s} {row['blur_px']:>4} px  " + "  ".join(
             f"{n} {v:5.2f}" for n, v in row["psnr"].items()))
-    rate = float(np.median([r["rate_hz"] for r in rows]))
+    rate = float(np.median([r["rate_hz"] for r in rows]))       # Hz, the full logs'
     summary = {}
     for name, factor, how in variants:
         vals = np.array([r["psnr"][name] for r in rows])
