@@ -247,13 +247,20 @@ def test_a_wrong_mirror_twin_gives_way_to_the_right_mapping(case):
                          BiasPrior(np.zeros(3)), 9, 2, lambda msg: None)
     M = true.axes
     x, f = fit.refine(M, np.zeros(6), 10)[:2]
-    kept, twin, note = fit.mirror_twin(M, x, f, [true.bias])
+    kept, twin, note, tie = fit.mirror_twin(M, x, f, [true.bias])
     assert twin is None and np.array_equal(kept, M), note
+    assert tie is None, note                        # a clear decision: no warning
     Mt = TWIN @ M
     xt, ft = fit.refine(Mt, np.clip(_twin_parameters(x, [true.bias]), fit.lo, fit.hi), 10)[:2]
-    taken, refined, note = fit.mirror_twin(Mt, xt, ft, [true.bias])
+    taken, refined, note, tie = fit.mirror_twin(Mt, xt, ft, [true.bias])
     assert axes_to_letters(taken) == axes_to_letters(M), note
     assert refined is not None and refined[1] < ft, note
+    # the phase was measured on more patches than the fit's (the next most textured)
+    phase = fit.phase_patches()
+    assert phase is fit.phase_patches()
+    assert len(phase.points) > len(fit.fine.points)
+    assert f"/{len(phase.points)} patches prefer" in note, note
+
 
 def test_a_shake_that_repeats_within_the_exposure_makes_the_offset_ambiguous(case):
     """A yaw oscillating at 100 Hz, four whole periods per row's 40 ms exposure: every row's
@@ -901,3 +908,23 @@ def test_the_widened_ranking_takes_each_mappings_best_bias_step(case):
                                   envelopes=(True,), stride=2)
     np.testing.assert_allclose(row[6], [-0.05, 0.0, 0.0])
     assert row[0] < fit.coarse_row(True, true.axes, None, 2)[0]
+
+
+def test_a_straight_blur_leaves_the_mirror_twin_uncertain(case):
+    """A steady turn about an axis in the x-y plane blurs every pixel along a straight,
+    even streak, and a streak is its own reflection: the mirror twin (x and y rates
+    negated) explains the photo exactly as well, and nothing in it tells the two apart.
+    The other mappings turn or roll the streaks. Calibrate says the mapping is uncertain,
+    naming the twin, whichever of the two it took."""
+    sharp, _, _ = case
+    t = np.arange(0.0, 1.2, 1 / 200)
+    wc = np.tile([0.35, -0.5, 0.0], (t.size, 1))
+    log = GyroLog(t, wc @ parse_axes(TRUE_AXES))
+    true = Capture(0.5, 0.03, 0.0, Camera.centred(W, H, 1.3 * W), log, axes=TRUE_AXES)
+    res = calibrate([_blur(sharp, true)], _corrupt(true, offset=0.0, readout=1.0))
+    got = axes_to_letters(res.capture.axes)
+    assert got in (TRUE_AXES, axes_to_letters(TWIN @ true.axes)), res.notes
+    other = axes_to_letters(TWIN @ res.capture.axes)
+    assert any("axis mapping is uncertain" in n and f"mirror twin {other}" in n
+               for n in res.notes), res.notes
+    assert format_estimates(res.estimates)[-1].endswith("uncertain)")

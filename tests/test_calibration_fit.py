@@ -9,7 +9,8 @@ import pytest
 
 from gyrodeblur.axes import parse_axes
 from gyrodeblur.calibration_fit import (TWIN, _phase_prefers_twin, _twin_parameters,
-                                        relative_ranking, shortlist, with_twin)
+                                        _unsettled_tie, relative_ranking, shortlist,
+                                        with_twin)
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture
 from gyrodeblur.gyrolog import GyroLog
@@ -85,15 +86,30 @@ def test_the_mirror_twin_is_compared_with_its_bias_mirrored():
 
 
 def test_the_twin_needs_a_clear_phase_preference():
-    """Without frame registration the twin replaces the winner only when its refined
-    objective is no worse and the phase prefers it by two standard errors, not by a coin
-    toss."""
+    """Without frame registration the twin replaces the winner only when the spectra cannot
+    tell the two apart (its refined objective less than 2 tempered nats worse) and the
+    phase prefers it by two standard errors, not by a coin toss."""
     clear = np.array([-0.05, -0.04, -0.06, -0.03, -0.05])
     toss = np.array([0.02, -0.03, 0.01, -0.04, 0.015, -0.02, -0.01, 0.01, -0.03])   # mean < 0
     assert _phase_prefers_twin(-0.8, clear)
     assert _phase_prefers_twin(0.0, clear)
+    assert _phase_prefers_twin(0.5, clear)               # a tie the spectra cannot break
     assert not _phase_prefers_twin(-0.8, toss)
-    assert not _phase_prefers_twin(0.5, clear)           # the refined twin scores worse
+    assert not _phase_prefers_twin(2.5, clear)           # the refined twin scores worse
+
+
+def test_a_twin_tie_the_phase_cannot_settle_is_unsettled():
+    """A tie of the objectives that the phase decides by under three standard errors, either
+    way, is reported (calibrate warns that the mapping is uncertain); a clear phase, or a
+    clear objective, is not."""
+    clear = np.array([-0.05, -0.04, -0.06, -0.03, -0.05])          # ~9 errors for the twin
+    weak = np.array([-0.05, 0.01, -0.04, -0.02, 0.02, -0.03, 0.0, -0.01])   # ~1.7 errors
+    assert _unsettled_tie(0.3, weak)
+    assert _unsettled_tie(-1.5, -weak)                   # the winner kept by a weak phase
+    assert _unsettled_tie(0.3, weak[:1])                 # one patch: no evidence
+    assert not _unsettled_tie(0.3, clear)
+    assert not _unsettled_tie(0.3, -clear)
+    assert not _unsettled_tie(2.5, weak)                 # the objectives are not tied
     assert not _phase_prefers_twin(-0.8, clear[:1])      # one patch: no standard error
 
 

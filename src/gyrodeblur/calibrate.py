@@ -85,9 +85,10 @@ them in order and decides what to keep (5) and what to report.
    rate: left as it is, it would turn the twin's PSFs, not reflect them). The frame
    registration below decides at those parameters when there is one; else the twin is
    refined (six iterations: roll and the rolling shutter do not mirror, so its optimum
-   lies a little away) and taken when its objective is no worse than the winner's and
-   the phase (normalised gradient sparsity of the Wiener-deconvolved patches) prefers it,
-   by two standard errors over the patches.
+   lies a little away) and taken when its objective is less than 2 tempered nats worse
+   than the winner's (the spectra cannot tell them apart) and the phase (normalised
+   gradient sparsity of the Wiener-deconvolved patches) prefers it by two standard errors,
+   measured on three times the fit's patches.
 4. Several photos of one session share every correction (each keeps its own exposure
    start and given values); each photo has its own patches (9 each, or 18 shared out), so
    that one with little blur does not take the patches of one that says more (on the
@@ -487,11 +488,19 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     # 3. the mirror twin (|H| nearly equal): the frame registration decides at the same
     #    parameters, else the twin is refined and the phase (sparsity of the deconvolved
     #    patches) must prefer it as well.
+    tie = None
     if "axes" not in fix and len(cand) > 1 and not kept:
-        M, twin, msg = fit.mirror_twin(M, x, fx, [cap.bias for cap in captures])
+        M, twin, msg, tie = fit.mirror_twin(M, x, fx, [cap.bias for cap in captures])
         if twin is not None:
             x, fx, Fm, sc = twin
         note(msg, "  ")
+        if tie is not None:          # a tie the phase could not settle: the twin is the
+            tie_gap = max(tie[1], 0.0)   # next best unless another mapping scores closer
+            others = [r for r in results if not in_twin_pair(M, r[2])]
+            if others and min(r[0] for r in others) - fx < tie_gap:
+                tie = None
+            else:
+                gap = min(gap, tie_gap) if np.isfinite(gap) else tie_gap
 
     # a mapping that only the widened ranking found stands on a bias far from the given
     # one: it is as uncertain as the first candidates were close
@@ -501,7 +510,12 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         rival = _best_other_mapping(results, M)
         runner = None if rival is None else rival[2]
-        if wide_only:
+        if tie is not None:
+            why = (f" its mirror twin {axes_to_letters(tie[0])} explains the blur about as "
+                   f"well (objective {tie[1]:+.1f}), and the phase of the deconvolved "
+                   f"patches prefers {axes_to_letters(M)} by only {tie[2]:.1f} standard "
+                   "errors")
+        elif wide_only:
             why = (f" {axes_to_letters(M) or 'the mapping found'} won only once the search "
                    f"moved the bias by a prior sd (at the given bias the best mappings were "
                    f"within {gap_first:.1f} of each other)")
