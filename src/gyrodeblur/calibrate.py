@@ -511,10 +511,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         rival = _best_other_mapping(results, M)
         runner = None if rival is None else rival[2]
         if tie is not None:
+            phase_for = axes_to_letters(M if tie[2] >= 0 else tie[0])
             why = (f" its mirror twin {axes_to_letters(tie[0])} explains the blur about as "
                    f"well (objective {tie[1]:+.1f}), and the phase of the deconvolved "
-                   f"patches prefers {axes_to_letters(M)} by only {tie[2]:.1f} standard "
-                   "errors")
+                   f"patches prefers {phase_for} by only {abs(tie[2]):.1f} standard errors")
         elif wide_only:
             why = (f" {axes_to_letters(M) or 'the mapping found'} won only once the search "
                    f"moved the bias by a prior sd (at the given bias the best mappings were "
