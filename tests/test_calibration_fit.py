@@ -96,6 +96,7 @@ def test_the_twin_needs_a_clear_phase_preference():
     assert _phase_prefers_twin(0.5, clear)               # a tie the spectra cannot break
     assert not _phase_prefers_twin(-0.8, toss)
     assert not _phase_prefers_twin(2.5, clear)           # the refined twin scores worse
+    assert not _phase_prefers_twin(-0.8, clear[:1])      # one patch: no standard error
 
 
 def test_a_twin_tie_the_phase_cannot_settle_is_unsettled():
@@ -110,7 +111,6 @@ def test_a_twin_tie_the_phase_cannot_settle_is_unsettled():
     assert not _unsettled_tie(0.3, clear)
     assert not _unsettled_tie(0.3, -clear)
     assert not _unsettled_tie(2.5, weak)                 # the objectives are not tied
-    assert not _phase_prefers_twin(-0.8, clear[:1])      # one patch: no standard error
 
 
 
