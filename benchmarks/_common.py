@@ -116,6 +116,13 @@ def run_main(main, argv: list[str] | None = None) -> int:
     return rc if isinstance(rc, int) else 0
 
 
+def add_source_options(parser) -> None:
+    """Add ``--photos`` and ``--gyro`` to an argparse ``parser``: the folder of sharp photos
+    and the gyro log a benchmark draws its cases from (``None``: the shared data's)."""
+    parser.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
+    parser.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
+
+
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1 (a count of 0 would silently mean nothing)."""
     import argparse

@@ -216,8 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", help="comma-separated registry names (default: all); "
                                       "--list shows them")
     ap.add_argument("--list", action="store_true", help="list the methods and exit")
-    ap.add_argument("--photos", help="folder of sharp photos (default ../shared/data/photos)")
-    ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
+    _common.add_source_options(ap)
     ap.add_argument("--max-photos", type=_common.positive_int, default=None,
                     help="use only the first N photos (default all; quick 2)")
     ap.add_argument("--windows", type=_common.positive_int, default=None,

@@ -57,8 +57,7 @@ def decimated(log: GyroLog, factor: int, how: str) -> GyroLog:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="3 cases, 320 px")
-    ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
-    ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
+    _common.add_source_options(ap)
     ap.add_argument("--max-size", type=_common.positive_int, default=None,
                     help="longer side, px (default 640; quick 320)")
     ap.add_argument("--seed", type=int, default=5)

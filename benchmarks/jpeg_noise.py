@@ -70,8 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true",
                     help="2 photos (two of the shared ones, else the folder's first two), "
                          "400 px, quality 90")
-    ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
-    ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
+    _common.add_source_options(ap)
     ap.add_argument("--max-size", type=_common.positive_int, default=None,
                     help="longer side, px (default 640; quick 400)")
     ap.add_argument("--seed", type=int, default=0)

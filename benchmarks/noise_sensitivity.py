@@ -100,8 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--photo", default=None,
                     help=f"photo file, or name (or name stem) in --photos (default "
                          f"{DEFAULT_PHOTO} when the folder has it, else its first photo)")
-    ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
-    ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
+    _common.add_source_options(ap)
     ap.add_argument("--exposure", type=float, default=0.03, help="exposure time, s")
     ap.add_argument("--readout", type=float, default=0.03, help="readout time, s")
     ap.add_argument("--focal", type=float, default=0.8, help="fx as a fraction of the width")

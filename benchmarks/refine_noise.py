@@ -69,8 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--photo", default=None,
                     help=f"photo file, or name (or name stem) in --photos (default "
                          f"{DEFAULT_PHOTO} when the folder has it, else its first photo)")
-    ap.add_argument("--photos", help="photo folder (default ../shared/data/photos)")
-    ap.add_argument("--gyro", help="gyro log (default the shared hand-held phone log)")
+    _common.add_source_options(ap)
     ap.add_argument("--max-size", type=_common.positive_int, default=None,
                     help="longer side, px (default 640; quick 400)")
     ap.add_argument("--realisations", type=_common.positive_int, default=None,
