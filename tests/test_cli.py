@@ -232,8 +232,16 @@ def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
     d = capture_dir
     assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9",
                  "-o", str(d / "blind.png"), "--quiet"]) == 0
-    assert "mode blind" in capsys.readouterr().out
-    assert read_photo(d / "blind.png").pixels.shape == (192, 256, 3)
+    got = capsys.readouterr()
+    assert "mode blind" in got.out
+    # a sharp photo shows none of the kernel found: it is left as it is, and said so
+    assert "warning: the blind kernel explains the photo no better than no blur" in got.err
+    kept = read_photo(d / "blind.png").pixels
+    assert kept.shape == (192, 256, 3)
+    assert np.abs(kept - read_photo(d / "sharp.jpg").pixels).max() <= 1.5 / 255
+    assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9",
+                 "--no-blur-check", "-o", str(d / "forced.png"), "--quiet"]) == 0
+    assert "no better than no blur" not in capsys.readouterr().err
     assert "--kernel-size" in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
                                           "8", "-o", str(d / "b2.png")], capsys)
     assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9", "--grid",
@@ -347,6 +355,8 @@ def test_options_out_of_range_or_ignored_are_refused(capture_dir, capsys):
          "is also the output photo"),
         (["deblur", photo, "--capture", cap, "--kernel-size", "9", "-o", str(d / "o.png")],
          "--kernel-size: applies with --blind only"),
+        (["deblur", photo, "--capture", cap, "--no-blur-check", "-o", str(d / "o.png")],
+         "--no-blur-check: applies with --blind only"),
         (["deblur", photo, "--blind", "--refine", "-o", str(d / "o.png")], "--refine: does not apply"),
         (["deblur", photo, "--blind", "--fix", "bias", "-o", str(d / "o.png")], "--fix: does not apply"),
         (["deblur", photo, "--blind", "--time-offset", "0", "-o", str(d / "o.png")],

@@ -156,6 +156,7 @@ from scipy.stats import chi2
 
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
+from .blur_evidence import NO_BLUR_MARGIN
 from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, TWIN,
                               CalibrationFit, in_twin_pair, relative_ranking, shortlist,
                               with_twin)
@@ -263,10 +264,11 @@ _TYPICAL_GYRO_NOISE = 0.007
 _TYPICAL_GYRO_RATE = 200.0
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
 #: The calibrated PSFs must explain the patches better than no blur at all by this much
-#: (tempered nats), else a warning. On the 24-case benchmark the blurred photos' gains were
-#: 3.4 (7 px of blur) to 140; the sharp originals given the same captures (six cases) and a
-#: sharp photo given a capture of 27 px blur scored 4.5, 0.7, 0.2, -3.7, -26, -43 and -46.
-_NO_BLUR_MARGIN = 1.0
+#: (tempered nats per 9 patches), else a warning; the blind kernel check uses the same
+#: margin. On the 24-case benchmark the blurred photos' gains were 3.4 (7 px of blur) to
+#: 140; the sharp originals given the same captures (six cases) and a sharp photo given a
+#: capture of 27 px blur scored 4.5, 0.7, 0.2, -3.7, -26, -43 and -46.
+_NO_BLUR_MARGIN = NO_BLUR_MARGIN
 #: Estimates whose squared prior z-scores sum beyond this quantile of the chi-square
 #: distribution (degrees of freedom: the prior-bound coordinates free) get a warning. On
 #: the 24-case benchmark, whose injected errors are at most one prior sd, the right

@@ -27,9 +27,10 @@ _SATURATED_MAX = 0.3
 
 
 class CalibrationPhoto:
-    """A blurred photo, its full-resolution capture, and cheap access to its pixels."""
+    """A blurred photo, its full-resolution capture (``None`` for a photo without a gyro
+    log, as the blind kernel check has), and cheap access to its pixels."""
 
-    def __init__(self, image, capture: Capture, transfer, index: int):
+    def __init__(self, image, capture: Capture | None, transfer, index: int):
         img = check_image(image, f"photo {index + 1}", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
         img = split_alpha(img)[0]                       # alpha is a mask, not light
@@ -37,7 +38,7 @@ class CalibrationPhoto:
             img = img[..., 0]
         self.image = img
         self.H, self.W = img.shape[:2]
-        self.cap = capture.scaled_to(self.W, self.H)
+        self.cap = None if capture is None else capture.scaled_to(self.W, self.H)
         self.curve = get_transfer_curve(transfer)
         self.index = index
 

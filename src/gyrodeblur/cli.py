@@ -115,6 +115,8 @@ def _ignored_options(args) -> None:
             raise InputError("--fix", "applies with --refine only")
         if given("kernel_size"):
             raise InputError("--kernel-size", "applies with --blind only")
+        if args.no_blur_check:
+            raise InputError("--no-blur-check", "applies with --blind only")
         if args.mode == "invariant":
             for name in ("grid", "overlap", "model"):
                 if given(name):
@@ -416,7 +418,8 @@ def cmd_deblur(args, say) -> None:
         kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
         restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
                                        overlap=overlap, method=args.method,
-                                       transfer=curve, progress=progress, **options)
+                                       transfer=curve, check_blur=not args.no_blur_check,
+                                       progress=progress, **options)
         mode_txt = "blind"
         grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
     else:
@@ -578,6 +581,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--blind", action="store_true", help="estimate the blur from the photo alone")
     s.add_argument("--kernel-size", type=int, default=None,
                    help=f"blind kernel size, px (odd; default {BLIND_KERNEL_SIZE})")
+    s.add_argument("--no-blur-check", action="store_true",
+                   help="blind: deconvolve with the estimated kernel even where the photo's "
+                        "spectrum shows none of its blur (by default such a photo is left as "
+                        "it is, with a warning)")
     s.add_argument("--refine", action="store_true",
                    help="self-calibrate time offset, bias, readout, focal length and axes first "
                         "(a value given with --time-offset, --bias, --readout-time, --fx/--fy or "

@@ -837,7 +837,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
 def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
                  overlap: float = DEFAULT_OVERLAP, method: str | None = None,
                  transfer: str | TransferCurve = "srgb", max_pixels: int = 1_000_000, clip: bool = True,
-                 progress=None, **options):
+                 check_blur: bool = True, progress=None, **options):
     """Deblur without a gyro log: estimate the blur from the photo, then deconvolve.
 
     The kernel is estimated by :func:`gyrodeblur.blind.estimate_kernel` (sec. 6.3.1:
@@ -869,6 +869,17 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     max_pixels : int
         Pixels the kernel is estimated on (the central part of the photo, or of each
         patch in proportion).
+    check_blur : bool
+        Check the photo's kernel against the photo's spectrum
+        (:func:`gyrodeblur.blur_evidence.kernel_gain_over_no_blur`): a kernel that
+        explains the most textured windows no better than no blur (by
+        :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`) is a false estimate (a
+        near-sharp photo, a page of text) or the blur varies too much for one kernel, and
+        deconvolving with it rings. The photo is then returned as it is (clipped to
+        [0, 1] with ``clip``), the field holds delta kernels, and a warning says so. With
+        a grid, the check is the photo kernel's, before the patches refine it (checked
+        patch by patch on the benchmark, the smaller windows' verdicts cost more than
+        they saved). ``False``: the kernels are used as estimated.
 
     Returns
     -------
@@ -889,6 +900,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     image = check_image(image, "photo", max_value=PHOTO_MAX,
                         min_value=PHOTO_MIN)
     check_flag(clip, "clip")
+    check_flag(check_blur, "check_blur")
     check_callback(progress, "progress")
     H, W = image.shape[:2]
     lin = get_transfer_curve(transfer).decode(split_alpha(image)[0])     # not the mask
@@ -900,6 +912,12 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
                                    f"{kernel_size} px kernel (it must be under half a "
                                    f"patch's shorter side): use a coarser grid")
     psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
+    if check_blur and _shows_no_blur(image, psfs[0], transfer):
+        delta = np.zeros_like(psfs[0])
+        delta[kernel_size // 2, kernel_size // 2] = 1.0
+        out = np.array(image, np.float32)
+        return (np.clip(out, 0.0, 1.0) if clip else out), \
+            PSFField(_centres_xy(patches), [delta] * len(patches), tuple(int(g) for g in grid))
     if len(patches) > 1:       # each patch refines the photo's kernel on its own pixels
         share = max_pixels / len(patches)
         psfs = [estimate_kernel(_central(lum[p.y0:p.y1, p.x0:p.x1], share), kernel_size,
@@ -907,6 +925,24 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     out = deblur_with_psfs(image, patches, psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, **options)
     return out, PSFField(_centres_xy(patches), psfs, tuple(int(g) for g in grid))
+
+
+def _shows_no_blur(image, psf, transfer) -> bool:
+    """Whether ``image`` shows less of the blur ``psf`` than no blur at all would explain
+    (:func:`gyrodeblur.blur_evidence.kernel_gain_over_no_blur` under
+    :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`; a warning says so). ``False`` when
+    the photo is too small to tell."""
+    from .blur_evidence import NO_BLUR_MARGIN, kernel_gain_over_no_blur
+
+    gain = kernel_gain_over_no_blur(image, psf, transfer=transfer)
+    if not gain < NO_BLUR_MARGIN:
+        return False
+    warnings.warn(f"the blind kernel explains the photo no better than no blur at all "
+                  f"({gain:+.1f} nats per 9 windows, under {NO_BLUR_MARGIN:g}): the photo shows "
+                  f"too little blur, or a blur that varies too much for one kernel, and "
+                  f"deconvolving would add ringing. It is returned as it is (--no-blur-check, "
+                  f"check_blur=False: deconvolve anyway)", stacklevel=3)
+    return True
 
 
 def _centres_xy(patches) -> np.ndarray:

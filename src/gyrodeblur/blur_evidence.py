@@ -1,0 +1,80 @@
+"""Whether a photo shows a given blur: a kernel's spectral evidence against no blur at all.
+
+A blind kernel estimate can be wrong in a way its own cost does not see: on a photo with
+little blur (a page of text, a near-sharp shot) the alternating MAP estimate can settle on
+a streak several pixels long, and deconvolving with it rings. The photo's spectrum tells:
+under the calibration's criterion (:mod:`gyrodeblur.spectral_criterion`, a Whittle
+likelihood with an envelope fitted to each patch), a kernel the photo really shows explains
+its most textured patches better than no blur, and a wrong one explains them worse, because
+its ``|H|^2`` puts dips where the photo has none. The criterion sees only ``|H|``, so a kernel
+and its reflection score alike; it is a check, not an estimator.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .calibration_fit import _PATCH, _TARGET_EXTENT, _TEMPERATURE
+from .calibration_patches import CalibrationPhoto, select_patch_centres
+from .spectral_criterion import PatchSpectra
+
+__all__ = ["NO_BLUR_MARGIN", "kernel_gain_over_no_blur"]
+
+#: A kernel (or a calibration's PSFs) must explain a photo's patches better than no blur at
+#: all by this much (tempered nats per 9 patches); below it, the photo shows little of that
+#: blur (:data:`gyrodeblur.calibrate._NO_BLUR_MARGIN` has the calibration benchmark's
+#: figures). Blind kernels (session 37, BENCHMARKS.md section 2): on Levin et al.'s protocol
+#: (12 photos x 8 kernels, one true kernel each) every true kernel passed (gains 5.5 and
+#: up) and 93 of 96 estimates, the 3 dropped each deblurring worse than the input; on the
+#: 36 gyro-blur cases, where one kernel cannot fit a rolling shutter's blur, 16 of 36.
+NO_BLUR_MARGIN = 1.0
+
+_PATCHES = 9
+_SMALLEST = 48             # px: a patch side at working scale below this says too little
+
+
+def kernel_gain_over_no_blur(image: np.ndarray, psf: np.ndarray, *, transfer="srgb",
+                             n_patches: int = _PATCHES) -> float:
+    """How much better one kernel explains a photo than no blur at all.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, C)
+        The blurred photo, float in [0, 1] (a fourth channel is alpha, ignored).
+    psf : ndarray (k, k)
+        The kernel, odd square, centred, at the photo's resolution (pixels).
+    transfer : str or TransferCurve
+        Transfer curve of the photo's values (the patches are read in linear light).
+    n_patches : int
+        Most textured, unclipped windows spread over the photo that are scored
+        (:func:`gyrodeblur.calibration_patches.select_patch_centres`).
+
+    Returns
+    -------
+    float
+        The gain in tempered nats per 9 patches (the calibration's units): compare with
+        :data:`NO_BLUR_MARGIN`. ``nan`` when the photo is too small for the kernel (a
+        working-scale patch under 48 px) or has no textured window.
+
+    Notes
+    -----
+    Each window is taken at a working scale where the kernel spans at most 32 px, as
+    calibration does, in patches of up to 128 px; the kernel's transfer function is
+    evaluated exactly at that scale's frequencies
+    (:meth:`gyrodeblur.spectral_criterion.PatchSpectra.psf_gain_over_no_blur`).
+    """
+    k = np.asarray(psf, np.float64)
+    rows, cols = np.nonzero(k > 0)
+    extent = float(max(np.ptp(rows), np.ptp(cols)) + 1) if rows.size else 1.0
+    photo = CalibrationPhoto(image, None, transfer, 0)
+    scale = min(1.0, _TARGET_EXTENT / extent)
+    size = int(min(_PATCH, 16 * (min(photo.H, photo.W) * scale // 16)))
+    if size < _SMALLEST:
+        return float("nan")
+    centres = [(0, x, y) for x, y in
+               select_patch_centres(photo, n_patches, int(round(size / scale)))]
+    if not centres:
+        return float("nan")
+    spectra = PatchSpectra([photo], centres, scale, size)
+    gain = spectra.psf_gain_over_no_blur(k)
+    return float(gain.sum() / _TEMPERATURE * _PATCHES / len(centres))

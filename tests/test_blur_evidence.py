@@ -1,0 +1,89 @@
+"""A kernel's spectral evidence against no blur (:mod:`gyrodeblur.blur_evidence`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+from skimage import data
+from skimage.transform import resize
+
+from gyrodeblur.blur_evidence import NO_BLUR_MARGIN, kernel_gain_over_no_blur
+
+
+def _scene() -> np.ndarray:
+    """A textured grey photo, 384 x 512, linear values in [0.05, 0.95]."""
+    img = data.astronaut().mean(axis=2) / 255
+    return (0.05 + 0.9 * resize(img, (384, 512), anti_aliasing=True)).astype(np.float32)
+
+
+def _streak(length: int, vertical: bool = False) -> np.ndarray:
+    k = np.zeros((length, length), np.float32)
+    k[length // 2, :] = 1 / length
+    return k.T.copy() if vertical else k
+
+
+def _moved_along_x(img: np.ndarray, length: int) -> np.ndarray:
+    """The forward model kept apart from the kernels judged: the scene shifted by cubic
+    interpolation to 4 positions per pixel along ``length`` px of x, and averaged."""
+    shifts = np.linspace(-(length - 1) / 2, (length - 1) / 2, 4 * (length - 1) + 1)
+    out = np.mean([ndimage.shift(img, (0, s), order=3, mode="mirror") for s in shifts], axis=0)
+    rng = np.random.default_rng(0)
+    return np.clip(out + 0.003 * rng.normal(size=out.shape), 0, 1).astype(np.float32)
+
+
+def test_the_blur_a_photo_shows_is_told_from_a_wrong_one_and_from_none():
+    sharp = _scene()
+    blurred = _moved_along_x(sharp, 9)
+    gain = {name: kernel_gain_over_no_blur(blurred, k, transfer="linear")
+            for name, k in (("true", _streak(9)), ("turned", _streak(9, vertical=True)),
+                            ("short", _streak(5)), ("long", _streak(13)))}
+    delta = np.zeros((9, 9), np.float32)
+    delta[4, 4] = 1
+    assert gain["true"] > 20 * NO_BLUR_MARGIN, gain
+    assert gain["turned"] < 0, gain
+    assert max(gain["short"], gain["long"]) < gain["true"] - 10, gain
+    assert abs(kernel_gain_over_no_blur(blurred, delta, transfer="linear")) < 0.05 * NO_BLUR_MARGIN
+    # the sharp scene shows none of the streak; the same kernel scored on it loses
+    assert kernel_gain_over_no_blur(sharp, _streak(9), transfer="linear") < 0
+
+
+def test_a_photo_too_small_for_the_kernel_is_not_judged():
+    small = _scene()[:40, :60]
+    assert np.isnan(kernel_gain_over_no_blur(small, _streak(9), transfer="linear"))
+
+
+def test_deblur_blind_leaves_a_sharp_photo_as_it_is_and_says_why():
+    from gyrodeblur.deblur import deblur_blind
+
+    sharp = _scene()
+    with pytest.warns(UserWarning, match="no better than no blur at all.*returned as it is"):
+        out, field = deblur_blind(sharp, 15, transfer="linear")
+    assert np.array_equal(out, sharp)
+    assert field.psfs[0][7, 7] == 1 and field.psfs[0].sum() == 1
+    # asked not to check, it deconvolves with whatever it estimated
+    forced, _ = deblur_blind(sharp, 15, transfer="linear", check_blur=False)
+    assert not np.array_equal(forced, sharp)
+    with pytest.raises(TypeError, match="check_blur must be True or False"):
+        deblur_blind(sharp, 15, check_blur="no")
+
+
+def test_deblur_blind_keeps_a_kernel_the_photo_shows():
+    """The streak photo's estimate passes the check (no warning) and is deconvolved; with a
+    grid, a sharp photo's patches all get delta kernels."""
+    import warnings
+
+    from gyrodeblur.deblur import deblur_blind
+    from gyrodeblur.metrics import psnr
+
+    sharp = _scene()
+    blurred = _moved_along_x(sharp, 9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out, field = deblur_blind(blurred, 15, transfer="linear")
+    assert field.psfs[0].max() < 0.5                     # a streak, not a delta
+    assert psnr(sharp, out, 16) > psnr(sharp, blurred, 16) + 2
+    with pytest.warns(UserWarning, match="returned as it is"):
+        kept, field2 = deblur_blind(sharp, 15, grid=(1, 2), transfer="linear")
+    assert np.array_equal(kept, sharp) and len(field2.psfs) == 2
+    assert all(k[7, 7] == 1 for k in field2.psfs)
