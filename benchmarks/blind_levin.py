@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _common  # noqa: E402
 
 from gyrodeblur.blind import estimate_kernel  # noqa: E402
+from gyrodeblur.blur_evidence import NO_BLUR_MARGIN, kernel_gain_over_no_blur  # noqa: E402
 from gyrodeblur.dataset import default_shared_data, list_photos, read_sharp  # noqa: E402
 from gyrodeblur.deblur import deblur_with_psfs  # noqa: E402
 from gyrodeblur.errors import InputError  # noqa: E402
@@ -132,8 +133,13 @@ def run_case(sharp, blurred, k, margin: int, border: int) -> dict:
     oracle = deconvolve(blurred, k)
     p = {name: _common.registered_psnr(sharp, img, border)
          for name, img in (("blurred", blurred), ("blind", blind), ("oracle", oracle))}
+    gain = kernel_gain_over_no_blur(blurred, est, transfer="linear")
+    kept = not gain < NO_BLUR_MARGIN
     return {"kernel_size": int(k.shape[0]), "support": int(size),
             "psnr_blurred": p["blurred"], "psnr_blind": p["blind"], "psnr_oracle": p["oracle"],
+            "no_blur_gain": gain, "kept": kept,
+            "true_no_blur_gain": kernel_gain_over_no_blur(blurred, k, transfer="linear"),
+            "psnr_checked": p["blind"] if kept else p["blurred"],
             "psnr_blind_unregistered": psnr(sharp, blind, border),
             "error_ratio": float(10 ** ((p["oracle"] - p["blind"]) / 10)),
             "kernel_similarity": kernel_similarity(est, k), "kernel_seconds": t_kernel}
@@ -150,14 +156,27 @@ def summarise(rows: list[dict]) -> dict:
                             "within_3": int((r <= 3).sum())},
             "blind_beats_blurred": int(sum(row["psnr_blind"] > row["psnr_blurred"]
                                            for row in rows)),
+            "check": _check_summary(rows),
             "per_kernel_median_ratio": {
                 k: float(np.median([row["error_ratio"] for row in rows if row["kernel"] == k]))
                 for k in sorted({row["kernel"] for row in rows})}}
 
 
+def _check_summary(rows: list[dict]) -> dict:
+    """How the check against no blur (``deblur_blind``'s default) sorts the estimates:
+    kept or not, and where the blind result beat the blurred input in each group."""
+    kept = [r for r in rows if r["kept"]]
+    dropped = [r for r in rows if not r["kept"]]
+    beats = lambda group: int(sum(r["psnr_blind"] > r["psnr_blurred"] for r in group))  # noqa: E731
+    return {"kept": len(kept), "true_kernels_kept": int(sum(not r["true_no_blur_gain"] < NO_BLUR_MARGIN
+                                                            for r in rows)),
+            "kept_beating_blurred": beats(kept), "dropped_beating_blurred": beats(dropped),
+            "mean_psnr_checked": float(np.mean([r["psnr_checked"] for r in rows]))}
+
+
 def markdown(result: dict) -> str:
     s = result["summary"]
-    m = s["mean"]
+    m, ch = s["mean"], s["check"]
     lines = [f"{s['cases']} cases ({result['photos']} photos x 8 Levin kernels, "
              f"grey crops of up to {result['crop']} px, noise {result['noise']:g}, 8-bit); "
              f"PSNR after the best global shift, border {result['border']} px.", "",
@@ -170,6 +189,11 @@ def markdown(result: dict) -> str:
              f"{s['cases']}, <= 3 in {s['error_ratio']['within_3']}/{s['cases']}; "
              f"kernel similarity (NCC) mean {m['kernel_similarity']:.3f}; "
              f"kernel estimate {m['kernel_seconds']:.2f} s mean.", "",
+             f"The check against no blur (`deblur_blind`'s default) keeps {ch['kept']}/"
+             f"{s['cases']} estimates (the true kernels: {ch['true_kernels_kept']}/"
+             f"{s['cases']}); the blind result beats the blurred input in "
+             f"{ch['kept_beating_blurred']} of those kept and {ch['dropped_beating_blurred']} "
+             f"of those dropped; mean PSNR with the check {ch['mean_psnr_checked']:.2f} dB.", "",
              "| kernel | median error ratio |", "|---|---:|"]
     lines += [f"| {k} | {v:.2f} |" for k, v in s["per_kernel_median_ratio"].items()]
     return "\n".join(lines) + "\n"
@@ -233,7 +257,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             _common.say(f"{path.stem:18s} {name}: blurred {row['psnr_blurred']:.2f}, blind "
                         f"{row['psnr_blind']:.2f}, oracle {row['psnr_oracle']:.2f} dB, ratio "
-                        f"{row['error_ratio']:.2f}, NCC {row['kernel_similarity']:.3f} "
+                        f"{row['error_ratio']:.2f}, NCC {row['kernel_similarity']:.3f}, "
+                        f"gain over no blur {row['no_blur_gain']:+.1f} "
                         f"({row['kernel_seconds']:.1f} s)")
     result = {"benchmark": "blind_levin", "quick": args.quick, "photos": len(photos),
               "crop": args.crop, "max_size": args.max_size, "noise": args.noise,

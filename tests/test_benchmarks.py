@@ -73,6 +73,9 @@ def test_blind_levin_quick(tmp_path):
     assert m["psnr_oracle"] > m["psnr_blurred"] + 5
     assert m["psnr_blurred"] < m["psnr_blind"] < m["psnr_oracle"]
     assert m["kernel_similarity"] > 0.5            # the estimates resemble the kernels
+    # the blind check against no blur passes every true kernel (the photo shows its blur)
+    assert r["summary"]["check"]["true_kernels_kept"] == 8
+    assert "The check against no blur" in out.with_suffix(".md").read_text()
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
