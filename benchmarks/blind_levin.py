@@ -19,6 +19,11 @@ levels. Pixel values are treated as linear, as in Levin's data. Then
   method (:func:`gyrodeblur.deblur.deblur_with_psfs`, one patch) with that kernel;
 * ``oracle``: the same non-blind method with the true kernel.
 
+Each estimate is also put to ``deblur_blind``'s check against no blur
+(:func:`gyrodeblur.blur_evidence.kernel_gain_over_no_blur`), and so is the true kernel: the
+report counts the kernels kept and how the blind result fared in each group (a dropped
+estimate leaves the photo as it is).
+
 Scores, on the central region (a border of the largest kernel's radius + 4 px): PSNR of
 the blurred input, of ``blind`` and of ``oracle``, each after the global sub-pixel shift that
 best aligns it (a blind kernel is known only up to a shift); Levin's error ratio
@@ -165,9 +170,11 @@ def summarise(rows: list[dict]) -> dict:
 def _check_summary(rows: list[dict]) -> dict:
     """How the check against no blur (``deblur_blind``'s default) sorts the estimates:
     kept or not, and where the blind result beat the blurred input in each group."""
+    def beats(group) -> int:
+        return int(sum(r["psnr_blind"] > r["psnr_blurred"] for r in group))
+
     kept = [r for r in rows if r["kept"]]
     dropped = [r for r in rows if not r["kept"]]
-    beats = lambda group: int(sum(r["psnr_blind"] > r["psnr_blurred"] for r in group))  # noqa: E731
     return {"kept": len(kept), "true_kernels_kept": int(sum(not r["true_no_blur_gain"] < NO_BLUR_MARGIN
                                                             for r in rows)),
             "kept_beating_blurred": beats(kept), "dropped_beating_blurred": beats(dropped),
