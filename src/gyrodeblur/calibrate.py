@@ -135,8 +135,9 @@ as uncertain, with a note that says what to do (on the benchmark every wrong map
 below 5 and every gap from 8.9 up was right).
 
 Last, the calibrated PSFs must explain the patches better than no blur at all (each with
-its own fitted envelope) by :data:`_NO_BLUR_MARGIN`; a sharp photo, or a log or exposure
-start that belong to another shot, gets a warning rather than confident estimates.
+its own fitted envelope) by :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`; a sharp
+photo, or a log or exposure start that belong to another shot, gets a warning rather than
+confident estimates.
 
 Limits (measured, see ``benchmarks/calibration.py``): blur of a few pixels carries almost
 no information; scenes dominated by horizontal and vertical edges can prefer a mapping
@@ -206,8 +207,8 @@ class CalibrationResult:
     blur_gain : float
         How much better (tempered nats, per :data:`_N_PATCHES` patches) the calibrated
         PSFs explain the patches than no blur at all, for the photo where that is least;
-        under :data:`_NO_BLUR_MARGIN` the notes warn that the photo shows little of the
-        blur the log implies (``nan`` when not measured).
+        under :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN` the notes warn that the
+        photo shows little of the blur the log implies (``nan`` when not measured).
     offset_rivals : list of (float, float, float)
         Other basins of the winning mapping that the search reached: their time offset
         (s), readout time (s) and how much higher their objective is (tempered nats), for
@@ -263,12 +264,6 @@ _KEEP_MAPPING_NATS = 2.0
 _TYPICAL_GYRO_NOISE = 0.007
 _TYPICAL_GYRO_RATE = 200.0
 _CANDIDATES = 5            # mappings refined at full working scale (+ the best's twin)
-#: The calibrated PSFs must explain the patches better than no blur at all by this much
-#: (tempered nats per 9 patches), else a warning; the blind kernel check uses the same
-#: margin. On the 24-case benchmark the blurred photos' gains were 3.4 (7 px of blur) to
-#: 140; the sharp originals given the same captures (six cases) and a sharp photo given a
-#: capture of 27 px blur scored 4.5, 0.7, 0.2, -3.7, -26, -43 and -46.
-_NO_BLUR_MARGIN = NO_BLUR_MARGIN
 #: Estimates whose squared prior z-scores sum beyond this quantile of the chi-square
 #: distribution (degrees of freedom: the prior-bound coordinates free) get a warning. On
 #: the 24-case benchmark, whose injected errors are at most one prior sd, the right
@@ -544,7 +539,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     unc = _uncertainties(x, fit.idx, Fm, sc, fit.ubar)
     gains = _gains_per_photo(fit.fine, theta, len(images))
     blur_gain = float(np.nanmin(gains)) if np.isfinite(gains).any() else float("nan")
-    weak = [k + 1 for k, g in enumerate(gains) if g < _NO_BLUR_MARGIN]
+    weak = [k + 1 for k, g in enumerate(gains) if g < NO_BLUR_MARGIN]
     if weak:
         which = ("the photo shows" if len(images) == 1 else
                  f"photo{'s' if len(weak) > 1 else ''} {', '.join(map(str, weak))} show"

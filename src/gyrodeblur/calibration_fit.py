@@ -14,7 +14,7 @@ import numpy as np
 
 from .axes import axes_to_letters
 from .bias_prior import PRIOR_BIAS, BiasPrior
-from .calibration_patches import select_patch_centres
+from .calibration_patches import patch_centres
 from .calibration_search import (X_NAMES, SearchSpace, line_fit, line_fit_minima, lm_refine,
                                  objective, psf_extent_and_path)
 from .errors import InputError
@@ -124,18 +124,14 @@ class CalibrationFit:
         probe = [search.tau_lo, 0.5 * search.tau_lo, 0.0, 0.5 * search.tau_hi, search.tau_hi]
         extent, path = psf_extent_and_path(photos, self.theta0, sorted(set(probe)))
         extent = max(extent, 2.0)
-        s_f = min(1.0, _TARGET_EXTENT / extent)
-        s_c = min(1.0, _COARSE_EXTENT / extent)
         small = min(min(ph.H, ph.W) for ph in photos)
-        P_f = int(min(_PATCH, 16 * (small * s_f // 16)))
-        P_c = int(min(_COARSE_PATCH, 16 * (small * s_c // 16)))
+        s_f, P_f = working_patch(extent, small)
+        s_c, P_c = working_patch(extent, small, _COARSE_EXTENT, _COARSE_PATCH)
         if P_f < 48 or P_c < 32:
             raise InputError(None, f"the photos are too small ({small} px) for the blur "
                                    f"(~{extent:.0f} px) to be calibrated")
         per = max(3, int(np.ceil(n_patches / len(photos))))
-        centres = []
-        for i, ph in enumerate(photos):
-            centres += [(i, x, y) for x, y in select_patch_centres(ph, per, int(round(P_f / s_f)))]
+        centres = patch_centres(photos, per, int(round(P_f / s_f)))
         if not centres:
             raise InputError(None, "no textured, unsaturated patch found for calibration")
         # a JPEG's quantisation empties the top of the spectrum, which would read as blur
@@ -219,11 +215,7 @@ class CalibrationFit:
         up to :data:`_TWIN_PATCH_FACTOR` times as many (made once, when first needed)."""
         if self._phase is None:
             photos, per, s_f, P_f, n_fine = self._phase_args
-            centres = []
-            for i, ph in enumerate(photos):
-                centres += [(i, x, y) for x, y in
-                            select_patch_centres(ph, _TWIN_PATCH_FACTOR * per,
-                                                 int(round(P_f / s_f)))]
+            centres = patch_centres(photos, _TWIN_PATCH_FACTOR * per, int(round(P_f / s_f)))
             self._phase = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
                                        n_samples=n_fine, envelope=False, band=self.band)
         return self._phase
@@ -489,6 +481,15 @@ class CalibrationFit:
             msg += f": {axes_to_letters(Mt)} taken"
             M = Mt
         return M, twin, msg, tie
+
+
+def working_patch(extent: float, small: int, target: float = _TARGET_EXTENT,
+                  largest: int = _PATCH) -> tuple[float, int]:
+    """The working scale at which PSFs of ``extent`` px span at most ``target`` px, and the
+    patch side there: ``largest`` px, or less (a multiple of 16) where the photos' shorter
+    side, ``small`` px, holds less."""
+    scale = min(1.0, target / extent)
+    return scale, int(min(largest, 16 * (small * scale // 16)))
 
 
 def in_twin_pair(M, N) -> bool:

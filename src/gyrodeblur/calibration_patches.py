@@ -15,7 +15,7 @@ from .capture import Capture
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, split_alpha
 from .tonecurve import get_transfer_curve
 
-__all__ = ["CalibrationPhoto", "select_patch_centres"]
+__all__ = ["CalibrationPhoto", "select_patch_centres", "patch_centres"]
 
 #: a grid cell whose best window has less texture than this fraction of the photo's best
 #: (smaller structure-tensor eigenvalue) gives no window: another cell's takes its place
@@ -158,3 +158,10 @@ def select_patch_centres(photo: CalibrationPhoto, n: int, footprint: int) -> lis
             pass
     found.sort()
     return [(x, y) for _, _, x, y in found[:n]]
+
+
+def patch_centres(photos, per_photo: int, footprint: int) -> list[tuple[int, float, float]]:
+    """``(photo index, x, y)`` of up to ``per_photo`` windows of each photo
+    (:func:`select_patch_centres`), photo by photo."""
+    return [(i, x, y) for i, ph in enumerate(photos)
+            for x, y in select_patch_centres(ph, per_photo, footprint)]

@@ -503,8 +503,7 @@ class PatchSpectra:
         S_blur = self.spectra(theta)
         H0 = self.otf(np.zeros((len(self.points), 1, 2)))
         S_none = self.model((H0.real ** 2 + H0.imag ** 2).astype(np.float32))
-        c_blur, c_none = (self._whittle(S * self.fast_envelope(S)) for S in (S_blur, S_none))
-        return c_none - c_blur
+        return self._gain_over(S_none, S_blur)
 
     def psf_gain_over_no_blur(self, psf: np.ndarray) -> np.ndarray:
         """Per patch, how much better (untempered nats) one pixel kernel ``psf`` explains
@@ -529,8 +528,13 @@ class PatchSpectra:
         h2 = np.repeat(((H.real ** 2 + H.imag ** 2)[None]).astype(np.float32), B, axis=0)
         S_psf = self.model(h2)
         S_none = self.model(np.ones_like(h2))
-        c_psf, c_none = (self._whittle(S * self.fast_envelope(S)) for S in (S_psf, S_none))
-        return c_none - c_psf
+        return self._gain_over(S_none, S_psf)
+
+    def _gain_over(self, S_none: np.ndarray, S_blur: np.ndarray) -> np.ndarray:
+        """Per patch, the Whittle cost of model spectra ``S_none`` minus that of ``S_blur``,
+        each with an envelope fitted to it (untempered nats)."""
+        c_blur, c_none = (self._whittle(S * self.fast_envelope(S)) for S in (S_blur, S_none))
+        return c_none - c_blur
 
     def sparsity(self, theta: Corrections) -> np.ndarray:
         """Per patch, normalised gradient sparsity ``|grad u|_1 / |grad u|_2`` (x sqrt n)
