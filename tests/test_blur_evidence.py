@@ -62,7 +62,14 @@ def test_deblur_blind_leaves_a_sharp_photo_as_it_is_and_says_why():
     assert np.array_equal(out, sharp)
     assert field.psfs[0][7, 7] == 1 and field.psfs[0].sum() == 1
     # asked not to check, it deconvolves with whatever it estimated
-    forced, _ = deblur_blind(sharp, 15, transfer="linear", check_blur=False)
+    from gyrodeblur.deblur import deblur_with_psfs
+    from gyrodeblur.tiling import patch_grid
+
+    forced, kept = deblur_blind(sharp, 15, transfer="linear", check_blur=False)
+    assert kept.psfs[0][7, 7] < 1
+    np.testing.assert_array_equal(
+        forced, deblur_with_psfs(sharp, patch_grid(sharp.shape[:2], (1, 1)), kept.psfs,
+                                 transfer="linear"))
     assert not np.array_equal(forced, sharp)
     with pytest.raises(TypeError, match="check_blur must be True or False"):
         deblur_blind(sharp, 15, check_blur="no")

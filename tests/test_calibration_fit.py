@@ -114,6 +114,29 @@ def test_a_twin_tie_the_phase_cannot_settle_is_unsettled():
 
 
 
+def _ratios_at(z: float, n: int = 9) -> np.ndarray:
+    """``n`` per-patch log ratios whose mean is exactly ``z`` standard errors of itself."""
+    e = np.linspace(-1.0, 1.0, n)
+    e = (e - e.mean()) / e.std(ddof=1)
+    return e + z / np.sqrt(n)
+
+
+def test_the_twin_rules_sit_at_two_and_three_standard_errors_and_two_nats():
+    """The thresholds themselves, just either side: the twin replaces the winner from two
+    standard errors of phase preference and under 2 nats of objective; a tie is unsettled
+    under three standard errors either way."""
+    assert _phase_prefers_twin(0.0, _ratios_at(-2.1))
+    assert not _phase_prefers_twin(0.0, _ratios_at(-1.9))
+    assert _phase_prefers_twin(1.9, _ratios_at(-5.0))
+    assert not _phase_prefers_twin(2.1, _ratios_at(-5.0))
+    for sign in (1.0, -1.0):
+        assert _unsettled_tie(0.0, _ratios_at(2.9 * sign))
+        assert not _unsettled_tie(0.0, _ratios_at(3.1 * sign))
+    assert _unsettled_tie(1.9, _ratios_at(0.5)) and _unsettled_tie(-1.9, _ratios_at(0.5))
+    assert not _unsettled_tie(2.1, _ratios_at(0.5))
+    assert not _unsettled_tie(-2.1, _ratios_at(0.5))
+
+
 def test_the_line_fit_finds_distinct_minima_best_first():
     """Two patches whose cost curves dip at two time shifts 0.2 s apart (a far basin
     leads the coarse grid): both minima come back, best first, each at its readout

@@ -57,8 +57,10 @@ class _Fit:
     def fail(self, name):
         raise InputError(name, "cannot be calibrated")
 
-    def die_in_a_worker(self, parent, k):
+    def die_in_a_worker(self, parent, k, marker=None):
         if os.getpid() != parent:
+            if marker is not None:
+                open(f"{marker}.{k}", "w").close()
             os._exit(1)                     # as if killed (out of memory)
         return k
 
@@ -89,12 +91,17 @@ def test_a_failing_step_raises_its_own_error_in_the_caller(workers):
 
 
 @forks
-def test_steps_a_dead_worker_left_undone_run_in_the_caller():
-    assert StepRunner(_Fit(), 2).map("die_in_a_worker", [(os.getpid(), 1), (os.getpid(), 2)]) == [1, 2]
+def test_steps_a_dead_worker_left_undone_run_in_the_caller(tmp_path):
+    marker = tmp_path / "died"
+    steps = [(os.getpid(), 1, marker), (os.getpid(), 2, marker)]
+    assert StepRunner(_Fit(), 2).map("die_in_a_worker", steps) == [1, 2]
+    assert list(tmp_path.glob("died.*"))            # a worker did start, and died
 
 
-def test_available_workers_is_bounded():
-    assert 1 <= available_workers() <= MAX_WORKERS
+@pytest.mark.parametrize("cpus, expected", [(1, 1), (3, 3), (8, MAX_WORKERS), (64, MAX_WORKERS)])
+def test_available_workers_is_the_cpus_allowed_up_to_the_cap(monkeypatch, cpus, expected):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cpus)), raising=False)
+    assert available_workers() == expected
 
 
 def test_workers_must_be_a_whole_number():
