@@ -938,10 +938,13 @@ def _shows_no_blur(image, psf, transfer) -> bool:
     if not gain < NO_BLUR_MARGIN:
         return False
     warnings.warn(f"the blind kernel explains the photo no better than no blur at all "
-                  f"({gain:+.1f} nats per 9 windows, under {NO_BLUR_MARGIN:g}): the photo shows "
-                  f"too little blur, or a blur that varies too much for one kernel, and "
-                  f"deconvolving would add ringing. It is returned as it is (--no-blur-check, "
-                  f"check_blur=False: deconvolve anyway)", stacklevel=3)
+                  f"({gain:+.1f} nats per 9 windows, under {NO_BLUR_MARGIN:g}), so it does not "
+                  f"fit the photo: the photo shows little blur, or its blur is not one "
+                  f"kernel's (a rolling shutter, a roll or a wide lens make it vary across "
+                  f"the frame), or the scene misled the estimate (text, a few straight "
+                  f"edges). Deconvolving with it would add ringing. It is returned as it is "
+                  f"(--no-blur-check, check_blur=False: deconvolve anyway; with the camera's "
+                  f"gyro log, --capture gives the blur at every pixel)", stacklevel=3)
     return True
 
 
