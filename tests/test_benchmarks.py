@@ -71,10 +71,15 @@ def test_blind_levin_quick(tmp_path):
     m = r["summary"]["mean"]
     assert len(r["per_case"]) == 8 and out.with_suffix(".png").stat().st_size > 5_000
     assert m["psnr_oracle"] > m["psnr_blurred"] + 5
-    assert m["psnr_blurred"] < m["psnr_blind"] < m["psnr_oracle"]
-    assert m["kernel_similarity"] > 0.5            # the estimates resemble the kernels
+    # (20.66 dB against the input's 17.75, kernel similarity 0.71, at session 38's code; a
+    # delta scores 0.48 against these kernels, a photo-blind round Gaussian passed the
+    # looser bounds these replace)
+    assert m["psnr_blurred"] + 1.5 < m["psnr_blind"] < m["psnr_oracle"]
+    assert m["kernel_similarity"] > 0.62           # the estimates resemble the kernels
     # the blind check against no blur passes every true kernel (the photo shows its blur)
+    # and most estimates
     assert r["summary"]["check"]["true_kernels_kept"] == 8
+    assert r["summary"]["check"]["kept"] >= 6
     assert "The check against no blur" in out.with_suffix(".md").read_text()
 
 

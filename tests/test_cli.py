@@ -242,11 +242,16 @@ def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
     assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9",
                  "--no-blur-check", "-o", str(d / "forced.png"), "--quiet"]) == 0
     assert "no better than no blur" not in capsys.readouterr().err
+    # told not to check, it deconvolves with the kernel it found
+    forced = read_photo(d / "forced.png").pixels
+    assert np.abs(forced - read_photo(d / "sharp.jpg").pixels).max() > 4 / 255
     assert "--kernel-size" in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
                                           "8", "-o", str(d / "b2.png")], capsys)
     assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9", "--grid",
                  "1x2", "-o", str(d / "blind2.png"), "--quiet"]) == 0
-    assert "mode blind 1x2" in capsys.readouterr().out
+    got = capsys.readouterr()
+    assert "mode blind 1x2" in got.out and "no better than no blur" in got.err
+    assert np.abs(read_photo(d / "blind2.png").pixels - kept).max() <= 1 / 255
     for grid, problem in (("auto", "with --blind give RxC"), ("6x6", "too small for a 21 px")):
         assert problem in _run_error(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size",
                                       "21", "--grid", grid, "-o", str(d / "b3.png")], capsys)

@@ -96,6 +96,7 @@ def test_the_predicted_motion_follows_the_gyro():
     theta = Corrections(axes=np.eye(3))
     pred = reg.predict(theta, 0, 1)
     assert pred[0] == pytest.approx(expected, abs=0.2) and abs(pred[1]) < 0.2, (pred, expected)
+    assert len(reg.pairs) == 1                                  # the residual is measured
     assert np.all(np.abs(reg.residuals(theta)) < 0.5)
 
 
