@@ -783,3 +783,18 @@ def test_negative_lists_need_no_equals_sign_and_calibrate_writes_json_only(captu
                       "-o", str(d / "x.png")], capsys)
     assert "x.png: the corrected capture description is JSON" in msg
     assert not (d / "x.png").exists()
+
+
+def test_each_command_shows_its_own_warnings_and_leaves_the_hook(capture_dir, capsys):
+    """Two runs in one process (a batch script calling main) each show their warning,
+    even when it is word for word the same, and main leaves warnings.showwarning as it
+    found it."""
+    import warnings
+
+    hook = warnings.showwarning
+    d = capture_dir
+    for k in range(2):
+        assert main(["deblur", str(d / "sharp.jpg"), "--blind", "--kernel-size", "9",
+                     "-o", str(d / f"same{k}.png"), "--quiet"]) == 0
+        assert "gyrodeblur: warning: the blind kernel explains" in capsys.readouterr().err
+    assert warnings.showwarning is hook

@@ -678,10 +678,12 @@ def main(argv: list[str] | None = None) -> int:
     def warn(message, category, filename, lineno, file=None, line=None):
         sys.stderr.write(f"gyrodeblur: warning: {message}\n")
 
-    warnings.showwarning = warn
     previous = _on_sigterm(_terminate)
     try:
-        args.func(args, say)
+        with warnings.catch_warnings():     # this command's warnings, each shown once
+            warnings.simplefilter("default")    # (a new filter forgets those shown before)
+            warnings.showwarning = warn
+            args.func(args, say)
     except InputError as exc:
         if exc.source is None and _photos(args):     # a problem of the photo(s) themselves
             exc = InputError(_photos(args), exc.problem)
