@@ -680,8 +680,10 @@ def main(argv: list[str] | None = None) -> int:
 
     previous = _on_sigterm(_terminate)
     try:
-        with warnings.catch_warnings():     # this command's warnings, each shown once
-            warnings.simplefilter("default")    # (a new filter forgets those shown before)
+        with warnings.catch_warnings():
+            # each command shows its own warnings: a filter added (last, so the user's -W
+            # and PYTHONWARNINGS still rule) makes Python forget those shown before
+            warnings.simplefilter("default", append=True)
             warnings.showwarning = warn
             args.func(args, say)
     except InputError as exc:
