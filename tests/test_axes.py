@@ -34,3 +34,12 @@ def test_refuses_non_rotations(spec, why):
 def test_matrix_accepted():
     m = [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]
     assert np.array_equal(parse_axes(m), np.asarray(m, float))
+
+
+def test_named_mappings_are_the_rotations_their_names_say():
+    """``android-back-camera``: Android device axes (x right, y up, z out of the screen) to
+    the back camera's (x right, y down, z forward): x kept, y and z negated."""
+    np.testing.assert_array_equal(parse_axes("android-back-camera") @ [1.0, 2.0, 3.0],
+                                  [1.0, -2.0, -3.0])
+    np.testing.assert_array_equal(parse_axes("android-back-camera"), parse_axes("Xyz"))
+    np.testing.assert_array_equal(parse_axes("identity"), np.eye(3))

@@ -34,6 +34,16 @@ def test_load_and_round_trip(capture_files):
     again = load_capture(d / "again.json")
     assert again.to_dict() == cap.to_dict()
     assert json.loads((d / "again.json").read_text())["gyro"]["path"] == "gyro.gcsv"
+    # and what the defaults would hide: a mapping, a time offset and a bias of its own
+    from gyrodeblur.axes import axes_to_letters, parse_axes
+
+    varied = cap.replace(axes=parse_axes("YxZ"), time_offset=0.0123,
+                         bias=np.array([0.01, -0.02, 0.005]))
+    varied.save(d / "varied.json")
+    back = load_capture(d / "varied.json")
+    assert axes_to_letters(back.axes) == "YxZ" and back.time_offset == 0.0123
+    np.testing.assert_array_equal(back.bias, [0.01, -0.02, 0.005])
+    assert back.to_dict() == varied.to_dict()
 
 
 def test_overrides_and_offset(capture_files):
@@ -116,8 +126,9 @@ def test_bad_captures(capture_files, change, match):
     d, doc = capture_files
     doc.update(change)
     (d / "cap.json").write_text(json.dumps(doc))
-    with pytest.raises(InputError, match=match):
+    with pytest.raises(InputError, match=match) as e:
         load_capture(d / "cap.json")
+    assert any(name in str(e.value) for name in ("cap.json", "gyro.gcsv", "missing.gcsv"))
 
 
 def test_not_json(tmp_path):

@@ -205,13 +205,19 @@ def test_csv_units_in_brackets(tmp_path, trace):
 def test_csv_rate_columns_the_names_contradict_are_refused(tmp_path, trace, header, match):
     p = tmp_path / "odd.csv"
     n = len(header.split(",")) - 1
-    p.write_text(_csv_text(header, trace.t, [trace.omega[:, 0]] * n))
+    # the last three columns hold the x, y and z rates, the others something else
+    p.write_text(_csv_text(header, trace.t, [trace.omega[:, 0] + 7.0] * (n - 3)
+                           + list(trace.omega.T)))
     with pytest.raises(InputError, match=match) as e:
         read_gyro_log(p, "csv")
     assert "odd.csv" in str(e.value) and "gyro.rate_columns" in str(e.value)
-    # naming the columns settles it
-    log = read_csv_log(p, rate_columns=header.split(",")[-3:])
-    assert log.omega.shape == (len(trace.t), 3)
+    # naming the columns settles it, each as the axis it is named for
+    names = header.split(",")
+    log = read_csv_log(p, rate_columns=names[-3:])
+    np.testing.assert_allclose(log.omega, trace.omega, atol=1e-9)
+    # named in another order, the columns are read in that order
+    log = read_csv_log(p, rate_columns=names[-3:][::-1])
+    np.testing.assert_allclose(log.omega, trace.omega[:, ::-1], atol=1e-9)
 
 
 def test_shared_handheld_log_loads(shared_data):
@@ -279,7 +285,7 @@ def test_bad_gcsv_scales_and_values(tmp_path, header, row, match):
 
 
 def test_missing_file_and_unknown_format(tmp_path):
-    with pytest.raises(InputError, match="not found"):
+    with pytest.raises(InputError, match="nope.csv.*not found"):
         read_gyro_log(tmp_path / "nope.csv")
     p = tmp_path / "x.csv"
     p.write_text("t_s,x,y,z\n0,0,0,0\n1,0,0,0\n")
@@ -291,9 +297,9 @@ def test_coverage_and_gaps():
     t = np.concatenate([np.arange(0, 0.1, 0.005), np.arange(0.2, 0.3, 0.005)])
     log = GyroLog(t, np.zeros((t.size, 3)), "g.csv")
     check_coverage(log, 0.01, 0.05)
-    with pytest.raises(InputError, match="gap of"):
+    with pytest.raises(InputError, match="g.csv.*gap of"):
         check_coverage(log, 0.05, 0.25)
-    with pytest.raises(InputError, match="covers"):
+    with pytest.raises(InputError, match="g.csv.*covers"):
         check_coverage(log, 0.25, 0.4)
 
 
