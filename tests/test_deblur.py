@@ -10,7 +10,7 @@ from gyrodeblur.deblur import auto_grid, deblur, plan_psf_field
 from gyrodeblur.gyrolog import GyroLog, read_gyro_log
 from gyrodeblur.imageio import read_photo
 from gyrodeblur.metrics import psnr
-from gyrodeblur.psf import psf_variation
+from gyrodeblur.psf import psf_variation, render_psf
 from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
 from gyrodeblur.tiling import patch_grid
 from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
@@ -65,8 +65,9 @@ def test_variant_improves_every_case_and_beats_invariant_on_roll(cases):
         pi = psnr(sharp, deblur(blurred, cap, method="wiener", mode="invariant"), b)
         gains_v.append(pv - p0)
         gains_i.append(pi - p0)
-        assert pv > p0 + 0.5, f"{name}: variant {pv:.2f} dB vs blurred {p0:.2f} dB"
-    assert np.mean(gains_v) > np.mean(gains_i), (gains_v, gains_i)
+        # (7-14 dB at session 38's code; with the rolling shutter ignored 0.4-5.6 dB)
+        assert pv > p0 + 4.0, f"{name}: variant {pv:.2f} dB vs blurred {p0:.2f} dB"
+    assert np.mean(gains_v) > np.mean(gains_i) + 4.0, (gains_v, gains_i)
 
 
 def test_flat_grey_stays_flat_with_any_field(cases):
@@ -79,9 +80,16 @@ def test_flat_grey_stays_flat_with_any_field(cases):
 
 def test_invariant_mode_uses_principal_point_and_middle_row(cases):
     _, sharp, _, cap = cases[0]
-    patches, field, _ = plan_psf_field(cap, sharp.shape[:2], mode="invariant")
-    assert len(patches) == 1 and patches[0].shape == sharp.shape[:2]
-    assert np.allclose(field.points[0], [cap.camera.cx, cap.camera.cy])
+    H, W = sharp.shape[:2]
+    patches, field, _ = plan_psf_field(cap, (H, W), mode="invariant")
+    assert len(patches) == 1 and patches[0].shape == (H, W)
+    scaled = cap.scaled_to(W, H)
+    cam = scaled.camera
+    assert np.allclose(field.points[0], [cam.cx, cam.cy])
+    np.testing.assert_array_equal(field.psfs[0], render_psf(scaled, cam.cx, cam.cy,
+                                                            row=(H - 1) / 2))
+    corner = render_psf(scaled, 0, 0)
+    assert corner.shape != field.psfs[0].shape or not np.allclose(corner, field.psfs[0])
 
 
 def test_grid_coarsens_for_huge_psfs():
@@ -170,6 +178,12 @@ def test_output_matches_sharp_geometry(cases):
     out = deblur(blurred, cap, method="wiener")
     shift, _, _ = phase_cross_correlation(sharp.mean(2), out.mean(2), upsample_factor=10)
     assert np.abs(shift).max() <= 0.5
+    # and so is each band of rows, which a rolling shutter left unmodelled would skew
+    H = sharp.shape[0]
+    for rows in (slice(0, H // 3), slice(2 * H // 3, H)):
+        shift, _, _ = phase_cross_correlation(sharp[rows].mean(2), out[rows].mean(2),
+                                              upsample_factor=10)
+        assert np.abs(shift).max() <= 0.5, (rows, shift)
 
 
 def _reference_warp(image, displacement):

@@ -27,7 +27,7 @@ def _centroid(psf):
 def test_zero_motion_gives_delta(make_capture):
     cap = make_capture([0, 0, 0])
     p = render_psf(cap, 100, 80)
-    assert p.shape[0] % 2 == 1 and p.shape == p[::-1].shape
+    assert p.shape[0] == p.shape[1] and p.shape[0] % 2 == 1
     assert np.isclose(p.sum(), 1)
     assert p[p.shape[0] // 2, p.shape[1] // 2] > 0.999
 
@@ -48,14 +48,21 @@ def test_yaw_streak_length_and_direction(make_capture):
     assert np.isclose(p.sum(), 1)
 
 
-def test_yaw_streak_length_exact_by_moments(make_capture):
-    # first moment of a uniform streak of length L is -L/2; tan() makes it slightly non-uniform
+def test_yaw_streak_first_moment_is_exact(make_capture):
+    """The content at the principal point moves by ``-f tan(w t)``: its mean over the
+    exposure, ``f ln(cos(w T)) / (w T)``, is the PSF's first moment (a uniform streak's
+    ``-L/2`` only to first order: at 2 rad/s the two differ by 0.02 px). The gather kernel
+    is the motion seen from the pixel the light lands on, 20 px off the axis, which
+    moves the moment by another 0.01 px."""
     for rate in (0.5, 2.0):
         cap = make_capture([0, rate, 0], f=500.0, exposure=0.04)
         p = render_psf(cap, cap.camera.cx, cap.camera.cy)
         x0, _, _, _ = _support(p)
         L = 500 * np.tan(rate * 0.04)
         assert abs(-x0 - L) < 1.0        # the splat adds < 1 px at the far end
+        mx, my = _centroid(p)
+        assert abs(mx - 500 * np.log(np.cos(rate * 0.04)) / (rate * 0.04)) < 0.015
+        assert abs(my) < 1e-3
 
 
 def test_pitch_moves_content_vertically(make_capture):
@@ -82,6 +89,11 @@ def test_roll_arcs_grow_with_radius(make_capture):
     for r, L in zip((40, 80, 160), lengths):
         assert abs(L - r * ang) < 1.5
     assert lengths[0] < lengths[1] < lengths[2]
+    # which way: the camera turns its x axis towards its y axis (right-hand rule about z
+    # forward), so the scene turns the other way, and content right of centre moves up
+    # by half the arc on average (160 px x 0.06 rad / 2 = 4.8 px)
+    mx, my = _centroid(render_psf(cap, cx + 160, cy))
+    assert abs(my + 160 * ang / 2) < 0.2 and abs(mx) < 0.2
 
 
 def test_rolling_shutter_changes_with_row(make_capture):
@@ -103,13 +115,35 @@ def test_rolling_shutter_changes_with_row(make_capture):
     assert abs(shift - f * np.tan(w_y * 0.03 * 10 / 240)) < 0.05
 
 
+def test_row_y_starts_y_over_h_of_the_readout_later():
+    """The timing to within a fraction of a row, on a fast yaw (1000 px, 2 rad/s, 50 ms
+    readout: a row's delay moves a trace by 0.4 px): row 0 is exposed with the global
+    shutter's timing, and the middle row's trace is the stretch of ``-f tan(w t)`` from
+    ``120/240`` of the readout on. Timing rows by ``(y + 0.5) / H`` or ``y / (H - 1)``
+    would be 0.21 px off on either row."""
+    from conftest import constant_rate_capture
+
+    f, w, T, readout, H = 1000.0, 2.0, 0.03, 0.05, 240
+
+    def mean_x(d):                     # mean of f tan(w t) over [d, d + T]
+        return f * np.log(np.cos(w * d) / np.cos(w * (d + T))) / (w * T)
+
+    glob = constant_rate_capture([0, w, 0], f=f, exposure=T, readout=0.0)
+    roll = constant_rate_capture([0, w, 0], f=f, exposure=T, readout=readout)
+    x = glob.camera.cx
+    for y in (0, 120):
+        shift = _centroid(render_psf(glob, x, y))[0] - _centroid(render_psf(roll, x, y))[0]
+        assert abs(shift - (mean_x(y / H * readout) - mean_x(0.0))) < 0.05, (y, shift)
+
+
 def test_field_and_splat_properties(make_capture):
     cap = make_capture([0.2, -0.5, 1.0], readout=0.02)
     pts = [(10, 10), (300, 20), (160, 120), (20, 230)]
     field = psf_field(cap, pts)
     assert len(field.psfs) == 4
-    for p in field.psfs:
+    for p, (x, y) in zip(field.psfs, pts):
         assert p.dtype == np.float32 and p.shape[0] % 2 == 1 and np.isclose(p.sum(), 1, atol=1e-5)
+        np.testing.assert_array_equal(p, render_psf(cap, x, y))     # each at its (x, y)
     s = splat(np.array([[0.25, -0.5]]))
     r = s.shape[0] // 2
     assert np.isclose(s[r, r], 0.75 * 0.5) and np.isclose(s[r - 1, r + 1], 0.25 * 0.5)
