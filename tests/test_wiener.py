@@ -91,7 +91,7 @@ def test_flat_image_stays_flat(taper):
 
 
 def test_dc_bin_of_filter_is_inverse_gain():
-    psf = _line_psf([(0, t) for t in range(-3, 4)], 9)
+    psf = _line_psf([(0.5 * t, t) for t in range(0, 4)], 9)      # one-sided: H is complex
     filt = wiener_filter(psf_to_otf(psf, (32, 32)), 0.01)
     assert filt.dtype == np.complex64
     assert filt[0, 0] == pytest.approx(1.0, abs=1e-6)
@@ -104,6 +104,8 @@ def test_dc_bin_of_filter_is_inverse_gain():
 @pytest.mark.parametrize("shifts", [
     [(0, t) for t in range(-4, 5)],                              # horizontal, integer
     [(0.45 * t, 0.9 * t) for t in np.linspace(-5, 5, 21)],       # diagonal, sub-pixel
+    [(0, t) for t in range(0, 7)],                               # one-sided stroke
+    [(2.5 * np.sin(t), 0.8 * t) for t in np.linspace(0, 6, 25)],  # curved, one-sided
 ])
 def test_restores_better_than_blurred(shifts):
     sharp = _texture((96, 128, 3), seed=1)
@@ -112,6 +114,18 @@ def test_restores_better_than_blurred(shifts):
     out = wiener_deconvolve(blurred, psf, phi=0.002)
     gain = _psnr(out, sharp, border=8) - _psnr(blurred, sharp, border=8)
     assert gain > 3.0, gain
+
+
+def test_a_one_sided_blur_is_undone_only_the_right_way_round():
+    """The kernel turned 180 degrees (convolution taken for correlation, or the filter's
+    conjugate dropped) makes a one-sided stroke worse than the blurred photo."""
+    sharp = _texture((96, 128, 3), seed=1)
+    shifts = [(0, t) for t in range(0, 7)]
+    blurred = _shift_blur(sharp, shifts)
+    psf = _line_psf(shifts, 15)
+    right = _psnr(wiener_deconvolve(blurred, psf, phi=0.002), sharp, border=8)
+    turned = _psnr(wiener_deconvolve(blurred, psf[::-1, ::-1].copy(), phi=0.002), sharp, border=8)
+    assert right > _psnr(blurred, sharp, border=8) + 5 > turned + 5, (right, turned)
 
 
 def test_taper_reduces_border_error():
