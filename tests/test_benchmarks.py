@@ -41,7 +41,10 @@ def test_noise_sensitivity_quick(tmp_path):
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert r["psnr_exact_gyro"] > r["psnr_blurred"] + 3
     assert math.isfinite(r["psnr_drop_at_typical_noise_db"])
-    assert abs(r["psnr_drop_at_typical_noise_db"]) < 3
+    assert 0 < r["psnr_drop_at_typical_noise_db"] < 0.5        # session 38: 0.07 dB
+    b = r["panels"]["bias"]                                  # 0.05 rad/s: 29.37 -> 24.27 dB
+    assert b["levels"] == [0.0, 0.05]
+    assert b["psnr"][1]["mean"] < b["psnr"][0]["mean"] - 2
     g = r["panels"]["gyro_noise"]
     assert g["levels"] == [0.0, 0.007] and g["psnr"][1]["n"] == 2
     assert set(r["panels"]) == {"gyro_noise", "bias", "time_offset", "readout", "focal"}
@@ -104,6 +107,11 @@ def test_compare_methods_quick(tmp_path):
         if name != "blurred":
             assert row["seconds_per_mp"] > 0
     assert table["wiener-variant"]["psnr_mean"] > table["blurred"]["psnr_mean"] + 3
+    # the gyro methods deblur (session 38: blurred 19.30, wiener-variant 33.92, wiener-aligned
+    # 34.38, sparse 36.80, sparse-patches 36.33 dB), the default best of all by a margin
+    for name in ("wiener-variant", "wiener-aligned", "sparse", "sparse-patches"):
+        assert table[name]["psnr_mean"] > table["blurred"]["psnr_mean"] + 5, name
+    assert table["sparse"]["psnr_mean"] > table["wiener-variant"]["psnr_mean"] + 1
     md = out.with_suffix(".md").read_text()
     assert "| wiener-variant |" in md and "| skimage-rl |" in md
 

@@ -58,6 +58,7 @@ def test_case_does_not_depend_on_the_other_photos(cases):
 def test_cases_are_sane(cases):
     assert len(cases) == 4
     assert len({c.name for c in cases}) == 4
+    assert len({c.meta["window_start"] for c in cases}) == 4       # each its own shake
     for c in cases:
         assert isinstance(c, Case)
         h, w = c.sharp.shape[:2]

@@ -32,8 +32,8 @@ def test_within_20_percent_on_a_textured_image(sigma, channels):
     img = _textured(rng, shape)
     noisy = img + rng.normal(0, sigma, shape).astype(np.float32)
     est = estimate_noise_sigma(noisy)
-    # measured: +17 % at 0.005 (the texture's finest scale leaks in), +1..5 % above
-    assert est == pytest.approx(sigma, rel=0.2)
+    # measured at session 38's code: +0.2 to +4.8 %
+    assert est == pytest.approx(sigma, rel=0.08)
 
 
 def test_sees_8bit_noise_smoothly():
@@ -61,9 +61,9 @@ def test_units_follow_the_image_and_flat_is_zero():
 def test_channel_average():
     rng = np.random.default_rng(3)
     img = np.stack([_textured(rng, (128, 128))] * 3, axis=2)
-    sig = np.array([0.01, 0.02, 0.03], np.float32)
+    sig = np.array([0.01, 0.01, 0.04], np.float32)     # mean 0.02; median 0.01, rms 0.0245
     noisy = img + rng.normal(0, 1, img.shape).astype(np.float32) * sig
-    assert estimate_noise_sigma(noisy) == pytest.approx(sig.mean(), rel=0.1)
+    assert estimate_noise_sigma(noisy) == pytest.approx(sig.mean(), rel=0.05)
 
 
 def test_large_images_are_subsampled():
@@ -72,13 +72,18 @@ def test_large_images_are_subsampled():
     full = estimate_noise_sigma(img, max_pixels=10 ** 7)
     sub = estimate_noise_sigma(img, max_pixels=60_000)
     assert sub == pytest.approx(full, rel=0.1)
+    from gyrodeblur.noise import _subsample
+    assert _subsample(img, 60_000).size < 0.3 * img.size        # it did measure less
 
 
 @pytest.mark.parametrize("bad", [np.zeros(10), np.zeros((4, 40)), np.zeros((2, 8, 8, 3))])
 def test_bad_input(bad):
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="image of at least 8x8"):
         estimate_noise_sigma(bad)
-    with pytest.raises(ValueError):
+
+
+def test_bad_edge_quantile():
+    with pytest.raises(ValueError, match="edge_quantile must be in"):
         estimate_noise_sigma(np.zeros((16, 16)), edge_quantile=0)
 
 
