@@ -43,7 +43,33 @@ def test_simulate_then_deblur_keeps_metadata(capture_dir, capsys):
     assert res.icc_profile == src.icc_profile and res.exif is not None
     assert Image.open(d / "out.jpg").getexif()[0x010F] == "TestCam"
     assert res.pixels.shape == src.pixels.shape
-    assert (d / "field.png").exists()
+    # the photo is deblurred (the 8-bit sRGB PSNR of the chapter, 10 px border)
+    from gyrodeblur.metrics import psnr
+
+    sharp, blurred = src.pixels, read_photo(d / "blurred.jpg").pixels
+    gain = psnr(sharp, res.pixels, 10) - psnr(sharp, blurred, 10)
+    assert gain > 8.0, gain                                  # 13.8 dB at session 38's code
+    # the field's picture: one PSF per patch of the 3 x 4 grid, drawn
+    field = np.asarray(Image.open(d / "field.png").convert("L"), np.float32)
+    assert field.std() > 5 and field.max() > 100
+    # --method and --mode reach the deblur: each its own result, each sharper than the input
+    outputs = {}
+    for opts, name in (([], "default.png"), (["--method", "wiener"], "wiener.png"),
+                       (["--mode", "invariant"], "invariant.png")):
+        assert main(["deblur", str(d / "blurred.jpg"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / name), *opts]) == 0
+        other = outputs[name] = read_photo(d / name).pixels
+        if not opts:
+            continue
+        assert np.abs(other - outputs["default.png"]).max() > 4 / 255, opts
+        if opts[0] == "--method":        # the library's Wiener result, to the 8-bit level
+            from gyrodeblur.capture import load_capture
+            from gyrodeblur.deblur import deblur
+
+            lib = deblur(blurred, load_capture(d / "cap.json"), method="wiener")
+            assert np.abs(other - lib).max() <= 1 / 255 + 1e-6
+        assert psnr(sharp, other, 10) > psnr(sharp, blurred, 10) + 5.0, opts   # 9.9, 13.1
+    assert "method wiener" in capsys.readouterr().out
 
 
 def test_simulate_samples_by_cubic_spline_unless_told_bilinear(capture_dir, capsys):
@@ -72,11 +98,23 @@ def test_simulate_samples_by_cubic_spline_unless_told_bilinear(capture_dir, caps
 
 
 def test_psf_commands(capture_dir):
+    from gyrodeblur.capture import load_capture
+    from gyrodeblur.psf import render_psf
+
     d = capture_dir
     assert main(["psf", "--capture", str(d / "cap.json"), "--at", "10,20", "-o", str(d / "p.npy")]) == 0
     p = np.load(d / "p.npy")
     assert p.shape[0] % 2 == 1 and abs(p.sum() - 1) < 1e-5
+    cap = load_capture(d / "cap.json")          # the PSF at (10, 20), not at the centre
+    np.testing.assert_allclose(p, render_psf(cap, 10, 20), atol=1e-7)
+    centre = render_psf(cap, cap.camera.cx, cap.camera.cy)
+    assert p.shape != centre.shape or np.abs(p - centre).max() > 0.01
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "10,20", "-o", str(d / "p.png")]) == 0
+    drawn = np.asarray(Image.open(d / "p.png").convert("L"), np.float32)
+    assert drawn.std() > 5 and drawn.max() > 100          # a picture of the PSF, not blank
     assert main(["psf", "--capture", str(d / "cap.json"), "--grid", "3x4", "-o", str(d / "f.png")]) == 0
+    drawn = np.asarray(Image.open(d / "f.png").convert("L"), np.float32)
+    assert drawn.std() > 5 and drawn.max() > 100
     assert main(["psf", "--capture", str(d / "cap.json"), "--grid", "3x4", "-o", str(d / "f.npy")]) == 0
     assert np.load(d / "f.npy").shape[0] == 12
 
@@ -177,23 +215,27 @@ def test_bad_inputs_exit_2_and_write_nothing(capture_dir, capsys):
     cap = str(d / "cap.json")
     (d / "notimage.jpg").write_text("hello")
     write_photo(d / "square.png", np.zeros((100, 100, 3), np.float32))
-    before = sorted(p.name for p in d.iterdir())
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
     assert "notimage.jpg" in _run_error(["deblur", str(d / "notimage.jpg"), "--capture", cap,
                                          "-o", str(d / "o.png")], capsys)
-    assert "aspect ratio" in _run_error(["deblur", str(d / "square.png"), "--capture", cap,
-                                         "-o", str(d / "o.png")], capsys)
-    assert "does not exist" in _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap,
-                                           "-o", str(d / "missing" / "o.png")], capsys)
+    msg = _run_error(["deblur", str(d / "square.png"), "--capture", cap, "-o", str(d / "o.png")],
+                     capsys)
+    assert "square.png" in msg and "aspect ratio" in msg
+    msg = _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap,
+                      "-o", str(d / "missing" / "o.png")], capsys)
+    assert "missing" in msg and "does not exist" in msg
     msg = _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap, "--exposure-start", "70",
                       "-o", str(d / "o.png")], capsys)
     assert "gyro.gcsv" in msg and "covers" in msg
-    assert "exists" in _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap,
-                                   "-o", str(d / "square.png")], capsys)
-    assert "input photo" in _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap,
-                                        "-o", str(d / "sharp.jpg"), "--overwrite"], capsys)
+    msg = _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap,
+                      "-o", str(d / "square.png")], capsys)
+    assert "square.png" in msg and "exists" in msg
+    msg = _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap,
+                      "-o", str(d / "sharp.jpg"), "--overwrite"], capsys)
+    assert "sharp.jpg" in msg and "input photo" in msg
     assert "--grid" in _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap, "--grid", "0x3",
                                    "-o", str(d / "o.png")], capsys)
-    assert sorted(p.name for p in d.iterdir()) == before
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before    # nothing written or changed
 
 
 @pytest.mark.parametrize("content,match", [
@@ -774,8 +816,16 @@ def test_negative_lists_need_no_equals_sign_and_calibrate_writes_json_only(captu
     assert main(["psf", "--capture", str(d / "cap.json"), "--at", "100,80", "-o", str(out),
                  "--overwrite"]) == 0
     assert not np.allclose(with_bias, np.load(out))       # the bias was read, and applied
+    no_bias = np.load(out)
     assert main(["psf", "--capture", str(d / "cap.json"), "--at", "100,80", "-o", str(out),
                  "--overwrite", "--time-offset", "-4e-3"]) == 0   # an exponent, negative
+    from gyrodeblur.capture import load_capture
+    from gyrodeblur.psf import render_psf
+
+    cap = load_capture(d / "cap.json")
+    np.testing.assert_allclose(np.load(out), render_psf(cap.replace(time_offset=-4e-3), 100, 80),
+                               atol=1e-7)                 # read as -4 ms, and applied
+    assert no_bias.shape != np.load(out).shape or not np.allclose(no_bias, np.load(out))
     msg = _run_error(["psf", "--capture", str(d / "cap.json"), "--at", "-1,-1", "-o",
                       str(d / "q.npy")], capsys)
     assert "--at: (-1, -1) is not a pixel" in msg
@@ -798,3 +848,20 @@ def test_each_command_shows_its_own_warnings_and_leaves_the_hook(capture_dir, ca
                      "-o", str(d / f"same{k}.png"), "--quiet"]) == 0
         assert "gyrodeblur: warning: the blind kernel explains" in capsys.readouterr().err
     assert warnings.showwarning is hook
+
+
+
+def test_the_demo_runs_to_the_end(tmp_path, capsys):
+    """The README's first command: every file written, the deblurred photo sharper."""
+    import json as _json
+
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    for name in ("blurred.png", "deblurred.png", "psf_field.png", "comparison.png",
+                 "capture.json"):
+        assert (out / name).stat().st_size > 0, name
+    blurred, deblurred = (float(line.split("PSNR")[1].split("dB")[0])
+                          for line in text.splitlines()
+                          if line.strip().startswith(("blurred ", "deblurred ")))
+    assert deblurred > blurred + 8, text                  # 14.9 -> 28.7 dB at session 38
