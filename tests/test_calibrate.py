@@ -944,3 +944,21 @@ def test_a_straight_blur_leaves_the_mirror_twin_uncertain(case):
     assert any("axis mapping is uncertain" in n and f"mirror twin {other}" in n
                for n in res.notes), res.notes
     assert format_estimates(res.estimates)[-1].endswith("uncertain)")
+
+
+def test_cli_a_photo_that_needs_turning_is_told_so_whatever_the_others_rotation(cli_dir,
+                                                                                capsys):
+    """Two portrait exports, only the second said to be turned: the first is told it looks
+    turned by 90 degrees (its own rotation is 0), not to leave the option out."""
+    from gyrodeblur.imageio import read_photo, write_photo
+
+    d = cli_dir
+    first = read_photo(d / "blurred.png").pixels
+    write_photo(d / "portrait1.png", np.rot90(first, -1), bit_depth=8)
+    noise = np.random.default_rng(9).normal(0, 2 / 255, first.shape).astype(np.float32)
+    write_photo(d / "portrait2.png", np.rot90(np.clip(first + noise, 0, 1), -1), bit_depth=8)
+    rc = main(["calibrate", str(d / "portrait1.png"), str(d / "portrait2.png"), "--capture",
+               str(d / "cap.json"), "--photo-rotation", "0,90", "-o", str(d / "out" / "p.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "portrait1.png" in err and "turned by 90 degrees" in err, err
+    assert "leave the option out" not in err

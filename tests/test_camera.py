@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from gyrodeblur.camera import Camera
+from gyrodeblur.camera import MAX_SIDE, Camera
+from gyrodeblur.errors import InputError
 from gyrodeblur.orientation import rotvec_to_matrix
 
 
@@ -23,3 +24,14 @@ def test_a_yaw_to_the_right_moves_the_scene_left_by_f_tan_angle():
     R = rotvec_to_matrix(np.array([0.0, 0.05, 0.0]))
     moved = cam.project(R.T @ cam.rays(cam.cx, cam.cy))
     assert moved == pytest.approx([cam.cx - 700.0 * np.tan(0.05), cam.cy])
+
+
+@pytest.mark.parametrize("width, problem", [(10 ** 20, "is not a sensor's"),
+                                            (10 ** 400, "whole number of pixels"),
+                                            (MAX_SIDE + 1, "is not a sensor's")])
+def test_an_absurd_image_size_is_refused_not_overflowed(width, problem):
+    """A width from a bad JSON (1e20 read as a whole number) is an InputError, not a
+    TypeError from numpy on an integer beyond float64."""
+    with pytest.raises(InputError, match=problem):
+        Camera(100.0, 100.0, 50.0, 40.0, width, 80)
+    assert Camera(100.0, 100.0, 50.0, 40.0, MAX_SIDE, 80).width == MAX_SIDE

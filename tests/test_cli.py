@@ -865,3 +865,18 @@ def test_the_demo_runs_to_the_end(tmp_path, capsys):
                           for line in text.splitlines()
                           if line.strip().startswith(("blurred ", "deblurred ")))
     assert deblurred > blurred + 8, text                  # 14.9 -> 28.7 dB at session 38
+
+
+def test_overlap_with_one_patch_is_refused_however_the_grid_is_spelt(capture_dir, capsys):
+    """One patch has nothing to overlap: --overlap is refused rather than ignored, with or
+    without --blind, for 1x1, 1X1 and 1,1 alike."""
+    d = capture_dir
+    base = ["deblur", str(d / "sharp.jpg"), "-o", str(d / "o.png")]
+    for grid in ("1x1", "1X1", "1,1"):
+        msg = _run_error(base + ["--capture", str(d / "cap.json"), "--grid", grid,
+                                 "--overlap", "0.4"], capsys)
+        assert "--overlap" in msg and "one patch" in msg, (grid, msg)
+        msg = _run_error(base + ["--blind", "--kernel-size", "9", "--grid", grid,
+                                 "--overlap", "0.3"], capsys)
+        assert "--overlap" in msg and "--grid RxC only" in msg, (grid, msg)
+    assert not (d / "o.png").exists()

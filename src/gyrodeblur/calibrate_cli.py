@@ -121,6 +121,7 @@ def calibrate_command(args, say, load_capture) -> None:
     for k, ph in enumerate(photos):
         a = argparse.Namespace(**vars(args))
         a.capture = paths[k] if len(paths) > 1 else paths[0]
+        a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .errors import InputError
 
-__all__ = ["Camera"]
+__all__ = ["Camera", "MAX_SIDE"]
+
+#: Longest image side (px) a camera description may give: far beyond any sensor (the
+#: largest have about 20 000 px), short of sizes that only overflow later.
+MAX_SIDE = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -38,8 +43,12 @@ class Camera:
 
     def __post_init__(self):
         def finite(v) -> bool:
-            return (not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating))
-                    and bool(np.isfinite(v)))
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                return False
+            try:
+                return math.isfinite(float(v))
+            except OverflowError:           # an int beyond any float
+                return False
 
         for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
@@ -53,6 +62,9 @@ class Camera:
             raise InputError("camera", f"focal lengths must be positive (fx={self.fx}, fy={self.fy})")
         if int(self.width) < 2 or int(self.height) < 2:
             raise InputError("camera", f"image size {self.width}x{self.height} is too small")
+        if max(int(self.width), int(self.height)) > MAX_SIDE:
+            raise InputError("camera", f"image size {self.width}x{self.height} is not a "
+                                       f"sensor's (sides up to {MAX_SIDE} px)")
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
 

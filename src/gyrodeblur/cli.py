@@ -40,6 +40,15 @@ def _pair(text: str, what: str, kind=int, sep="x") -> tuple:
     return vals
 
 
+def _one_patch(grid: str) -> bool:
+    """Whether the ``--grid`` text asks for one patch (``1x1``, ``1X1``, ``1,1``); "auto"
+    and bad text are not (the latter is refused where the grid is read)."""
+    try:
+        return grid != "auto" and _pair(grid, "--grid") == (1, 1)
+    except InputError:
+        return False
+
+
 def _bias(text: str | None):
     if text is None or text == "auto":
         return text
@@ -107,7 +116,7 @@ def _ignored_options(args) -> None:
                                  "does not apply with --blind, which uses no gyro log")
         if args.mode != "variant":
             raise InputError("--mode", "does not apply with --blind (--grid sets its patches)")
-        if given("overlap") and args.grid in (None, "1x1"):
+        if given("overlap") and (args.grid is None or _one_patch(args.grid)):
             raise InputError("--overlap", "applies with --blind --grid RxC only (one kernel "
                                           "for the whole photo has no patches)")
     else:
@@ -122,6 +131,9 @@ def _ignored_options(args) -> None:
                 if given(name):
                     raise InputError("--" + name, "applies to --mode variant only (invariant "
                                                   "deblurs the whole photo with one PSF)")
+        elif given("overlap") and args.grid is not None and _one_patch(args.grid):
+            raise InputError("--overlap", f"does not apply with --grid {args.grid} (one patch "
+                                          "has no neighbours to overlap)")
     if args.downscale != 1.0 and not args.refine:   # (with --blind, --refine is refused)
         raise InputError("--downscale", "applies with --refine only")
     if args.workers is not None and not args.refine:
