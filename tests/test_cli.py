@@ -880,3 +880,85 @@ def test_overlap_with_one_patch_is_refused_however_the_grid_is_spelt(capture_dir
                                  "--overlap", "0.3"], capsys)
         assert "--overlap" in msg and "--grid RxC only" in msg, (grid, msg)
     assert not (d / "o.png").exists()
+
+
+def test_writing_over_a_file_keeps_its_permissions(capture_dir):
+    """--overwrite replaces the file's content, not who may read it."""
+    import os
+    import stat
+
+    d = capture_dir
+    out = d / "private.npy"
+    np.save(out, np.zeros(3))
+    os.chmod(out, 0o600)
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "10,20", "-o", str(out),
+                 "--overwrite"]) == 0
+    assert stat.S_IMODE(os.stat(out).st_mode) == 0o600 and np.load(out).ndim == 2
+    fresh = d / "fresh.npy"                         # a new file takes the usual mode
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "10,20", "-o", str(fresh)]) == 0
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(os.stat(fresh).st_mode) == 0o666 & ~umask
+
+
+def test_the_demo_refuses_a_folder_it_cannot_make_and_leaves_none_when_stopped(
+        tmp_path, capsys, monkeypatch):
+    import gyrodeblur.demo as demo
+
+    (tmp_path / "afile").write_text("x")
+    for out, problem in (("", "--out: give a folder"), (str(tmp_path / "afile" / "x"),
+                                                        "is a file, not a folder")):
+        assert problem in _run_error(["demo", "--out", out], capsys), out
+    # stopped before it writes, it leaves no folder (which it would later take for its own)
+    monkeypatch.setattr(demo, "simulate_blur", lambda *a, **k: (_ for _ in ()).throw(
+        KeyboardInterrupt))
+    assert main(["demo", "--out", str(tmp_path / "new")]) == 130
+    assert not (tmp_path / "new").exists()
+
+
+def test_the_demo_writes_through_no_link(tmp_path, capsys):
+    """A link of a demo output's name in the demo's folder is replaced, not written
+    through: the file it pointed at, outside the folder, is left alone."""
+    import gyrodeblur.demo as demo
+
+    out = tmp_path / "dm"
+    out.mkdir()
+    (out / demo.MARKER).write_text("")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine")
+    for name in ("metrics.json", demo.MARKER):
+        if (out / name).exists():
+            (out / name).unlink()
+        (out / name).symlink_to(victim)
+    assert main(["demo", "--out", str(out)]) == 0
+    assert victim.read_text() == "mine"
+    assert not (out / "metrics.json").is_symlink() and "psnr" in (out / "metrics.json").read_text()
+
+
+def test_an_empty_capture_name_is_named_as_such(capture_dir, capsys):
+    msg = _run_error(["psf", "--capture", "", "--at", "1,1", "-o",
+                      str(capture_dir / "p.npy")], capsys)
+    assert "--capture: an empty file name" in msg
+
+
+def test_an_interrupted_run_ends_its_progress_bar_before_saying_so(capture_dir, capsys,
+                                                                  monkeypatch):
+    """On a terminal, Ctrl-C during the deblur: the bar's line is ended, so "interrupted"
+    starts a line of its own."""
+    import gyrodeblur.cli as cli
+    import gyrodeblur.deblur as deblur_module
+
+    monkeypatch.setattr(cli, "_is_terminal", lambda stream: True)
+
+    def stopped(*args, progress=None, **kwargs):
+        progress.t0 -= 5.0                           # past the bar's one-second wait
+        progress(3, 10)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(deblur_module, "deblur", stopped)
+    d = capture_dir
+    assert main(["deblur", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "o.png")]) == 130
+    err = capsys.readouterr().err
+    assert "3/10\ngyrodeblur: interrupted; nothing written" in err
+    assert cli._Progress.drawn is None

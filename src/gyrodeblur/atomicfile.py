@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import stat
 
 from .errors import InputError
 
@@ -30,7 +31,8 @@ def atomic_write(path: str | os.PathLike, write) -> None:
     Parameters
     ----------
     path : str or os.PathLike
-        The destination (replaced if it exists: the caller decides whether it may be).
+        The destination (replaced if it exists: the caller decides whether it may be; the
+        new file then takes the old one's permission bits).
     write : callable
         ``write(f)`` writes the whole content to the binary file object ``f``.
 
@@ -46,6 +48,10 @@ def atomic_write(path: str | os.PathLike, write) -> None:
             write(f)
             f.flush()
             os.fsync(f.fileno())
+        try:                           # a file written over keeps its permission bits
+            os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
+        except FileNotFoundError:
+            pass
         os.replace(tmp, path)
     except BaseException as exc:
         try:

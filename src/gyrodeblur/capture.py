@@ -442,6 +442,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     src = "capture"
     if path is not None:
         src = os.fspath(path)
+        if not src:
+            raise InputError("--capture", "an empty file name: give the capture description")
         try:
             with open(src, encoding="utf-8-sig") as fh:
                 data = json.load(fh, object_pairs_hook=_no_repeated_keys(src))

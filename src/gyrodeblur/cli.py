@@ -190,6 +190,10 @@ class _Progress:
     """A progress bar on stderr, shown only once a run has taken more than a second, and
     only on a terminal (a log file gets no carriage-return lines)."""
 
+    #: The bar on the terminal now, if any: :func:`main` ends its line when the work
+    #: stops early (an error, Ctrl-C), so the message starts a line of its own.
+    drawn: "_Progress | None" = None
+
     def __init__(self, label: str, quiet: bool):
         self.label, self.t0, self.shown = label, time.perf_counter(), False
         self.quiet = quiet or not _is_terminal(sys.stderr)
@@ -198,6 +202,7 @@ class _Progress:
         if self.quiet or (not self.shown and time.perf_counter() - self.t0 < 1.0):
             return
         self.shown = True
+        _Progress.drawn = self
         n = 30 * done // max(total, 1)
         sys.stderr.write(f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {done}/{total}")
         sys.stderr.flush()
@@ -205,6 +210,14 @@ class _Progress:
     def close(self) -> None:
         if self.shown:
             sys.stderr.write("\n")
+            self.shown = False
+        if _Progress.drawn is self:
+            _Progress.drawn = None
+
+    @classmethod
+    def end_drawn(cls) -> None:
+        if cls.drawn is not None:
+            cls.drawn.close()
 
 
 def _is_terminal(stream) -> bool:
@@ -697,7 +710,10 @@ def main(argv: list[str] | None = None) -> int:
             # and PYTHONWARNINGS still rule) makes Python forget those shown before
             warnings.simplefilter("default", append=True)
             warnings.showwarning = warn
-            args.func(args, say)
+            try:
+                args.func(args, say)
+            finally:                        # a message after a bar starts its own line
+                _Progress.end_drawn()
     except InputError as exc:
         if exc.source is None and _photos(args):     # a problem of the photo(s) themselves
             exc = InputError(_photos(args), exc.problem)

@@ -15,6 +15,7 @@ from importlib import resources
 
 import numpy as np
 
+from .atomicfile import atomic_write_text, check_writable
 from .camera import Camera
 from .capture import Capture
 from .deblur import deblur
@@ -30,9 +31,14 @@ __all__ = ["demo_capture", "run_demo"]
 
 
 def _check_demo_folder(out_dir: str, overwrite: bool) -> None:
-    """Refuse to write over files in a folder that is not the demo's own."""
+    """Refuse to write over files in a folder that is not the demo's own, and a folder that
+    cannot be made (before any work)."""
+    if not os.fspath(out_dir):
+        raise InputError("--out", "give a folder to write the demo's files in")
     if os.path.exists(out_dir) and not os.path.isdir(out_dir):
         raise InputError(out_dir, "exists and is not a folder")
+    if not os.path.exists(out_dir):
+        check_writable(out_dir)          # its parent folder exists and takes new entries
     if overwrite or not os.path.isdir(out_dir) or os.path.exists(os.path.join(out_dir, MARKER)):
         return
     taken = [name for name in OUTPUTS if os.path.lexists(os.path.join(out_dir, name))]
@@ -68,9 +74,6 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = F
     from skimage import data
 
     _check_demo_folder(out_dir, overwrite)
-    os.makedirs(out_dir, exist_ok=True)
-    with open(os.path.join(out_dir, MARKER), "w", encoding="utf-8") as fh:
-        fh.write("written by `gyrodeblur demo`, which may write over this folder's files\n")
     sharp = data.astronaut().astype(np.float32) / 255.0
     cap = demo_capture()
     blurred = quantize_8bit(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap,
@@ -87,6 +90,14 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = F
         "method": report.method, "grid": list(report.grid), "model": report.model,
         "psf_extent_px": list(report.extent_range), "seconds": report.seconds,
     }
+    # the folder, and the marker that makes it the demo's, only once there is something to
+    # write: an interrupted demo leaves no folder it could later write over unasked
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as exc:
+        raise InputError(out_dir, f"cannot make the folder: {exc.strerror or exc}") from None
+    atomic_write_text(os.path.join(out_dir, MARKER),
+                      "written by `gyrodeblur demo`, which may write over this folder's files\n")
     w = dict(overwrite=True)                 # the folder was checked above
     write_photo(os.path.join(out_dir, "sharp.png"), sharp, **w)
     write_photo(os.path.join(out_dir, "blurred.png"), blurred, **w)
@@ -97,8 +108,7 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = F
     side = np.concatenate([blurred, gap, restored, gap, sharp], axis=1)
     write_photo(os.path.join(out_dir, "comparison.png"), side, **w)
     cap.save(os.path.join(out_dir, "capture.json"), gyro_path=cap.gyro_spec["path"])
-    with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as fh:
-        json.dump(res, fh, indent=2)
+    atomic_write_text(os.path.join(out_dir, "metrics.json"), json.dumps(res, indent=2))
     say(f"demo: wrote {out_dir}/ (blurred.png, psf_field.png, deblurred.png, "
         "comparison.png = blurred | deblurred | sharp)")
     say(f"  blurred    PSNR {res['blurred']['psnr']:6.2f} dB  SSIM {res['blurred']['ssim']:.3f}")
