@@ -909,6 +909,9 @@ def test_the_demo_refuses_a_folder_it_cannot_make_and_leaves_none_when_stopped(
     for out, problem in (("", "--out: give a folder"), (str(tmp_path / "afile" / "x"),
                                                         "is a file, not a folder")):
         assert problem in _run_error(["demo", "--out", out], capsys), out
+    # folders to be made on the way are made
+    assert main(["demo", "--out", str(tmp_path / "a" / "b")]) == 0
+    assert (tmp_path / "a" / "b" / "deblurred.png").is_file()
     # stopped before it writes, it leaves no folder (which it would later take for its own)
     monkeypatch.setattr(demo, "simulate_blur", lambda *a, **k: (_ for _ in ()).throw(
         KeyboardInterrupt))

@@ -37,8 +37,16 @@ def _check_demo_folder(out_dir: str, overwrite: bool) -> None:
         raise InputError("--out", "give a folder to write the demo's files in")
     if os.path.exists(out_dir) and not os.path.isdir(out_dir):
         raise InputError(out_dir, "exists and is not a folder")
-    if not os.path.exists(out_dir):
-        check_writable(out_dir)          # its parent folder exists and takes new entries
+    if not os.path.exists(out_dir):    # the nearest existing folder above takes new entries
+        above = os.path.dirname(os.path.abspath(out_dir))
+        while not os.path.exists(above):
+            above = os.path.dirname(above)
+        if not os.path.isdir(above):
+            raise InputError(out_dir, f"{above} is a file, not a folder")
+        try:
+            check_writable(os.path.join(above, "demo"))
+        except InputError as exc:
+            raise InputError(out_dir, exc.problem) from None
     if overwrite or not os.path.isdir(out_dir) or os.path.exists(os.path.join(out_dir, MARKER)):
         return
     taken = [name for name in OUTPUTS if os.path.lexists(os.path.join(out_dir, name))]
