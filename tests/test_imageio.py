@@ -655,3 +655,61 @@ def test_a_16_bit_photo_written_as_jpeg_is_said_and_a_file_is_no_folder(tmp_path
     (tmp_path / "afile").write_text("x")
     with pytest.raises(InputError, match="afile is a file, not a folder"):
         check_destination(tmp_path / "afile" / "x.png")
+
+
+def _read_without_tifffile(path, monkeypatch):
+    """``read_photo`` as on a machine where tifffile cannot decode the file (LZW or JPEG
+    compression without imagecodecs): Pillow decodes it."""
+    def cannot(p):
+        raise RuntimeError("requires the 'imagecodecs' package")
+
+    with monkeypatch.context() as m:
+        m.setattr(imageio, "_read_tiff_tifffile", cannot)
+        return read_photo(path)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_a_min_is_white_tiff_is_read_as_light_not_ink(tmp_path, monkeypatch, dtype):
+    """Grey stored as ink (photometric 0: 0 is white) comes out as light, 8 or 16 bits,
+    whichever decoder reads it (16-bit ones read by Pillow came out as a negative)."""
+    top = np.iinfo(dtype).max
+    ink = np.random.default_rng(5).integers(0, top + 1, (12, 16)).astype(dtype)
+    tifffile.imwrite(tmp_path / "mw.tif", ink, photometric="miniswhite")
+    for photo in (read_photo(tmp_path / "mw.tif"),
+                  _read_without_tifffile(tmp_path / "mw.tif", monkeypatch)):
+        assert photo.bit_depth == 8 * ink.itemsize
+        np.testing.assert_array_equal(np.rint(photo.pixels * top), top - ink.astype(np.int64))
+
+
+def test_premultiplied_16bit_colour_is_divided_whole_by_either_decoder(tmp_path, monkeypatch):
+    """Associated (premultiplied) alpha at 16 bits: Pillow's decoder divided each byte of a
+    sample by the alpha on its own; both decoders now give the same straight colours."""
+    rng = np.random.default_rng(6)
+    alpha = rng.integers(1, 65536, (12, 16, 1))
+    colour = rng.integers(0, 65536, (12, 16, 3)) * alpha // 65535
+    stored = np.concatenate([colour, alpha], axis=2).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "pm.tif", stored, photometric="rgb", extrasamples=[1])
+    by_tifffile = read_photo(tmp_path / "pm.tif")
+    by_pillow = _read_without_tifffile(tmp_path / "pm.tif", monkeypatch)
+    assert by_tifffile.bit_depth == by_pillow.bit_depth == 16
+    np.testing.assert_array_equal(by_pillow.pixels, by_tifffile.pixels)
+    straight = np.minimum(np.rint(colour * 65535 / alpha), 65535)
+    np.testing.assert_array_equal(np.rint(by_tifffile.pixels[..., :3] * 65535), straight)
+
+
+def test_a_tiff_only_tifffile_reads_is_held_to_the_size_limit(tmp_path, monkeypatch):
+    """Float RGB, which Pillow cannot open, is refused on its declared size like the rest,
+    before its pixels are decoded."""
+    tifffile.imwrite(tmp_path / "f.tif", np.zeros((40, 30, 3), np.float32), photometric="rgb")
+    monkeypatch.setattr(imageio, "MAX_PHOTO_PIXELS", 1000)
+    with pytest.raises(InputError, match="f.tif: 30x40 pixels .* more than"):
+        read_photo(tmp_path / "f.tif")
+
+
+def test_a_jpeg_wider_than_the_format_holds_is_refused_before_writing(tmp_path):
+    with pytest.raises(InputError, match="long.jpg: JPEG holds at most 65500 px a side"):
+        write_photo(tmp_path / "long.jpg", np.zeros((4, 65501), np.float32))
+    assert not list(tmp_path.iterdir())
+    like = Photo(np.zeros((4, 65501), np.float32), 8, "PNG")
+    with pytest.raises(InputError, match="write .png or .tif"):
+        imageio.check_destination(tmp_path / "o.jpg", like, False)

@@ -225,13 +225,20 @@ def _open_within_size_limit(p: str) -> Image.Image:
         im = Image.open(p)
     finally:
         Image.MAX_IMAGE_PIXELS = limit
-    width, height = im.size
-    if width * height > MAX_PHOTO_PIXELS:
+    try:
+        _refuse_too_many_pixels(p, *im.size)
+    except InputError:
         im.close()
+        raise
+    return im
+
+
+def _refuse_too_many_pixels(p: str, width: int, height: int) -> None:
+    """:class:`InputError` for a header that declares more than :data:`MAX_PHOTO_PIXELS`."""
+    if width * height > MAX_PHOTO_PIXELS:
         raise InputError(p, f"{width}x{height} pixels ({width * height / 1e6:.0f} MP) is more "
                             f"than the {MAX_PHOTO_PIXELS / 1e6:.0f} MP this tool reads (a damaged "
                             "file, or one made to exhaust memory?)")
-    return im
 
 
 def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict | None,
@@ -386,15 +393,25 @@ def _pillow_16bit_colour(path: str, im: Image.Image) -> np.ndarray:
     ``im`` is ``path`` opened and not yet loaded; it is loaded here (the first pass), so
     its ``info`` is complete afterwards.
     """
-    other = [_tile_with_rawmode(t, _other_byte(t[3] if isinstance(t[3], str) else t[3][0]))
-             for t in im.tile]
+    def rawmode(t) -> str:
+        return t[3] if isinstance(t[3], str) else t[3][0]
+
+    # premultiplied colours (``RGBa``) are read as they are stored: Pillow would divide
+    # each byte by its alpha on its own, which scrambles the two halves; the whole
+    # 16-bit samples are divided below
+    premultiplied = any(rawmode(t).startswith("RGBa") for t in im.tile)
+    if premultiplied:
+        im.tile = [_tile_with_rawmode(t, rawmode(t).replace("RGBa", "RGBA", 1))
+                   for t in im.tile]
+    other = [_tile_with_rawmode(t, _other_byte(rawmode(t))) for t in im.tile]
     orientation = _load_as_stored(im)
     high = np.asarray(im).astype(np.uint16)
     with Image.open(path) as second:
         second.tile = other
         second.load()
         low = np.asarray(second).astype(np.uint16)
-    return _unorient((high << 8) | low, orientation)
+    arr = _unorient((high << 8) | low, orientation)
+    return _with_plain_alpha(arr, [1]) if premultiplied else arr
 
 
 def _pillow_png16_grey_alpha(im: Image.Image) -> np.ndarray:
@@ -444,6 +461,8 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
     stored = (tags.get(257), tags.get(256))
     if arr.shape[:2] != stored:
         raise InputError(path, f"decoded {arr.shape[:2]} pixels, but the file says {stored}")
+    if tags.get(262) in (0, (0,)) and arr.dtype == np.uint16:
+        arr = np.uint16(65535) - arr        # min-is-white: Pillow inverts 8-bit ink, not 16
     return arr
 
 
@@ -467,11 +486,20 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
             warnings.warn(f"{path}: only the first of its {len(tif.pages)} pages is read",
                           stacklevel=2)
         page = tif.pages.first
+        _refuse_too_many_pixels(path, int(page.imagewidth), int(page.imagelength))
         photometric = int(page.photometric)
-        if photometric not in (1, 2):  # MINISBLACK, RGB
+        if photometric not in (0, 1, 2):  # MINISWHITE, MINISBLACK, RGB
             name = getattr(page.photometric, "name", str(photometric))
             raise InputError(path, f"unsupported TIFF colour model {name}")
         arr = page.asarray()
+        if photometric == 0:              # grey stored as ink: 0 is white
+            if arr.dtype.kind == "f":
+                raise InputError(path, "unsupported TIFF colour model MINISWHITE with float "
+                                       "samples")
+            top = True if arr.dtype == np.bool_ else np.iinfo(arr.dtype).max
+            grey = arr if arr.ndim == 2 else arr[..., 0] if not page.axes.startswith("S") \
+                else arr[0]
+            grey[...] = ~grey if arr.dtype == np.bool_ else top - grey
         axes = page.axes
         extra = [int(e) for e in (page.extrasamples or ())]
         icc_tag = page.tags.get(34675)
@@ -777,6 +805,9 @@ def write_photo(
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     if fmt == "JPEG" and channels in (2, 4):
         raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
+    if fmt == "JPEG" and max(pixels.shape[:2]) > JPEG_MAX_SIDE:
+        raise InputError(p, f"JPEG holds at most {JPEG_MAX_SIDE} px a side, the photo is "
+                            f"{pixels.shape[1]}x{pixels.shape[0]}: write .png or .tif")
     check_destination(p, like, overwrite)
     if fmt == "JPEG" and bit_depth is None and like is not None and like.bit_depth == 16:
         warnings.warn(f"{p}: JPEG stores 8 bits per sample: the 16-bit photo is written at 8 "
@@ -868,6 +899,10 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     if image:
         fmt = _format_of(path)
         _choose_bit_depth(path, fmt, bit_depth, like)
+        if fmt == "JPEG" and like is not None and max(like.pixels.shape[:2]) > JPEG_MAX_SIDE:
+            raise InputError(path, f"JPEG holds at most {JPEG_MAX_SIDE} px a side, the photo "
+                                   f"is {like.pixels.shape[1]}x{like.pixels.shape[0]}: write "
+                                   ".png or .tif")
         if fmt == "JPEG" and like is not None and like.pixels.ndim == 3 \
                 and like.pixels.shape[2] == 4:
             raise InputError(path, "JPEG cannot store the photo's alpha channel; write .png "
@@ -908,6 +943,10 @@ def _icc_fits(icc: bytes, channels: int) -> bool:
     if space == b"RGB ":
         return channels in (3, 4)
     return False
+
+
+#: The longest side a JPEG file can hold (the format's 16-bit sizes, as libjpeg caps them).
+JPEG_MAX_SIDE = 65500
 
 
 def _write_jpeg(f, ints, *, exif, icc, quality) -> None:
