@@ -417,3 +417,57 @@ def test_another_log_given_as_an_option_has_its_own_format(capture_files):
     with pytest.raises(InputError, match="--gyro-format"):
         load_capture(d / "cap.json", overrides={"gyro_path": str(d / "other.csv"),
                                                 "gyro_format": "nope"})
+
+
+def test_parsing_mistakes_are_named_not_tracebacks(capture_files):
+    """A unit given as a list, an integer of more digits than Python reads, and a gcsv
+    frame_readout_direction that is not 0-3 are each an InputError naming the file."""
+    d, doc = capture_files
+    (d / "c.json").write_text(json.dumps({**doc, "gyro": {**doc["gyro"], "time_unit": ["s"]}}))
+    with pytest.raises(InputError, match="c.json: gyro.time_unit.*unknown unit"):
+        load_capture(d / "c.json")
+    (d / "c.json").write_text(json.dumps(doc)[:-1] + ', "x": ' + "9" * 5000 + "}")
+    with pytest.raises(InputError, match="c.json: not valid JSON"):
+        load_capture(d / "c.json")
+
+
+@pytest.mark.parametrize("direction, readout", [("0", 0.0166), ("0.0", 0.0166), ("1", 0.0),
+                                                ("top", None), ("7", None)])
+def test_the_gcsv_readout_direction_is_read_as_a_number(tmp_path, direction, readout):
+    from gyrodeblur.gyrolog import GyroLog, write_gcsv
+
+    t = np.arange(0, 1, 0.005)
+    write_gcsv(tmp_path / "g.gcsv", GyroLog(t, np.zeros((t.size, 3))))
+    lines = (tmp_path / "g.gcsv").read_text().splitlines()
+    lines[1:1] = ["frame_readout_time,16.6", f"frame_readout_direction,{direction}"]
+    (tmp_path / "g.gcsv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "c.json").write_text(json.dumps({
+        "exposure_start": 0.5, "exposure_time": 0.03,
+        "camera": {"fx": 500, "width": 640, "height": 480}, "gyro": {"path": "g.gcsv"}}))
+    if readout is None:
+        with pytest.raises(InputError, match="g.gcsv: the gcsv header's frame_readout_direction"):
+            load_capture(tmp_path / "c.json")
+    else:
+        assert load_capture(tmp_path / "c.json").readout_time == pytest.approx(readout)
+
+
+def test_an_android_log_given_no_mapping_is_read_as_the_back_camera(tmp_path):
+    """Not as camera axes: the named android-back-camera, and a warning that says so."""
+    from gyrodeblur.axes import parse_axes
+
+    t = np.arange(0, 1, 0.005)
+    lines = [f"4 {int(round(a * 1e9))} 0.1 0.2 0.3" for a in t]
+    (tmp_path / "events.txt").write_text("\n".join(lines) + "\n")
+    doc = {"exposure_start": 0.5, "exposure_time": 0.03,
+           "camera": {"fx": 500, "width": 640, "height": 480},
+           "gyro": {"path": "events.txt", "format": "android"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="c.json: an Android sensor log .* android-back-camera"):
+        cap = load_capture(tmp_path / "c.json")
+    np.testing.assert_array_equal(cap.axes, parse_axes("android-back-camera"))
+    doc["gyro"]["orientation"] = "XYZ"                 # given: taken as it is, no warning
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(load_capture(tmp_path / "c.json").axes, np.eye(3))

@@ -518,3 +518,32 @@ def test_format_names_and_column_names_are_matched_as_a_person_types_them(tmp_pa
     assert np.allclose(log.omega, trace.omega)
     with pytest.raises(InputError, match="unknown gyro log format 'tsv'"):
         read_gyro_log(p, "tsv")
+
+
+def test_rate_columns_of_different_stated_units_are_refused(tmp_path, trace):
+    p = tmp_path / "mixed.csv"
+    p.write_text(_csv_text("t_s,gx (rad/s),gy (deg/s),gz (deg/s)", trace.t, list(trace.omega.T)))
+    with pytest.raises(InputError, match="mixed.csv: the rate columns .* state different units"):
+        read_gyro_log(p, "csv")
+    p.write_text(_csv_text("t_s,gx (deg/s),gy (deg/s),gz (deg/s)", trace.t,
+                           list(np.degrees(trace.omega).T)))
+    np.testing.assert_allclose(read_gyro_log(p, "csv").omega, trace.omega, atol=1e-9)
+
+
+def test_a_trailing_delimiter_names_no_column(tmp_path, trace):
+    """``time,a,b,c,`` with rows ending in a comma is the four-column log it looks like."""
+    p = tmp_path / "trail.csv"
+    text = _csv_text("t_s,wx,wy,wz", trace.t, list(trace.omega.T))
+    p.write_text("\n".join(line + "," for line in text.splitlines()) + "\n")
+    log = read_gyro_log(p, "csv")
+    np.testing.assert_allclose(log.omega, trace.omega, atol=1e-9)
+
+
+def test_a_gcsv_header_key_given_twice_is_refused(tmp_path, trace):
+    p = tmp_path / "dup.gcsv"
+    write_gcsv(p, trace, tscale=1e-3)
+    lines = p.read_text().splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("tscale"))
+    p.write_text("\n".join(lines[:at + 1] + ["tscale,1"] + lines[at + 1:]) + "\n")
+    with pytest.raises(InputError, match="dup.gcsv: the gcsv header gives tscale twice"):
+        read_gyro_log(p)

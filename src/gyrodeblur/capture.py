@@ -305,6 +305,19 @@ def _get(d: dict, key: str, source: str, kind=float, required=True):
         raise InputError(source, f"{key!r} must be a number, got {v!r}") from None
 
 
+def _readout_direction(value, source: str) -> int:
+    """A gcsv header's ``frame_readout_direction`` (0 top to bottom, 1 bottom to top, 2 and
+    3 along the rows), written ``0`` or ``0.0``; anything else is an InputError."""
+    try:
+        d = float(str(value).strip())
+    except ValueError:
+        d = float("nan")
+    if d not in (0, 1, 2, 3):
+        raise InputError(source, f"the gcsv header's frame_readout_direction must be 0 (top "
+                                 f"to bottom), 1, 2 or 3, got {value!r}")
+    return int(d)
+
+
 def _whole(v) -> int:
     """A pixel count: a finite whole number (``1024`` or ``1024.0``, not ``1024.5``)."""
     if isinstance(v, bool):
@@ -457,6 +470,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         except UnicodeDecodeError:
             raise InputError(src, "cannot read: not UTF-8 text (save it as UTF-8; UTF-16, as "
                                   "some Windows editors write, is not read)") from None
+        except ValueError as exc:           # e.g. an integer of more digits than Python reads
+            raise InputError(src, f"not valid JSON ({str(exc).split(';')[0]})") from None
         except OSError as exc:
             raise InputError(src, f"cannot read ({exc})") from None
         if not isinstance(data, dict):
@@ -544,7 +559,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         fmt = check_format(fmt, origin(("gyro_format",)) if "gyro_format" in ov
                            else f"{src}: gyro.format")
     for key, known in (("time_unit", TIME_UNITS), ("rate_unit", RATE_UNITS)):
-        if key in gyro_d and gyro_d[key] not in known:
+        if key in gyro_d and (not isinstance(gyro_d[key], str) or gyro_d[key] not in known):
             where = origin((key,)) if key in ov else f"{src}: gyro.{key}"
             raise InputError(where, f"unknown unit {gyro_d[key]!r} (known: {', '.join(known)})")
     csv_opts = {k: gyro_d[k] for k in CSV_OPTION_KEYS if k in gyro_d}
@@ -560,13 +575,20 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     if "rate_unit_from" in log.meta and report:
         report("gyro rates read in rad/s (the column names state no unit; give --rate-unit "
                "deg/s if they are degrees)")
-    axes = parse_axes(gyro_d.get("orientation", "XYZ"), source=f"{src} (gyro.orientation)")
+    orientation = gyro_d.get("orientation", "XYZ")
+    if "orientation" not in gyro_d and log.meta.get("axes") == "android device":
+        orientation = "android-back-camera"      # not the camera's axes, as XYZ would say
+        warnings.warn(f"{src}: an Android sensor log is in the device's axes (x right, y "
+                      f"up, z out of the screen); with no gyro.orientation (--orientation) "
+                      f"given, it is read as android-back-camera (Xyz: a back camera whose "
+                      f"rows run along the device's x axis)", stacklevel=2)
+    axes = parse_axes(orientation, source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     exposure_start = _get(data, "exposure_start", src)
     exposure_time = _get(data, "exposure_time", src)
     readout = _get(data, "readout_time", src, required=False)
-    direction = str(log.meta.get("frame_readout_direction", "0")).strip()
-    if readout is None and "frame_readout_time" in log.meta and direction != "0":
+    direction = _readout_direction(log.meta.get("frame_readout_direction", "0"), gpath)
+    if readout is None and "frame_readout_time" in log.meta and direction != 0:
         if report:             # 1: bottom to top, 2 and 3: along the rows
             report(f"the gcsv header's frame_readout_time is not used: its "
                    f"frame_readout_direction {direction} is not top to bottom (turn the photo "

@@ -345,6 +345,9 @@ def read_gcsv(path: str | os.PathLike) -> GyroLog:
             start = i
             break
         if len(parts) >= 2:
+            if parts[0] in header:         # which one was meant? (as a JSON key given twice)
+                raise InputError(path, f"the gcsv header gives {parts[0]} twice (again on "
+                                       f"line {i + 1})")
             header[parts[0]] = ",".join(parts[1:])
     if start is None:
         raise InputError(path, "no 't,gx,gy,gz' column line in the gcsv header")
@@ -490,6 +493,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     if delimiter is None:
         delimiter = sniff_delimiter(lines[0])
     header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
+    while len(header) > 1 and not header[-1]:     # a trailing delimiter names no column
+        header.pop()
     if all(is_number(h) for h in header) and comment is not None:
         # the names on the last comment line ("#timestamp [ns],w_RS_S_x ..." as EuRoC
         # writes, "# t_s,wx,wy,wz" as numpy.savetxt does)
@@ -537,7 +542,12 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     tu = time_unit or named_tu
     if tu is not None and tu not in TIME_UNITS:
         raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
-    named_ru = unit_from_name(header[ri[0]], RATE_UNITS)
+    stated_ru = [unit_from_name(header[i], RATE_UNITS) for i in ri]
+    if len(set(stated_ru)) > 1:
+        raise InputError(path, f"the rate columns {', '.join(header[i] for i in ri)} state "
+                               f"different units ({', '.join(str(u) for u in stated_ru)}): "
+                               "write them in one unit")
+    named_ru = stated_ru[0]
     ru = rate_unit or named_ru
     if ru is None and bracketed_unit(header[ri[0]]) is not None:
         raise InputError(path, f"column {header[ri[0]]!r} states a unit that is neither "
@@ -615,7 +625,7 @@ def read_android_events(path: str | os.PathLike) -> GyroLog:
     if not rows:
         raise InputError(path, "no gyroscope events (type 4) in the file")
     a = _without_repeats(np.asarray(rows, dtype=np.float64))
-    return GyroLog(a[:, 0] * 1e-9, a[:, 1:], path, {})
+    return GyroLog(a[:, 0] * 1e-9, a[:, 1:], path, {"axes": "android device"})
 
 
 def write_gcsv(path: str | os.PathLike, log: GyroLog, *, tscale: float = 1e-6,
