@@ -266,3 +266,40 @@ def test_psf_positions_and_timing_rows_are_checked(make_capture):
     # its own row starts 10 ms later: the yaw has moved its light 2.4 px further to -x
     shift = trace(rolling, 64.0, 48.0, 5) - at_row0
     assert np.allclose(shift[:, 0], -120.0 * 2.0 * 0.01, atol=0.1)
+
+
+def test_flags_and_numbers_of_the_solvers_are_checked_by_name():
+    """Found by a hunt: "no" read as true, and numbers the solvers cannot hold, were taken
+    without a word (a NaN image, a silently truncated order, a TypeError from inside)."""
+    from gyrodeblur.sparse import sparse_deconvolve
+    from gyrodeblur.wiener import wiener_deconvolve
+
+    img = np.random.default_rng(0).random((32, 40)).astype(np.float32)
+    psf = np.full((1, 3), 1 / 3)
+    for name in ("taper", "normalize"):
+        with pytest.raises(TypeError, match=name):
+            wiener_deconvolve(img, psf, **{name: "no"})
+    with pytest.raises(TypeError, match="clip"):
+        sparse_deconvolve(img, psf, noise_sigma=0.01, clip="no")
+    for weight in (1e38, 1e-42):
+        with pytest.raises(ValueError, match="weight"):
+            sparse_deconvolve(img, psf, weight=weight)
+    for dilation in ("2", -1, 1.5):
+        with pytest.raises(ValueError, match="saturation_dilation"):
+            sparse_deconvolve(img, psf, noise_sigma=0.01, saturation_dilation=dilation)
+
+
+def test_render_psf_and_simulate_blur_check_their_options(make_capture):
+    from gyrodeblur.psf import render_psf
+    from gyrodeblur.simulate import simulate_blur
+
+    cap = make_capture([0, 0.3, 0], width=64, height=48, f=60.0)
+    with pytest.raises(TypeError, match="centred"):
+        render_psf(cap, 10, 10, centred="no")
+    img = np.random.default_rng(1).random((48, 64)).astype(np.float32)
+    for order in (3.0, True):
+        with pytest.raises(ValueError, match="order"):
+            simulate_blur(img, cap, order=order)
+    for snr in (1e308, -1e308):
+        with pytest.raises(ValueError, match="snr_db"):
+            simulate_blur(img, cap, snr_db=snr)

@@ -144,9 +144,8 @@ def test_colour_input_is_estimated_on_luminance(sharp, levin):
     # space): an estimate from either would differ
     other = np.ascontiguousarray(np.rot90(sharp), np.float32)
     rgb = np.stack([g, g, g], axis=2)
-    rgb[..., 0] += 0.05 / 0.2126 + 0.5 * other
+    rgb[..., 0] += 0.5 * other
     rgb[..., 1] -= 0.5 * other * 0.2126 / 0.7152
-    rgb[..., 2] -= 0.05 / 0.0722
     luma = rgb @ np.array([0.2126, 0.7152, 0.0722], np.float32)
     np.testing.assert_allclose(luma, g, atol=1e-5)
     assert np.abs(rgb[..., 1] - g).max() > 0.1 and np.abs(rgb.mean(axis=2) - g).max() > 0.1
@@ -348,3 +347,34 @@ def test_flat_image_gives_a_delta():
     psf = estimate_kernel(np.full((64, 64), 0.4, np.float32), 9)
     _assert_valid_psf(psf, 9)
     assert psf[4, 4] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("bad, problem", [
+    (lambda g: (g * 255).astype(np.uint8), "floating-point values in \\[0, 1\\]"),
+    (lambda g: g * 255, "image"),
+    (lambda g: g > 0.5, "floating-point"),
+    (lambda g: np.where(g > 0.5, np.nan, g), "NaN"),
+])
+def test_a_photo_that_is_not_one_in_0_1_is_refused(sharp, bad, problem):
+    """Integers, 255-scaled floats, booleans and NaN gave a kernel, wrong, without a word."""
+    with pytest.raises(InputError, match=problem):
+        estimate_kernel(bad(sharp), 9)
+
+
+def test_grey_and_alpha_is_estimated_on_the_grey(sharp, levin):
+    g = _blur(sharp, levin["levin_3"])
+    alpha = np.random.default_rng(7).random(g.shape).astype(np.float32)
+    np.testing.assert_array_equal(estimate_kernel(np.dstack([g, alpha]), 17, levels=2,
+                                                  iterations=2),
+                                  estimate_kernel(g, 17, levels=2, iterations=2))
+
+
+@pytest.mark.parametrize("option, value", [
+    ("cleanup", 2.0), ("cleanup", 1.0), ("edge_decay", 0.0), ("kernel_reg", float("nan")),
+    ("iterations", 2.7), ("iterations", "x"), ("levels", 0), ("lambda_decay", 1.5),
+    ("lambda_grad", -1.0), ("edge_pixels", True),
+])
+def test_options_out_of_range_are_refused_by_name(option, value):
+    img = np.random.default_rng(8).random((64, 64)).astype(np.float32)
+    with pytest.raises((ValueError, TypeError), match=option):
+        estimate_kernel(img, 9, **{option: value})

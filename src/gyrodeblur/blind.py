@@ -28,7 +28,7 @@ from scipy import ndimage, signal
 
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
-from .images import check_psf
+from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, split_alpha
 
 __all__ = ["estimate_kernel", "blind_deconvolve"]
 
@@ -166,9 +166,9 @@ def estimate_kernel(
     """
     gray = _to_gray(image)
     _check_kernel_size(kernel_size, gray.shape)
+    _check_options(iterations, levels, lambda_grad, lambda_min, lambda_decay, kernel_reg,
+                   edge_pixels, edge_decay, cleanup)
     iterations = int(iterations)
-    if iterations < 1:
-        raise ValueError(f"iterations must be >= 1, got {iterations}")
 
     init = None if init_psf is None else _fit_support(_check_psf(init_psf), kernel_size)
     if levels is None:
@@ -247,18 +247,38 @@ def blind_deconvolve(
 # validation and conversions
 # --------------------------------------------------------------------------------------
 def _to_gray(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image)
+    """The photo's Rec. 709 luma (grey as it is), its alpha channel left out; an
+    InputError for what is not a photo in [0, 1] (integers, NaN, 255-scaled values)."""
+    img, _ = split_alpha(check_image(image, "image", max_value=PHOTO_MAX, min_value=PHOTO_MIN))
     if img.ndim == 3:
-        if img.shape[2] >= 3:
-            img = np.tensordot(img[..., :3].astype(np.float32, copy=False), _LUMA, axes=([2], [0]))
-        else:
-            img = img.astype(np.float32, copy=False).mean(axis=2)
-    elif img.ndim != 2:
-        raise ValueError(f"image must have shape (H, W) or (H, W, C), got {img.shape}")
-    img = np.ascontiguousarray(img, dtype=np.float32)
-    if not np.all(np.isfinite(img)):
-        raise ValueError("image contains NaN or infinite values")
-    return img
+        img = (np.tensordot(img, _LUMA, axes=([2], [0])) if img.shape[2] == 3
+               else img[..., 0])
+    return np.ascontiguousarray(img, dtype=np.float32)
+
+
+def _check_options(iterations, levels, lambda_grad, lambda_min, lambda_decay, kernel_reg,
+                   edge_pixels, edge_decay, cleanup) -> None:
+    """ValueError/TypeError naming the first of :func:`estimate_kernel`'s options that is
+    out of its range (a whole count where one is meant, finite weights, a decay in (0, 1],
+    a cleanup threshold under 1 that leaves the kernel's peak)."""
+    for name, v in (("iterations", iterations), ("levels", levels)):
+        if v is not None and (isinstance(v, (bool, np.bool_))
+                              or not isinstance(v, (int, np.integer)) or v < 1):
+            raise ValueError(f"{name} must be a whole number >= 1, got {v!r}")
+    for name, v, lo, hi in (("lambda_grad", lambda_grad, 0, np.inf),
+                            ("lambda_min", lambda_min, 0, np.inf),
+                            ("lambda_decay", lambda_decay, 0, 1),
+                            ("kernel_reg", kernel_reg, 0, np.inf),
+                            ("edge_pixels", edge_pixels, 0, np.inf),
+                            ("edge_decay", edge_decay, 0, np.inf),
+                            ("cleanup", cleanup, -np.inf, 1)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number)) \
+                or not np.isfinite(v):
+            raise TypeError(f"{name} must be a finite number, got {v!r}")
+        ok = (0 <= v < 1) if name == "cleanup" else (lo < v <= hi) if name == "lambda_decay" \
+            else v >= lo if name == "lambda_min" else v > lo
+        if not ok:
+            raise ValueError(f"{name} out of range, got {v!r}")
 
 
 def _check_kernel_size(kernel_size, shape: tuple[int, int]) -> None:

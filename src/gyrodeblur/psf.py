@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .arguments import check_flag
 from .capture import Capture, check_capture
 from .errors import InputError
 
@@ -344,6 +345,7 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     if not (isinstance(max_step, (int, float, np.floating, np.integer)) and max_step > 0
             and np.isfinite(max_step)):
         raise InputError(None, f"max_step must be a positive number of pixels, got {max_step!r}")
+    check_flag(centred, "centred")
     cam = check_capture(capture).camera
     if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, np.integer))
                                or not 0 <= radius <= max(cam.width, cam.height)):

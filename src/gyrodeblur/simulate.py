@@ -113,13 +113,16 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     coefficients computed once per channel); outside the frame the image is mirrored
     (half-sample symmetric).
     """
-    if order not in (1, 3):
+    if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) \
+            or order not in (1, 3):
         raise ValueError(f"order must be 1 (bilinear) or 3 (cubic spline), got {order!r}")
     if n_samples is not None and (isinstance(n_samples, bool) or not isinstance(
             n_samples, (int, np.integer)) or n_samples < 1):
         raise ValueError(f"n_samples must be a positive whole number or None, got {n_samples!r}")
     if snr_db is not None:
         snr_db = check_real(snr_db, "snr_db")
+        if not -100.0 <= snr_db <= 300.0:     # checked before the work, not after it
+            raise ValueError(f"snr_db must be -100 to 300 dB, got {snr_db!r}")
     try:
         if isinstance(seed, (bool, np.bool_)):
             raise TypeError

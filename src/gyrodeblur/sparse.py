@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 import scipy.ndimage as ndi
 
+from .arguments import check_flag
 from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad
 from .images import check_image, check_psf
 from .noise import estimate_noise_sigma
@@ -153,7 +154,8 @@ def default_data_penalty(psf: np.ndarray) -> float:
 def check_sparse_options(*, exponent: float | None = None, iterations: int | None = None,
                          noise_sigma: float | None = None,
                          saturation_level: float | None = None,
-                         weight: float | None = None, **others) -> None:
+                         weight: float | None = None,
+                         saturation_dilation: int | None = None, **others) -> None:
     """Check :func:`sparse_deconvolve`'s numeric options (ValueError naming the bad one);
     ``None`` is an option not given (or, for ``saturation_level``, turned off).
 
@@ -174,8 +176,20 @@ def check_sparse_options(*, exponent: float | None = None, iterations: int | Non
     if saturation_level is not None and not (np.isfinite(saturation_level)
                                              and 0 < saturation_level <= 1):
         raise ValueError(f"saturation_level must be in (0, 1] or None, got {saturation_level!r}")
-    if weight is not None and not (np.isfinite(weight) and weight > 0):
-        raise ValueError(f"weight must be a positive number, got {weight!r}")
+    if weight is not None and not (np.isfinite(weight) and _WEIGHT_RANGE[0] <= weight
+                                   <= _WEIGHT_RANGE[1]):
+        raise ValueError(f"weight must be a positive number in {_WEIGHT_RANGE[0]:g} to "
+                         f"{_WEIGHT_RANGE[1]:g} (beyond, float32 overflows), got {weight!r}")
+    if saturation_dilation is not None and (isinstance(saturation_dilation, bool)
+                                            or not isinstance(saturation_dilation,
+                                                              numbers.Integral)
+                                            or saturation_dilation < 0):
+        raise ValueError(f"saturation_dilation must be a whole number of pixels >= 0, got "
+                         f"{saturation_dilation!r}")
+
+
+#: The prior weights the float32 solver can hold (``weight`` 1e38 or 1e-42 gave NaN).
+_WEIGHT_RANGE = (1e-20, 1e20)
 
 
 def sparse_deconvolve(
@@ -311,7 +325,9 @@ def sparse_deconvolve(
     g = check_image(image)
     h = check_psf(psf)
     check_sparse_options(exponent=exponent, iterations=iterations, noise_sigma=noise_sigma,
-                         saturation_level=saturation_level, weight=weight)
+                         saturation_level=saturation_level, weight=weight,
+                         saturation_dilation=saturation_dilation)
+    check_flag(clip, "clip")
     if workers is not None:
         warnings.warn("sparse_deconvolve(workers=...) is ignored: its FFTs are OpenCV's, "
                       "which threads them itself (cv2.setNumThreads)", DeprecationWarning,

@@ -31,6 +31,7 @@ import numbers
 import numpy as np
 import scipy.fft as sfft
 
+from .arguments import check_flag
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
 from .images import check_image, check_psf
@@ -125,6 +126,8 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     >>> out.dtype, out.shape, bool(np.allclose(out, 0.5, atol=1e-6))
     (dtype('float32'), (32, 48), True)
     """
+    check_flag(taper, "taper")
+    check_flag(normalize, "normalize")
     image = _as_image(image)
     psf = check_psf(psf)
     phi = check_phi(phi)
