@@ -547,3 +547,9 @@ def test_a_gcsv_header_key_given_twice_is_refused(tmp_path, trace):
     p.write_text("\n".join(lines[:at + 1] + ["tscale,1"] + lines[at + 1:]) + "\n")
     with pytest.raises(InputError, match="dup.gcsv: the gcsv header gives tscale twice"):
         read_gyro_log(p)
+
+
+def test_a_unit_stated_on_one_rate_column_holds_for_all(tmp_path, trace):
+    p = tmp_path / "one.csv"
+    p.write_text(_csv_text("t_s,gx (deg/s),gy,gz", trace.t, list(np.degrees(trace.omega).T)))
+    np.testing.assert_allclose(read_gyro_log(p, "csv").omega, trace.omega, atol=1e-9)

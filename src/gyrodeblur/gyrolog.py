@@ -543,11 +543,11 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     if tu is not None and tu not in TIME_UNITS:
         raise InputError(path, f"unknown time unit {tu!r} (known: s, ms, us, ns)")
     stated_ru = [unit_from_name(header[i], RATE_UNITS) for i in ri]
-    if len(set(stated_ru)) > 1:
+    if rate_unit is None and len({u for u in stated_ru if u is not None}) > 1:
         raise InputError(path, f"the rate columns {', '.join(header[i] for i in ri)} state "
                                f"different units ({', '.join(str(u) for u in stated_ru)}): "
                                "write them in one unit")
-    named_ru = stated_ru[0]
+    named_ru = next((u for u in stated_ru if u is not None), None)
     ru = rate_unit or named_ru
     if ru is None and bracketed_unit(header[ri[0]]) is not None:
         raise InputError(path, f"column {header[ri[0]]!r} states a unit that is neither "
