@@ -26,6 +26,7 @@ import numpy as np
 import scipy.fft as sfft
 from scipy import ndimage, signal
 
+from .arguments import check_real
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, split_alpha
@@ -265,20 +266,15 @@ def _check_options(iterations, levels, lambda_grad, lambda_min, lambda_decay, ke
         if v is not None and (isinstance(v, (bool, np.bool_))
                               or not isinstance(v, (int, np.integer)) or v < 1):
             raise ValueError(f"{name} must be a whole number >= 1, got {v!r}")
-    for name, v, lo, hi in (("lambda_grad", lambda_grad, 0, np.inf),
-                            ("lambda_min", lambda_min, 0, np.inf),
-                            ("lambda_decay", lambda_decay, 0, 1),
-                            ("kernel_reg", kernel_reg, 0, np.inf),
-                            ("edge_pixels", edge_pixels, 0, np.inf),
-                            ("edge_decay", edge_decay, 0, np.inf),
-                            ("cleanup", cleanup, -np.inf, 1)):
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number)) \
-                or not np.isfinite(v):
-            raise TypeError(f"{name} must be a finite number, got {v!r}")
-        ok = (0 <= v < 1) if name == "cleanup" else (lo < v <= hi) if name == "lambda_decay" \
-            else v >= lo if name == "lambda_min" else v > lo
-        if not ok:
-            raise ValueError(f"{name} out of range, got {v!r}")
+    for name, v, ok, what in (("lambda_grad", lambda_grad, lambda x: x > 0, "> 0"),
+                              ("lambda_min", lambda_min, lambda x: x >= 0, ">= 0"),
+                              ("lambda_decay", lambda_decay, lambda x: 0 < x <= 1, "in (0, 1]"),
+                              ("kernel_reg", kernel_reg, lambda x: x > 0, "> 0"),
+                              ("edge_pixels", edge_pixels, lambda x: x > 0, "> 0"),
+                              ("edge_decay", edge_decay, lambda x: x > 0, "> 0"),
+                              ("cleanup", cleanup, lambda x: 0 <= x < 1, "in [0, 1)")):
+        if not ok(check_real(v, name)):
+            raise ValueError(f"{name} must be {what}, got {v!r}")
 
 
 def _check_kernel_size(kernel_size, shape: tuple[int, int]) -> None:

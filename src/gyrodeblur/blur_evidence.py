@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calibration_fit import _TEMPERATURE, working_patch
+from .calibration_fit import _TEMPERATURE, SMALLEST_PATCH, working_patch
 from .calibration_patches import CalibrationPhoto, patch_centres
 from .spectral_criterion import PatchSpectra
 
@@ -32,7 +32,6 @@ __all__ = ["NO_BLUR_MARGIN", "kernel_gain_over_no_blur"]
 NO_BLUR_MARGIN = 1.0
 
 _PATCHES = 9
-_SMALLEST = 48             # px: a patch side at working scale below this says too little
 
 
 def kernel_gain_over_no_blur(image: np.ndarray, psf: np.ndarray, *, transfer="srgb",
@@ -70,7 +69,7 @@ def kernel_gain_over_no_blur(image: np.ndarray, psf: np.ndarray, *, transfer="sr
     extent = float(max(np.ptp(rows), np.ptp(cols)) + 1) if rows.size else 1.0
     photo = CalibrationPhoto(image, None, transfer, 0)
     scale, size = working_patch(extent, min(photo.H, photo.W))
-    if size < _SMALLEST:
+    if size < SMALLEST_PATCH:
         return float("nan")
     centres = patch_centres([photo], n_patches, int(round(size / scale)))
     if not centres:

@@ -82,6 +82,9 @@ _TWIN_PATCH_FACTOR = 3
 _TARGET_EXTENT = 32.0      # px: working scale makes the largest PSF about this long
 _PATCH = 128               # px: patch side at working scale
 _COARSE_EXTENT = 16.0      # px: the same for the coarse search
+#: px: a working-scale patch side below this says too little (the fit refuses the photos,
+#: the blind kernel check gives no verdict)
+SMALLEST_PATCH = 48
 _COARSE_PATCH = 64
 _COARSE_STEP = 0.002       # s: time-shift grid of the coarse search
 #: Over a coarse time-shift grid spanning more than ``WIDE_SPAN`` (s; the default offset
@@ -127,7 +130,7 @@ class CalibrationFit:
         small = min(min(ph.H, ph.W) for ph in photos)
         s_f, P_f = working_patch(extent, small)
         s_c, P_c = working_patch(extent, small, _COARSE_EXTENT, _COARSE_PATCH)
-        if P_f < 48 or P_c < 32:
+        if P_f < SMALLEST_PATCH or P_c < 32:
             raise InputError(None, f"the photos are too small ({small} px) for the blur "
                                    f"(~{extent:.0f} px) to be calibrated")
         per = max(3, int(np.ceil(n_patches / len(photos))))

@@ -805,9 +805,8 @@ def write_photo(
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     if fmt == "JPEG" and channels in (2, 4):
         raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
-    if fmt == "JPEG" and max(pixels.shape[:2]) > JPEG_MAX_SIDE:
-        raise InputError(p, f"JPEG holds at most {JPEG_MAX_SIDE} px a side, the photo is "
-                            f"{pixels.shape[1]}x{pixels.shape[0]}: write .png or .tif")
+    if fmt == "JPEG":
+        _refuse_too_big_for_jpeg(p, pixels)
     check_destination(p, like, overwrite)
     if fmt == "JPEG" and bit_depth is None and like is not None and like.bit_depth == 16:
         warnings.warn(f"{p}: JPEG stores 8 bits per sample: the 16-bit photo is written at 8 "
@@ -899,10 +898,8 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
     if image:
         fmt = _format_of(path)
         _choose_bit_depth(path, fmt, bit_depth, like)
-        if fmt == "JPEG" and like is not None and max(like.pixels.shape[:2]) > JPEG_MAX_SIDE:
-            raise InputError(path, f"JPEG holds at most {JPEG_MAX_SIDE} px a side, the photo "
-                                   f"is {like.pixels.shape[1]}x{like.pixels.shape[0]}: write "
-                                   ".png or .tif")
+        if fmt == "JPEG" and like is not None:
+            _refuse_too_big_for_jpeg(path, like.pixels)
         if fmt == "JPEG" and like is not None and like.pixels.ndim == 3 \
                 and like.pixels.shape[2] == 4:
             raise InputError(path, "JPEG cannot store the photo's alpha channel; write .png "
@@ -947,6 +944,12 @@ def _icc_fits(icc: bytes, channels: int) -> bool:
 
 #: The longest side a JPEG file can hold (the format's 16-bit sizes, as libjpeg caps them).
 JPEG_MAX_SIDE = 65500
+
+
+def _refuse_too_big_for_jpeg(path: str, pixels: np.ndarray) -> None:
+    if max(pixels.shape[:2]) > JPEG_MAX_SIDE:
+        raise InputError(path, f"JPEG holds at most {JPEG_MAX_SIDE} px a side, the photo is "
+                               f"{pixels.shape[1]}x{pixels.shape[0]}: write .png or .tif")
 
 
 def _write_jpeg(f, ints, *, exif, icc, quality) -> None:
