@@ -701,6 +701,33 @@ def test_sigterm_while_writing_leaves_no_file_and_exits_143(capture_dir):
     assert set(d.iterdir()) == before
 
 
+def test_a_reader_that_closes_the_pipe_does_not_stop_the_work(capture_dir):
+    """``gyrodeblur ... | head -0``: standard output closed before the command prints.
+    The PSF is still written, nothing is said on stderr, and the exit status is 0 (it
+    was a BrokenPipeError traceback and 1, and with several lines the rest of the work
+    was lost)."""
+    import subprocess
+    import sys
+    d = capture_dir
+    script = ("import sys, time\n"
+              "from gyrodeblur.cli import main\n"
+              "time.sleep(1.0)\n"        # the reader closes the pipe before the command prints
+              f"sys.exit(main(['psf', '--capture', {str(d / 'cap.json')!r}, '--at', '60,40', "
+              f"'-o', {str(d / 'p.npy')!r}]))\n")
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    child.stdout.close()
+    try:
+        err = child.stderr.read()
+        child.wait(timeout=60)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    assert err == "" and child.returncode == 0, (child.returncode, err)
+    psf = np.load(d / "p.npy")
+    assert psf.shape[0] % 2 == 1 and abs(float(psf.sum()) - 1) < 1e-5
+
+
 def test_outputs_are_all_written_or_none(capture_dir, capsys, monkeypatch):
     """A PSF drawing that cannot be written takes the new photo with it (exit 2, nothing
     written); a folder that refuses files is said before the work; the .npy of ``psf``

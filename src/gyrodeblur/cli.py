@@ -698,7 +698,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(joined_negative_lists(sys.argv[1:] if argv is None else list(argv)))
 
     def say(msg: str) -> None:
-        print(msg)
+        try:
+            print(msg, flush=True)
+        except BrokenPipeError:     # the reader has gone (``| head``): the work goes on
+            _stdout_to_devnull()
 
     def warn(message, category, filename, lineno, file=None, line=None):
         sys.stderr.write(f"gyrodeblur: warning: {message}\n")
@@ -728,6 +731,21 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         _on_sigterm(previous)
     return 0
+
+
+def _stdout_to_devnull() -> None:
+    """Send what is still to be printed to the null device: standard output's reader has
+    closed the pipe, and the files the command writes matter more than its report (the
+    interpreter's own flush at exit would fail again on the pipe)."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):    # not a file (a test's capture)
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
 
 
 class _Terminated(BaseException):
