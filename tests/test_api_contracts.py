@@ -194,6 +194,41 @@ def test_logs_and_captures_are_hashable_and_refuse_complex_rates(make_capture):
         GyroLog(t, np.ones((5, 3)) * (1 + 1j))
 
 
+def test_logs_captures_and_patch_windows_of_the_wrong_kind_are_named(scene, make_capture):
+    """A log's meta and source, a capture's times given as True, and patches given as
+    tuples: each refused by name at once (meta=None failed later inside ``rotated``,
+    True read as one second, a tuple gave an AttributeError deep in the deblur)."""
+    from pathlib import Path
+
+    from gyrodeblur.deblur import deblur_with_psfs
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.tiling import Patch
+    t, w = np.arange(5) * 0.01, np.zeros((5, 3))
+    with pytest.raises(TypeError, match="GyroLog meta must be a mapping"):
+        GyroLog(t, w, "g.csv", None)
+    with pytest.raises(TypeError, match="GyroLog source must be a file name"):
+        GyroLog(t, w, 5)
+    meta = {"frame_readout_time": 20.0}
+    log = GyroLog(t, w, Path("g.csv"), meta)
+    meta["frame_readout_time"] = 1.0                     # the log keeps its own copy
+    assert log.source == "g.csv" and log.meta == {"frame_readout_time": 20.0}
+    assert log.rotated(np.eye(3)).meta == log.meta
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    for name in ("exposure_time", "readout_time", "time_offset"):
+        with pytest.raises(InputError, match=f"{name} must be a number, got True"):
+            cap.replace(**{name: True})
+    psf = np.zeros((5, 5), np.float32)
+    psf[2] = 0.2
+    with pytest.raises(TypeError, match="must be gyrodeblur.tiling.Patch windows"):
+        deblur_with_psfs(scene, [(0, 96, 0, 128)], [psf])
+    with pytest.raises(TypeError, match="whole numbers of pixels"):
+        deblur_with_psfs(scene, [Patch(0.0, 96.0, 0, 128)], [psf])
+    with pytest.raises(ValueError, match="is empty or leaves the 96x128 image"):
+        deblur_with_psfs(scene, [Patch(0, 100, 0, 128)], [psf])
+    out = deblur_with_psfs(scene, [Patch(0, 96, 0, 128)], [psf])
+    assert out.shape == scene.shape
+
+
 def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_capture):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
     blurred = simulate_blur(scene, cap)

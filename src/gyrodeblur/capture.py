@@ -119,6 +119,8 @@ class Capture:
             raise TypeError(f"log must be a GyroLog, got {type(self.log).__name__}")
         for name in ("exposure_start", "exposure_time", "readout_time", "time_offset"):
             try:
+                if isinstance(getattr(self, name), (bool, np.bool_)):
+                    raise TypeError             # True is not one second
                 v = float(getattr(self, name))
             except (TypeError, ValueError):
                 raise InputError(src, f"{name} must be a number, got {getattr(self, name)!r}") from None

@@ -26,7 +26,7 @@ from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, sp
 from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
-                     deconvolve_patchwise, patch_grid)
+                     check_patches, deconvolve_patchwise, patch_grid)
 from .tonecurve import TransferCurve, get_transfer_curve
 from .wiener import DEFAULT_PHI, check_phi, wiener_deconvolve
 
@@ -598,6 +598,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     checked = check_image(image, "photo", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
     patches, psfs = list(patches), list(psfs)
+    check_patches(patches, *checked.shape[:2])
     model = _check_model(model, method, patches, checked.shape[:2])
     encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
     if len(psfs) != len(patches):

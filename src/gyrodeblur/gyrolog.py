@@ -36,6 +36,7 @@ import csv
 import inspect
 import os
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -101,6 +102,15 @@ class GyroLog:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        if isinstance(self.source, os.PathLike):
+            object.__setattr__(self, "source", os.fspath(self.source))
+        if self.source is not None and not isinstance(self.source, str):
+            raise TypeError(f"GyroLog source must be a file name (str) or None, got "
+                            f"{type(self.source).__name__}")
+        if not isinstance(self.meta, Mapping):
+            raise TypeError(f"GyroLog meta must be a mapping of header values, got "
+                            f"{type(self.meta).__name__}")
+        object.__setattr__(self, "meta", dict(self.meta))    # the caller's may change
         for name in ("t", "omega"):
             kind = np.asarray(getattr(self, name)).dtype.kind
             if kind not in "biuf":

@@ -36,6 +36,7 @@ __all__ = [
     "check_overlap",
     "patch_grid",
     "blend_weights",
+    "check_patches",
     "deconvolve_patchwise",
     "psf_radius",
     "patch_margin",
@@ -167,7 +168,7 @@ def blend_weights(patches: Sequence[Patch],
         map.)
     """
     height, width = int(shape[0]), int(shape[1])
-    _check_inside(patches, height, width)
+    check_patches(patches, height, width)
     row_ivs = sorted({(p.y0, p.y1) for p in patches})
     col_ivs = sorted({(p.x0, p.x1) for p in patches})
     cells = {(p.y0, p.y1, p.x0, p.x1) for p in patches}
@@ -319,13 +320,13 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
         if unknown.shape != (height, width):
             raise ValueError(f"unknown must be a boolean mask of shape {(height, width)}, "
                              f"got {unknown.shape}")
+    check_patches(patches, height, width)
     _warn_large_psfs(patches, psfs)
 
     try:
         weights = blend_weights(patches, (height, width))
         weight_map = None
     except ValueError:
-        _check_inside(patches, height, width)
         weights = [(_hamming(p.y1 - p.y0), _hamming(p.x1 - p.x0)) for p in patches]
         weight_map = np.zeros((height, width), np.float32)
 
@@ -471,8 +472,16 @@ def _normalised_axis_weights(intervals: list[tuple[int, int]], length: int,
     return {iv: (w / total[iv[0]:iv[1]]).astype(np.float32) for iv, w in raw.items()}
 
 
-def _check_inside(patches: Sequence[Patch], height: int, width: int) -> None:
+def check_patches(patches: Sequence[Patch], height: int, width: int) -> None:
+    """Refuse a window that is not a :class:`Patch` of whole-number bounds (TypeError),
+    or that is empty or leaves the ``height`` x ``width`` image (ValueError)."""
     for p in patches:
+        if not isinstance(p, Patch):
+            raise TypeError(f"patches must be gyrodeblur.tiling.Patch windows (y0, y1, x0, "
+                            f"x1), got {type(p).__name__} {p!r}")
+        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool)
+                   for v in (p.y0, p.y1, p.x0, p.x1)):
+            raise TypeError(f"{p}: a window's bounds must be whole numbers of pixels")
         if not (0 <= p.y0 < p.y1 <= height and 0 <= p.x0 < p.x1 <= width):
             raise ValueError(f"{p} is empty or leaves the {height}x{width} image")
 
