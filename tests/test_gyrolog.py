@@ -553,3 +553,25 @@ def test_a_unit_stated_on_one_rate_column_holds_for_all(tmp_path, trace):
     p = tmp_path / "one.csv"
     p.write_text(_csv_text("t_s,gx (deg/s),gy,gz", trace.t, list(np.degrees(trace.omega).T)))
     np.testing.assert_allclose(read_gyro_log(p, "csv").omega, trace.omega, atol=1e-9)
+
+
+@pytest.mark.parametrize("header, options", [
+    ("t_s,gx,-gy,gz", {}),                             # found by name
+    ("t_s,wx,wy,+wz", {}),
+    ("t_s,gx,-gy,gz", {"rate_columns": ["gx", "-gy", "gz"]}),
+    ("t_s,a,-b,c,temp", {"rate_columns": [1, 2, 3]}),  # given by index
+])
+def test_a_rate_column_whose_name_carries_a_sign_is_refused(tmp_path, trace, header, options):
+    """A sign in a column's name is not read: taking ``-gy`` as +y turned the camera the
+    wrong way without a word."""
+    p = tmp_path / "signed.csv"
+    cols = list(trace.omega.T) + ([np.zeros(len(trace))] if header.endswith("temp") else [])
+    p.write_text(_csv_text(header, trace.t, cols))
+    signed = next(h for h in header.split(",") if h[0] in "+-")
+    with pytest.raises(InputError, match=f"signed.csv: rate column '\\{signed}' carries a "
+                                         f"sign, which is not read"):
+        read_gyro_log(p, "csv", **options)
+    p.write_text(_csv_text(header.replace(signed, signed[1:]), trace.t, cols))
+    unsigned = {k: [signed[1:] if c == signed else c for c in v] for k, v in options.items()}
+    np.testing.assert_allclose(read_gyro_log(p, "csv", **unsigned).omega, trace.omega,
+                               atol=1e-9)

@@ -44,7 +44,8 @@ import numpy as np
 from .errors import InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
                           default_rate_columns, default_time_column, is_number,
-                          looks_like_time, parse_number, sniff_delimiter,
+                          looks_like_time, parse_number, refuse_signed_names,
+                          sniff_delimiter,
                           time_unit_from_interval, unit_from_name)
 
 __all__ = [
@@ -544,6 +545,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             raise InputError(path, "rate_columns must be three different columns, other than "
                                    f"the time column; got {', '.join(header[i] for i in ri)} "
                                    f"(time: {header[ti]})")
+    refuse_signed_names(path, header, ri)
     for name, given, known in (("time_unit", time_unit, TIME_UNITS),
                                ("rate_unit", rate_unit, RATE_UNITS)):
         if given is not None and not isinstance(given, str):

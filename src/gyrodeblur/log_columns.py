@@ -21,7 +21,8 @@ from .errors import InputError
 __all__ = ["TIME_UNITS", "RATE_UNITS", "RATE_UNIT_ENDINGS", "RATE_ALIASES",
            "GUESSED_RATE_RANGE", "parse_number", "is_number", "unit_from_name",
            "bracketed_unit", "sniff_delimiter", "time_unit_from_interval", "rate_axis",
-           "looks_like_time", "default_time_column", "default_rate_columns"]
+           "looks_like_time", "default_time_column", "default_rate_columns",
+           "refuse_signed_names"]
 
 #: Seconds per unit of time.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -187,6 +188,19 @@ def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
             raise InputError(path, f"column {header[i]!r} would be read as the {a} rate, "
                                    f"which its name contradicts{where}")
     return ri
+
+
+def refuse_signed_names(path: str, header: list[str], columns: list[int]) -> None:
+    """Refuse rate columns whose names carry a sign (``-gy``). The sign is not read: a
+    log's axes become the camera's only through the capture's ``gyro.orientation``, a
+    rotation, never by a sign in a name, so reading such a column as it is could turn
+    the camera the wrong way without a word."""
+    for i in columns:
+        if header[i].strip().startswith(("-", "+", "\u2212")):
+            raise InputError(path, f"rate column {header[i]!r} carries a sign, which is not "
+                                   f"read (the log's axes become the camera's only through "
+                                   f"gyro.orientation): rename the column, negating its "
+                                   f"values if they are the rate's opposite")
 
 
 def is_number(s: str) -> bool:
