@@ -255,6 +255,10 @@ def test_shared_android_log(shared_data):
     ("t_s,x,y,z\n0,0,0,0\n0.01,0,0,0\n0.005,0,0,0\n",
      r"not increasing \(sample 3: 0.005000 s after 0.010000 s\)"),
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
+    # epoch microseconds said to be seconds: rounding would eat the exposure
+    ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000005000,0,0,0\n",
+     r"gyro sample 1's time 1.7e\+15 s is beyond 4.29e\+09 s .* microseconds or "
+     r"nanoseconds read as seconds"),
     ("t_s,x,y,z\n0,0,0\n", "expected 4 values"),
     ("t_s,x,y,z\n0,0,0,abc\n", "not a number"),
     ("", "empty"),

@@ -70,6 +70,10 @@ IMPLAUSIBLE_MEDIAN_RATE = 35.0
 #: No gyro measures a rate above this (rad/s, about 11500 deg/s, well over the widest
 #: ranges of MEMS gyros, +-4000 deg/s): a sample beyond it is corrupt (or in another unit).
 MAX_GYRO_RATE = 200.0
+#: Latest sample time a log may hold (s, about 136 years): beyond it float64 seconds are
+#: coarser than a microsecond, and a photo's exposure is lost to rounding. Unix seconds
+#: (1.7e9 now) are below it; microseconds or nanoseconds read as seconds are not.
+MAX_TIME = 2.0 ** 32
 #: A log's median rate above this (rad/s, 115 deg/s) is a fast pan from start to end: where
 #: no unit was stated, deg/s read as rad/s is likelier (a hand-held phone's median is
 #: 0.05-0.7 rad/s; the same in deg/s reads as 3-40).
@@ -145,6 +149,12 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
     bad = ~np.isfinite(t) | ~np.all(np.isfinite(w), axis=1)
     if bad.any():
         raise InputError(source, f"NaN or infinite value in gyro sample {int(np.argmax(bad)) + 1}")
+    if np.abs(t).max() > MAX_TIME:
+        i = int(np.argmax(np.abs(t) > MAX_TIME))
+        raise InputError(source, f"gyro sample {i + 1}'s time {float(t[i]):.6g} s is beyond "
+                                 f"{MAX_TIME:.3g} s (136 years), where seconds are too coarse "
+                                 "for an exposure: microseconds or nanoseconds read as "
+                                 "seconds? (set the time unit)")
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
