@@ -240,6 +240,37 @@ def test_a_skew_beyond_the_shutter_falls_back_to_the_points_own_row(make_capture
     assert landing_pixel(ok, 160.0, 120.0)[1] < 120.0 - 3      # converged, moved up
 
 
+def test_a_fast_tilt_lands_each_point_where_the_forward_model_puts_its_light(make_capture):
+    # Skew 0.54 (content crosses 0.54 rows per row the shutter sweeps): the fixed point
+    # shrinks its error by only that much a step. After eight steps the points were
+    # 0.3-0.8 px short when content moves down, and with content moving up the lower
+    # rows' points had not settled and fell back to their own rows: PSFs and alignment
+    # field tens of pixels off (a deblur of the lower half came out worse than its input).
+    # Each point's light, blurred by the warping forward model (no PSF), must be where
+    # landing_pixel says, and the PSF's mean offset must say the same.
+    yy, xx = np.mgrid[:240, :320]
+    for rate, points in (([3.0, 0.0, 0.0], [(160, 30), (160, 60), (90, 80)]),
+                         ([-3.0, 0.0, 0.0], [(160, 150), (240, 175)])):
+        cap = make_capture(rate, f=1080.0, exposure=0.003, readout=0.04)
+        for x0, y0 in points:
+            dot = np.zeros((240, 320), np.float32)
+            dot[y0, x0] = 1.0
+            g = simulate_blur(dot, cap, order=1)
+            if rate[0] < 0:           # content moves up: leave out the copy that the
+                g[y0:] = 0            # mirrored border sends up from below the frame
+            light = np.array([(g * xx).sum(), (g * yy).sum()]) / g.sum()
+            p = landing_pixel(cap, x0, y0)
+            assert np.allclose(p, light, atol=0.1), (x0, y0, p, light)
+            assert abs(y0 - p[1]) > 20                 # a long way from its own row
+            mx, my = _centroid(render_psf(cap, x0, y0))
+            assert np.allclose([x0 + mx, y0 + my], light, atol=0.15), (x0, y0, mx, my)
+    ys, xs, d = displacement_field(cap, step=30)
+    mid = len(xs) // 2
+    column = np.stack([np.full(len(ys), float(xs[mid])), ys], -1)
+    assert np.allclose(d[:, mid], landing_pixel(cap, column[:, 0], ys) - column, atol=1e-6)
+    assert np.all(np.diff(d[:, mid, 1]) < -5)          # ever further up, to the last row
+
+
 def test_psf_pictures_draw_the_sinc_lobes_below_zero_black():
     """A PSF off the pixel grid rings below zero; its picture (``psf`` command, the demo's
     field) must draw those samples black, not cast NaN (the square-root stretch of a

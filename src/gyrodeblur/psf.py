@@ -133,14 +133,18 @@ def offsets_under_rotation(camera, R: np.ndarray, px, py) -> np.ndarray:
     return np.stack([px, py], axis=-1)[..., None, :] - src
 
 
-#: Fixed-point steps :func:`landing_pixel` takes at most, the change (px) at which it
-#: stops, and the residual (px) above which a point counts as not converged. Each step
-#: shrinks the error by the rolling shutter's skew, the change of the mean displacement
-#: per pixel (about rate x fx x readout / height: 0.06 px per px at 1.7 rad/s, fx 1000
-#: px, a 25 ms readout and 680 rows), so two or three steps reach the tolerance.
+#: Fixed-point steps :func:`landing_pixel` takes at most, and the change (px) at which it
+#: stops. Each step shrinks the error by the rolling shutter's skew, the change of the
+#: mean displacement per pixel (about rate x fx x readout / height: 0.06 px per px at
+#: 1.7 rad/s, fx 1000 px, a 25 ms readout and 680 rows), so for hand shake two or three
+#: steps reach the tolerance; a fast tilt (skew 0.5 and more) needs many more, and the
+#: points still moving after these steps are finished by Newton's method
+#: (:func:`_landing_by_newton`).
 _LANDING_STEPS = 8
 _LANDING_TOL = 1e-3
-_LANDING_RESIDUAL = 0.5
+#: Newton steps at most, and the finite-difference step (px) of their Jacobian.
+_NEWTON_STEPS = 8
+_NEWTON_DELTA = 1e-2
 
 
 def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndarray:
@@ -150,10 +154,11 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
     ``x0``, ``y0`` are pixel positions (scalars or arrays of one shape); ``n`` time steps
     of ``p``'s row's exposure (or ``row``'s) form the mean. Returns ``(..., 2)`` (x, y).
 
-    The fixed-point iteration converges while content moves across rows more slowly than
-    the shutter sweeps them (skew under 1). Where it does not (a telephoto lens tilting
-    fast with a short exposure), the point falls back to its own position: its PSF is then
-    timed by its own row, as a global shutter would have it.
+    A fixed-point iteration, finished by Newton's method where it is slow, solves this
+    while content moves across rows more slowly than the shutter sweeps them (skew under
+    1). Where it does not (a telephoto lens tilting fast with a short exposure), the point
+    falls back to its own position: its PSF is then timed by its own row, as a global
+    shutter would have it.
     """
     x0 = np.asarray(x0, np.float64)
     y0 = np.asarray(y0, np.float64)
@@ -165,12 +170,39 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
         p = new
         if not np.nanmax(step, initial=0.0) >= _LANDING_TOL:     # all converged, or all NaN
             break
-    residual = np.abs(start + _gather_offsets(capture, p[..., 0], p[..., 1], n, row)
-                      .mean(axis=-2) - p).max(axis=-1)
-    lost = ~(residual <= _LANDING_RESIDUAL)                       # NaN too
-    if np.any(lost):
-        p = np.where(lost[..., None], start, p)
+    slow = ~(step.max(axis=-1) < _LANDING_TOL)                    # NaN too
+    if np.any(slow):
+        p[slow] = _landing_by_newton(capture, start[slow], p[slow], n, row)
     return p
+
+
+def _landing_by_newton(capture: Capture, start: np.ndarray, p: np.ndarray, n: int,
+                       row) -> np.ndarray:
+    """Finish :func:`landing_pixel` for the points ``start`` ``(m, 2)`` from ``p``: Newton
+    steps on ``F(p) = start + g(p) - p`` (``g`` the mean gather offset), its 2 x 2 Jacobian
+    by finite differences. A point is kept where it converges to :data:`_LANDING_TOL`
+    with the skew (the spectral radius of ``dg/dp``) under 1; others fall back to
+    ``start``."""
+    def residual(q):
+        return start + _gather_offsets(capture, q[:, 0], q[:, 1], n, row).mean(axis=-2) - q
+
+    eye = np.eye(2)
+    f = residual(p)
+    for _ in range(_NEWTON_STEPS):
+        jac = np.stack([(residual(p + _NEWTON_DELTA * e) - f) / _NEWTON_DELTA for e in eye],
+                       axis=-1)                                   # dF/dp, (m, 2, 2)
+        det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+        ok = np.abs(det) > 1e-9
+        inv = np.stack([np.stack([jac[:, 1, 1], -jac[:, 0, 1]], -1),
+                        np.stack([-jac[:, 1, 0], jac[:, 0, 0]], -1)], -2)
+        step = np.einsum("mij,mj->mi", inv, f) / np.where(ok, det, 1.0)[:, None]
+        p = np.where(ok[:, None], p - step, p)
+        f = residual(p)
+        if not np.nanmax(np.abs(f), initial=0.0) >= _LANDING_TOL:
+            break
+    skew = np.abs(np.linalg.eigvals(jac + eye)).max(axis=-1)      # dg/dp = dF/dp + I
+    kept = (np.abs(f).max(axis=-1) < _LANDING_TOL) & (skew < 1.0)  # NaN: not kept
+    return np.where(kept[:, None], p, start)
 
 
 def check_blur_span(capture: Capture, span: float, where: str) -> None:
