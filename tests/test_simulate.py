@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+from scipy import ndimage
 from skimage import data, transform
 
 from gyrodeblur.psf import render_psf
-from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur, warp_samples
+from gyrodeblur.simulate import (_add_spline_samples, _row_homographies, _spline_coefficients,
+                                 add_noise, quantize_8bit, simulate_blur, warp_samples)
 
 
 @pytest.fixture(scope="module")
@@ -99,3 +101,59 @@ def test_alpha_is_not_blurred_and_bad_arguments_are_refused(make_capture, scene)
                 {"snr_db": float("nan")}):
         with pytest.raises(ValueError, match=f"{next(iter(bad))} must be"):
             simulate_blur(scene, cap, **bad)
+
+
+@pytest.mark.parametrize("order", [1, 3])
+def test_spline_sampler_is_map_coordinates_with_mirrored_border(order):
+    """The sampler (coefficients, mirror padding, fold, taps, weights) against scipy's
+    ``map_coordinates(mode="reflect")`` at random positions, a third of them outside the
+    frame (near it, and up to 1e5 px away), and on the frame's edges and half-pixels."""
+    rng = np.random.default_rng(order)
+    H, W = 13, 17
+    img = rng.random((H, W, 2)).astype(np.float32)
+    x = np.concatenate([rng.uniform(-0.5, W - 0.5, 400), rng.uniform(-2 * W, 3 * W, 150),
+                        rng.uniform(-1e5, 1e5, 50), [-0.5, W - 0.5, 0, W - 1, -3, W + 2.5]])
+    y = np.concatenate([rng.uniform(-0.5, H - 0.5, 400), rng.uniform(-2 * H, 3 * H, 150),
+                        rng.uniform(-1e5, 1e5, 50), [H - 0.5, -0.5, H + 1, 2.5, 0, H - 1]])
+    x, y = x.reshape(2, -1), y.reshape(2, -1)                 # any shape
+    assert ((x < -0.5) | (x > W - 0.5) | (y < -0.5) | (y > H - 0.5)).mean() > 0.3
+    out = np.zeros((2,) + x.shape, np.float32)
+    _add_spline_samples(_spline_coefficients(img, order), x, y, order, out)
+    for c in range(2):
+        ref = ndimage.map_coordinates(img[..., c].astype(np.float64), [y, x], order=order,
+                                      mode="reflect")
+        np.testing.assert_allclose(out[c], ref, rtol=0, atol=2e-6)
+    with pytest.raises(ValueError, match="infinity"):        # not an IndexError, nor zeros
+        _add_spline_samples(_spline_coefficients(img, order), x, np.where(x > 5, np.inf, y),
+                            order, out)
+
+
+@pytest.mark.parametrize("order", [1, 3])
+def test_simulate_is_the_mean_of_map_coordinates_warps(make_capture, order):
+    """The whole synthesis (rows in chunks and bands, channels, rolling shutter) against
+    its definition, written with scipy's sampler: grey and RGB."""
+    cap = make_capture([-0.4, 0.6, 1.5], width=64, height=48, f=60.0, readout=0.02)
+    rng = np.random.default_rng(5)
+    rgb = ndimage.gaussian_filter(rng.random((48, 64, 3)), (1, 1, 0)).astype(np.float32)
+    n = 5
+    xs = np.arange(64.0)[None, :]
+    ys = np.arange(48.0)[:, None]
+    for img in (rgb, rgb[..., 1]):
+        ref = np.zeros(img.shape)
+        for j in range(n):
+            h = _row_homographies(cap, (j + 0.5) / n)[:, None]
+            den = h[..., 2, 0] * xs + h[..., 2, 1] * ys + h[..., 2, 2]
+            sx = (h[..., 0, 0] * xs + h[..., 0, 1] * ys + h[..., 0, 2]) / den
+            sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den
+            for c in range(1 if img.ndim == 2 else 3):
+                plane = img if img.ndim == 2 else img[..., c]
+                warped = ndimage.map_coordinates(plane.astype(np.float64), [sy, sx],
+                                                 order=order, mode="reflect")
+                if img.ndim == 2:
+                    ref += warped / n
+                else:
+                    ref[..., c] += warped / n
+        out = simulate_blur(img, cap, n_samples=n, order=order)
+        assert out.shape == img.shape and out.dtype == np.float32
+        np.testing.assert_allclose(out, ref, rtol=0, atol=1e-5)
+        assert np.abs(out - img).max() > 0.05                   # and it did blur

@@ -25,6 +25,87 @@ __all__ = ["simulate_blur", "add_noise", "quantize_8bit", "warp_samples"]
 MAX_STEP_PX = 0.5
 
 
+#: Mirrored pixels around the spline coefficients: enough for every tap of a coordinate
+#: folded into the frame (cubic: ``floor(x) - 1 .. floor(x) + 2`` for ``-0.5 <= x <= n - 0.5``).
+_PAD = 2
+
+#: Pixels warped per chunk of rows (keeps the sampler's temporaries in cache).
+_CHUNK_PX = 65536
+
+
+def _spline_coefficients(planes: np.ndarray, order: int) -> np.ndarray:
+    """``(C, H + 2 _PAD, W + 2 _PAD)`` float32: the spline coefficients of the channels of
+    ``planes`` (``(H, W, C)``; for order 1 the pixels themselves), with :data:`_PAD`
+    mirrored pixels around them (half-sample symmetric, as ``mode="reflect"``)."""
+    H, W, C = planes.shape
+    padded = np.empty((C, H + 2 * _PAD, W + 2 * _PAD), np.float32)
+    for c in range(C):
+        p = planes[..., c]
+        if order > 1:
+            p = ndimage.spline_filter(p, order, output=np.float32, mode="reflect")
+        padded[c] = np.pad(p, _PAD, mode="symmetric")
+    return padded
+
+
+def _spline_taps(x: np.ndarray, n: int, order: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Taps of spline ``order`` (1 or 3) at positions ``x`` on an axis of ``n`` pixels.
+
+    ``x`` (float64) is first folded into ``[-0.5, n - 0.5]`` by the half-sample symmetric
+    mirror (``map_coordinates``' ``mode="reflect"``; positions already inside are left as
+    they are, to the bit). Returns the index, in an array padded by :data:`_PAD` mirrored
+    pixels, of the first of the ``order + 1`` taps (intp), and their float32 weights.
+    """
+    lo, hi = x.min(), x.max()
+    if not np.isfinite(lo + hi):              # map_coordinates gave 0 there, silently
+        raise ValueError("the rotation carries pixels to infinity (a view turned by 90 "
+                         "degrees or more from the reference orientation)")
+    if lo < -0.5 or hi > n - 0.5:
+        if lo < -n - 0.5 or hi > 2 * n - 0.5:          # more than a frame outside
+            far = (x < -n - 0.5) | (x > 2 * n - 0.5)
+            x = np.where(far, np.mod(x + 0.5, 2 * n) - 0.5, x)
+        x = np.where(x < -0.5, -1 - x, x)
+        x = np.where(x > n - 0.5, 2 * n - 1 - x, x)
+    i = np.floor(x)
+    f = (x - i).astype(np.float32)            # fraction in float64 first: exact at any x
+    first = i.astype(np.intp) + (_PAD - order // 2)
+    if order == 1:
+        return first, [1 - f, f]
+    f2 = f * f
+    f3 = f2 * f
+    g = 1 - f
+    w0 = g * g * g * np.float32(1 / 6)       # cubic B-spline: (1-f)^3/6, (3f^3-6f^2+4)/6,
+    w1 = f3 * np.float32(0.5) - f2 + np.float32(2 / 3)      # (-3f^3+3f^2+3f+1)/6, f^3/6
+    w3 = f3 * np.float32(1 / 6)
+    return first, [w0, w1, 1 - w0 - w1 - w3, w3]
+
+
+def _add_spline_samples(padded: np.ndarray, x: np.ndarray, y: np.ndarray, order: int,
+                        out: np.ndarray) -> None:
+    """``out[c] += s_c(x, y)``: the spline of ``order`` with coefficients ``padded[c]``
+    (from :func:`_spline_coefficients`) at positions ``x``, ``y`` (float64, any shape;
+    ``out`` is ``(C,) + x.shape``), mirrored outside the frame: what
+    ``scipy.ndimage.map_coordinates(..., mode="reflect", prefilter=False)`` gives, to
+    float32 rounding, but with the taps and weights computed once for all channels."""
+    C, Hp, Wp = padded.shape
+    bx, wx = _spline_taps(x, Wp - 2 * _PAD, order)
+    by, wy = _spline_taps(y, Hp - 2 * _PAD, order)
+    first = by * Wp + bx                      # flat index of the first tap
+    k = order + 1
+    row = np.empty(x.shape, np.float32)
+    tmp = np.empty(x.shape, np.float32)
+    for c in range(C):
+        flat = padded[c].ravel()
+        for dy in range(k):
+            for dx in range(k):
+                g = np.take(flat[dy * Wp + dx:], first)    # tap (dy, dx)
+                if dx == 0:
+                    np.multiply(g, wx[0], out=row)
+                else:
+                    row += np.multiply(g, wx[dx], out=tmp)
+            row *= wy[dy]
+            out[c] += row
+
+
 def _row_homographies(capture: Capture, s: float, r0: int = 0,
                       r1: int | None = None) -> np.ndarray:
     """``(r1 - r0, 3, 3)``: ``K R(t_y) K^-1`` for rows ``y`` in ``r0:r1`` (default all),
@@ -106,12 +187,18 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         negated) or far above white (over :data:`~gyrodeblur.images.PHOTO_MAX`: 0-255).
     TypeError
         ``capture``, ``snr_db``, ``seed`` or ``quantize`` of the wrong kind.
+    ValueError
+        A bad ``order``, ``n_samples`` or ``snr_db``, an image whose size is not the
+        camera's, or a rotation that carries pixels to infinity (by 90 degrees or more).
 
     Notes
     -----
-    Sampling: ``scipy.ndimage.map_coordinates`` of ``order`` (the cubic spline's
-    coefficients computed once per channel); outside the frame the image is mirrored
-    (half-sample symmetric).
+    Sampling: the spline of ``order`` (the cubic spline's coefficients computed once per
+    channel by ``scipy.ndimage.spline_filter``), evaluated as
+    ``scipy.ndimage.map_coordinates(..., mode="reflect", prefilter=False)`` does, to
+    float32 rounding: outside the frame the image is mirrored (half-sample symmetric).
+    The taps and weights of each warped pixel are computed once for all channels, in
+    chunks of rows, and the taps gathered with ``numpy.take``.
     """
     if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) \
             or order not in (1, 3):
@@ -147,28 +234,25 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         raise ValueError(f"image is {W}x{H} but the capture's camera is {cam.width}x{cam.height}")
     n = int(n_samples) if n_samples is not None else warp_samples(capture)
     planes = img.reshape(H, W, -1)
-    acc = np.zeros_like(planes)
-    if order > 1:                    # spline coefficients, once (sampled unfiltered below)
-        planes = np.stack([ndimage.spline_filter(planes[..., c], order, output=np.float32,
-                                                 mode="reflect")
-                           for c in range(planes.shape[2])], axis=-1)
+    padded = _spline_coefficients(planes, order)     # once, sampled unfiltered below
+    acc = np.zeros((planes.shape[2], H, W), np.float32)
     xs = np.arange(W, dtype=np.float64)[None, :]
+    step = max(1, _CHUNK_PX // W)
 
     def band(r0, r1):                # rows r0:r1 of every sample, in the samples' order
-        ys = np.arange(r0, r1, dtype=np.float64)[:, None]
-        for j in range(n):
-            h = _row_homographies(capture, (j + 0.5) / n, r0, r1)[:, None]  # (rows, 1, 3, 3)
-            den = h[..., 2, 0] * xs + h[..., 2, 1] * ys + h[..., 2, 2]
-            sx = (h[..., 0, 0] * xs + h[..., 0, 1] * ys + h[..., 0, 2]) / den
-            sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den
-            coords = np.stack([sy, sx])
-            for c in range(planes.shape[2]):
-                acc[r0:r1, :, c] += ndimage.map_coordinates(
-                    planes[..., c], coords, order=order, mode="reflect", prefilter=False)
+        for a in range(r0, r1, step):
+            b = min(r1, a + step)
+            ys = np.arange(a, b, dtype=np.float64)[:, None]
+            for j in range(n):
+                h = _row_homographies(capture, (j + 0.5) / n, a, b)[:, None]  # (rows, 1, 3, 3)
+                den = h[..., 2, 0] * xs + h[..., 2, 1] * ys + h[..., 2, 2]
+                sx = (h[..., 0, 0] * xs + h[..., 0, 1] * ys + h[..., 0, 2]) / den
+                sy = (h[..., 1, 0] * xs + h[..., 1, 1] * ys + h[..., 1, 2]) / den
+                _add_spline_samples(padded, sx, sy, order, acc[:, a:b])
 
     capture.orientation              # integrated once, before the bands share it
-    for_row_bands(band, H)           # map_coordinates releases the GIL: one band per core
-    out = (acc / n).reshape(img.shape)
+    for_row_bands(band, H)           # np.take and ufuncs release the GIL: one band per core
+    out = np.ascontiguousarray(np.moveaxis(acc, 0, -1) / n).reshape(img.shape)
     if snr_db is not None:
         out = add_noise(out, snr_db, seed)
     out = curve.encode(out)
