@@ -36,10 +36,32 @@ def test_matrix_accepted():
     assert np.array_equal(parse_axes(m), np.asarray(m, float))
 
 
+@pytest.mark.parametrize("degrees", [0, 90, 180, 270])
+def test_named_android_mappings_follow_the_sensor_orientation(degrees):
+    """``android-back-camera-<θ>``: Android device axes (x right, y up, z out of the screen,
+    natural orientation) to a back camera's sensor-layout frame (x right, y down, z
+    forward), for a sensor whose image is shown upright after a clockwise turn of θ. Device
+    right, device up and the direction out of the screen, each in the raw sensor image:
+    upright, right is (1, 0) and up (0, -1) (image y down); the raw image is the upright
+    one turned back (anticlockwise on screen) by θ, which sends image (x, y) to
+    (x cos θ + y sin θ, -x sin θ + y cos θ); out of the screen is behind a back camera."""
+    m = parse_axes(f"android-back-camera-{degrees}")
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+
+    def in_raw(x, y):
+        return [x * c + y * s, -x * s + y * c]
+
+    np.testing.assert_allclose(m @ [1.0, 0.0, 0.0], in_raw(1.0, 0.0) + [0.0], atol=1e-12)
+    np.testing.assert_allclose(m @ [0.0, 1.0, 0.0], in_raw(0.0, -1.0) + [0.0], atol=1e-12)
+    np.testing.assert_allclose(m @ [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], atol=1e-12)
+
+
 def test_named_mappings_are_the_rotations_their_names_say():
-    """``android-back-camera``: Android device axes (x right, y up, z out of the screen) to
-    the back camera's (x right, y down, z forward): x kept, y and z negated."""
+    """``android-back-camera`` is most phones' sensor orientation, 90 degrees: camera x =
+    -device y (the raw image's left is the device's top), camera y = -device x."""
     np.testing.assert_array_equal(parse_axes("android-back-camera") @ [1.0, 2.0, 3.0],
-                                  [1.0, -2.0, -3.0])
-    np.testing.assert_array_equal(parse_axes("android-back-camera"), parse_axes("Xyz"))
+                                  [-2.0, -1.0, -3.0])
+    np.testing.assert_array_equal(parse_axes("android-back-camera"),
+                                  parse_axes("android-back-camera-90"))
+    np.testing.assert_array_equal(parse_axes("android-back-camera-0"), parse_axes("Xyz"))
     np.testing.assert_array_equal(parse_axes("identity"), np.eye(3))

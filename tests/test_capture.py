@@ -347,7 +347,7 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     t = 1000.0 + np.arange(400) / 200.0
     rows = "\n".join(f"{v:.3f},0.01,0.3,-0.02" for v in t)
     (tmp_path / "g.csv").write_text("t_s,gx,gy,gz\n" + rows + "\n")
-    doc = {"exposure_start": 1001.0, "exposure_time": 0.03,
+    doc = {"exposure_start": 1001.0, "exposure_time": 0.03, "readout_time": 0.02,
            "camera": {"fx": 500, "width": 640, "height": 480}, "gyro": {"path": "g.csv"}}
     (tmp_path / "c.json").write_text(json.dumps(doc))
     said = []
@@ -357,6 +357,15 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     said.clear()
     load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"}, report=said.append)
     assert said == []
+    # a readout time left out is a global shutter, and said (a phone's is 10-30 ms)
+    del doc["readout_time"]
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    cap = load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"},
+                       report=said.append)
+    assert cap.readout_time == 0.0
+    assert said == ["readout_time = 0: not given, a global shutter (a phone's rolling "
+                    "shutter reads out in about 10-30 ms: give a guess, which calibrate "
+                    "refines)"]
 
 
 def test_a_capture_saved_anywhere_loads_again(capture_files, tmp_path_factory):
@@ -467,6 +476,34 @@ def test_an_android_log_given_no_mapping_is_read_as_the_back_camera(tmp_path):
     np.testing.assert_array_equal(cap.axes, parse_axes("android-back-camera"))
     doc["gyro"]["orientation"] = "XYZ"                 # given: taken as it is, no warning
     (tmp_path / "c.json").write_text(json.dumps(doc))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(load_capture(tmp_path / "c.json").axes, np.eye(3))
+
+
+@pytest.mark.parametrize("header", ["time,seconds_elapsed,z,y,x",
+                                    "timestamp,rotationRateX,rotationRateY,rotationRateZ"])
+def test_a_phone_apps_csv_given_no_mapping_is_read_as_the_back_camera(tmp_path, header):
+    """Sensor Logger's and Core Motion's columns are in the device's axes: read, like an
+    Android dump, as android-back-camera (yxz, most phones' sensor orientation) with a
+    warning; a plain CSV stays in camera axes, silently."""
+    from gyrodeblur.axes import parse_axes
+
+    t = 1.7e9 + np.arange(0, 1, 0.005)
+    rows = ([f"{int(round(a * 1e9))},{a - t[0]:.3f},0.3,0.2,0.1" for a in t]
+            if "elapsed" in header else [f"{a:.4f},0.1,0.2,0.3" for a in t])
+    (tmp_path / "phone.csv").write_text(header + "\n" + "\n".join(rows) + "\n")
+    doc = {"exposure_start": t[100], "exposure_time": 0.03,
+           "camera": {"fx": 500, "width": 640, "height": 480}, "gyro": {"path": "phone.csv"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="c.json: a phone app's log .* device's axes .* "
+                                         "android-back-camera \\(yxz"):
+        cap = load_capture(tmp_path / "c.json")
+    np.testing.assert_array_equal(cap.axes, parse_axes("yxz"))
+    np.testing.assert_allclose(cap.log.omega[0], [0.1, 0.2, 0.3])      # x, y, z by name
+    (tmp_path / "phone.csv").write_text("t_s,wx,wy,wz\n" + "\n".join(
+        f"{a:.4f},0.1,0.2,0.3" for a in t) + "\n")
     import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -4,9 +4,10 @@ The camera frame is OpenCV's: x right, y down, z forward (along the optical axis
 mapping is a proper rotation ``M`` with ``w_camera = M @ w_log``. It can be written
 
 * as three letters, the i-th naming the log axis (``X``, ``Y`` or ``Z``; lowercase =
-  negated) that *is* the camera's i-th axis: ``"XYZ"`` is the identity, ``"Xyz"`` says
-  camera x = log x, camera y = -log y, camera z = -log z (an Android phone's back camera
-  in the device's natural orientation: device y points up and z out of the screen);
+  negated) that *is* the camera's i-th axis: ``"XYZ"`` is the identity, ``"yxz"`` says
+  camera x = -log y, camera y = -log x, camera z = -log z (an Android phone's back camera,
+  its photo in the sensor's layout, from the device's axes: y up and z out of the screen
+  in the natural orientation; see :data:`NAMED_AXES`);
 * as a 3x3 matrix (nested lists), rows = camera axes;
 * as a name from :data:`NAMED_AXES`.
 
@@ -25,12 +26,20 @@ from .errors import InputError
 
 __all__ = ["parse_axes", "axes_to_letters", "PROPER_AXIS_LETTERS", "NAMED_AXES"]
 
-#: Named mappings, log frame -> camera frame.
+#: Named mappings, log frame -> camera frame. ``android-back-camera-<θ>``: Android device
+#: axes (x right, y up, z out of the screen, in the device's natural orientation) to the
+#: frame of a back camera's photo in its sensor's layout (rows in readout order), for the
+#: camera's ``SENSOR_ORIENTATION`` θ (the clockwise turn, degrees, that shows the sensor's
+#: image upright in the natural orientation). 0: the sensor's rows run along the device's
+#: x axis; 90, most phones' (and the Shield tablet's): its x axis is the device's -y.
+#: ``android-back-camera`` is the 90 of most phones.
 NAMED_AXES = {
     "identity": "XYZ",
-    # Android device axes (x right, y up, z out of the screen, natural orientation) to a
-    # back camera whose image rows run along the device's x axis.
-    "android-back-camera": "Xyz",
+    "android-back-camera-0": "Xyz",
+    "android-back-camera-90": "yxz",
+    "android-back-camera-180": "xYz",
+    "android-back-camera-270": "YXz",
+    "android-back-camera": "yxz",
 }
 
 

@@ -276,12 +276,13 @@ _FAR_QUANTILE = 0.95
 DEFAULT_OFFSET_RANGE = 0.04
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
-#: per second of log searched on one photo, so 5 s either side is over three minutes
+#: per second of log searched on one photo, so 5 s either side is about eight minutes
 #: (give the exposure start to a second or better).
 MAX_OFFSET_RANGE = 5.0
 #: Calibration seconds per second of time shifts searched beyond the default's, one photo,
-#: 2 cores (benchmark, session 31: 26.4 s a photo over 1.02 s, 5.1 s over 0.08 s).
-_SECONDS_PER_SPAN = 20.0
+#: 2 cores (session 39, an idle VM, a 1024 x 764 photo: 17.7 s at +-40 ms, 117.6 s at
+#: +-1 s; session 31's 20 predates the second, bias-widened ranking of every photo).
+_SECONDS_PER_SPAN = 52.0
 _RANGE_SLACK = 0.001       # s: a log that cuts the asked range by less is not mentioned
 
 
@@ -310,9 +311,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         it stops); the refinement may end up to 10 ms beyond. Where the two clocks are
         known only roughly, give more. The coarse ranking scans the range every 2 ms for
         each axis mapping, and over more than 0.1 s each candidate mapping is started
-        from its three best distinct coarse minima: about 40 s more per second on each
-        side, on 2 cores (on the calibration benchmark, 26 s a photo for +-0.51 s against
-        5 s for the default). Refused with the offset fixed.
+        from its three best distinct coarse minima: about 100 s more per second on each
+        side, on 2 cores (a 1024 x 764 photo: 118 s for +-1 s against 18 s for the
+        default). Refused with the offset fixed.
     transfer : str or TransferCurve, or a list of them
         Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
         :class:`~gyrodeblur.tonecurve.TransferCurve`, e.g. from

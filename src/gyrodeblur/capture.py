@@ -578,12 +578,17 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         report("gyro rates read in rad/s (the column names state no unit; give --rate-unit "
                "deg/s if they are degrees)")
     orientation = gyro_d.get("orientation", "XYZ")
-    if "orientation" not in gyro_d and log.meta.get("axes") == "android device":
+    device = log.meta.get("axes")
+    if "orientation" not in gyro_d and device in ("android device", "phone device"):
         orientation = "android-back-camera"      # not the camera's axes, as XYZ would say
-        warnings.warn(f"{src}: an Android sensor log is in the device's axes (x right, y "
+        what = ("an Android sensor log" if device == "android device" else
+                "a phone app's log (its column names are Sensor Logger's or Core Motion's)")
+        warnings.warn(f"{src}: {what} is in the device's axes (x right, y "
                       f"up, z out of the screen); with no gyro.orientation (--orientation) "
-                      f"given, it is read as android-back-camera (Xyz: a back camera whose "
-                      f"rows run along the device's x axis)", stacklevel=2)
+                      f"given, it is read as android-back-camera (yxz: a back camera of "
+                      f"SENSOR_ORIENTATION 90, as most phones', its photo in the sensor's "
+                      f"layout; android-back-camera-0, -180 or -270 for others, or let "
+                      f"calibrate find it)", stacklevel=2)
     axes = parse_axes(orientation, source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     exposure_start = _get(data, "exposure_start", src)
@@ -604,6 +609,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                                     f"{log.meta['frame_readout_time']}; or give readout_time")
         if report:
             report(f"readout_time = {readout:.6g} s (from the gcsv header's frame_readout_time)")
+    if readout is None and report:
+        report("readout_time = 0: not given, a global shutter (a phone's rolling shutter "
+               "reads out in about 10-30 ms: give a guess, which calibrate refines)")
     readout = 0.0 if readout is None else readout
     bias_spec = gyro_d.get("bias")
     if isinstance(bias_spec, str):

@@ -584,6 +584,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     rows = _parse_numeric_rows(path, lines[1:], [ti] + ri, first_line=skip + 2,
                                sep=delimiter, names=header)     # time, x, y, z
     meta = {}
+    if _from_a_phone_app(header, ri):
+        meta["axes"] = "phone device"
     if tu is None and not looks_like_time(header[ti]):
         raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
                                "does not say it holds times; give the unit (--time-unit "
@@ -610,6 +612,15 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                           "pan throughout; if they are deg/s, give --rate-unit deg/s "
                           "(gyro.rate_unit)", stacklevel=3)
     return log
+
+
+def _from_a_phone_app(header: list[str], rate_columns: list[int]) -> bool:
+    """Whether a CSV's columns are a phone app's, whose rates are in the device's axes:
+    Sensor Logger's ``seconds_elapsed`` column, or rates named as Core Motion's
+    ``rotationRateX`` (iOS apps)."""
+    names = [h.strip().lower() for h in header]
+    return "seconds_elapsed" in names or any(names[i].startswith("rotationrate")
+                                             for i in rate_columns)
 
 
 #: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.
