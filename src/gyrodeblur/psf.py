@@ -200,7 +200,9 @@ def _landing_by_newton(capture: Capture, start: np.ndarray, p: np.ndarray, n: in
         f = residual(p)
         if not np.nanmax(np.abs(f), initial=0.0) >= _LANDING_TOL:
             break
-    skew = np.abs(np.linalg.eigvals(jac + eye)).max(axis=-1)      # dg/dp = dF/dp + I
+    finite = np.isfinite(jac).all(axis=(1, 2))
+    skew = np.full(len(p), np.inf)                                # dg/dp = dF/dp + I
+    skew[finite] = np.abs(np.linalg.eigvals(jac[finite] + eye)).max(axis=-1)
     kept = (np.abs(f).max(axis=-1) < _LANDING_TOL) & (skew < 1.0)  # NaN: not kept
     return np.where(kept[:, None], p, start)
 
