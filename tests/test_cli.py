@@ -202,6 +202,31 @@ def test_a_photo_turned_from_the_sensor_layout_is_deblurred_as_the_sensor_read_i
                                   np.rot90(read_photo(d / "bl_l.png").pixels, -1))
 
 
+def test_a_gyro_deblur_warns_when_the_logs_blur_does_not_fit_the_photo(capture_dir, capsys):
+    """An exposure start 0.3 s off (another stretch of the log) gives PSFs the photo does
+    not show: the deblur says so and points to calibrate (it said nothing, and the result
+    was worse than the input); with the right start, or --no-blur-check, nothing is said."""
+    d = capture_dir
+    doc = json.loads((d / "cap.json").read_text())
+    doc["camera"]["fx"] = doc["camera"]["fy"] = 450.0          # about 10 px of blur
+    doc["exposure_time"] = 0.05
+    (d / "long.json").write_text(json.dumps(doc))
+    cap = str(d / "long.json")
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o",
+                 str(d / "b.png"), "--snr-db", "40", "--seed", "2"]) == 0
+    capsys.readouterr()
+    runs = {"right": [], "late": ["--exposure-start", "50.6"],
+            "late, unchecked": ["--exposure-start", "50.6", "--no-blur-check"]}
+    for name, extra in runs.items():
+        assert main(["deblur", str(d / "b.png"), "--capture", cap, "-o",
+                     str(d / f"{name}.png"), "--model", "patches", *extra]) == 0
+        err = capsys.readouterr().err
+        warned = "the blur the gyro log implies does not fit the photo" in err
+        assert warned == (name == "late"), (name, err)
+        if warned:
+            assert "run calibrate (or deblur --refine) first" in err
+
+
 def _run_error(argv, capsys):
     rc = main(argv)
     err = capsys.readouterr().err.strip().splitlines()
@@ -402,8 +427,8 @@ def test_options_out_of_range_or_ignored_are_refused(capture_dir, capsys):
          "is also the output photo"),
         (["deblur", photo, "--capture", cap, "--kernel-size", "9", "-o", str(d / "o.png")],
          "--kernel-size: applies with --blind only"),
-        (["deblur", photo, "--capture", cap, "--no-blur-check", "-o", str(d / "o.png")],
-         "--no-blur-check: applies with --blind only"),
+        (["deblur", photo, "--capture", cap, "--refine", "--no-blur-check", "-o",
+          str(d / "o.png")], "--no-blur-check: does not apply with --refine"),
         (["deblur", photo, "--blind", "--refine", "-o", str(d / "o.png")], "--refine: does not apply"),
         (["deblur", photo, "--blind", "--fix", "bias", "-o", str(d / "o.png")], "--fix: does not apply"),
         (["deblur", photo, "--blind", "--time-offset", "0", "-o", str(d / "o.png")],

@@ -1,5 +1,9 @@
 """Whether a photo shows a given blur: a kernel's spectral evidence against no blur at all.
 
+The same test guards a gyro deblur (:func:`capture_gain_over_no_blur`): PSFs from a log
+whose clock, exposure start or axes are far off, or from another shot's log, explain the
+photo worse than no blur, and deblurring with them makes it worse without a word.
+
 A blind kernel estimate can be wrong in a way its own cost does not see: on a photo with
 little blur (a page of text, a near-sharp shot) the alternating MAP estimate can settle on
 a streak several pixels long, and deconvolving with it rings. The photo's spectrum tells:
@@ -14,11 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calibration_fit import _TEMPERATURE, SMALLEST_PATCH, working_patch
+from .calibration_fit import (_TEMPERATURE, BLOCKY, COMPRESSED_BAND, SMALLEST_PATCH,
+                              working_patch)
 from .calibration_patches import CalibrationPhoto, patch_centres
-from .spectral_criterion import PatchSpectra
+from .calibration_search import psf_extent_and_path
+from .spectral_criterion import Corrections, PatchSpectra
 
-__all__ = ["NO_BLUR_MARGIN", "kernel_gain_over_no_blur"]
+__all__ = ["NO_BLUR_MARGIN", "WRONG_BLUR_MARGIN", "kernel_gain_over_no_blur",
+           "capture_gain_over_no_blur"]
 
 #: A kernel (or a calibration's PSFs) must explain a photo's patches better than no blur at
 #: all by this much (tempered nats per 9 patches); below it, the photo shows little of that
@@ -30,6 +37,16 @@ __all__ = ["NO_BLUR_MARGIN", "kernel_gain_over_no_blur"]
 #: the 3 dropped each deblurring worse than the input; on the 36 gyro-blur cases, where one
 #: kernel cannot fit a rolling shutter's blur, 16 of 36.
 NO_BLUR_MARGIN = 1.0
+#: A capture whose PSFs explain a photo worse than no blur at all by more than this
+#: (tempered nats per 9 patches) is not the photo's, or the photo is sharp: a deblur with
+#: it makes the photo worse. On the 36 cases of the benchmark dataset (session 39) the true
+#: captures scored +0.3 (the fence, lai_manmade_03_w0) to +136; the same blurred photos
+#: given an exposure 0.3 s late -148 to +0.0 (35 of 36 below this), their sharp originals
+#: -96 to -0.3 (33 of 36 below: the three above have 7-9 px of blur); the real Shield
+#: frames with their hand-worked captures +45 to +83. A photo softer than its pixels scores
+#: low with its true capture too: three of those photos upscaled 4.15x (12 MP) scored +3,
+#: -27 and -59, and one upscaled 2x -41.
+WRONG_BLUR_MARGIN = -5.0
 
 _PATCHES = 9
 
@@ -76,4 +93,50 @@ def kernel_gain_over_no_blur(image: np.ndarray, psf: np.ndarray, *, transfer="sr
         return float("nan")
     spectra = PatchSpectra([photo], centres, scale, size)
     gain = spectra.psf_gain_over_no_blur(k)
+    return float(gain.sum() / _TEMPERATURE * _PATCHES / len(centres))
+
+
+def capture_gain_over_no_blur(image: np.ndarray, capture, *, transfer="srgb",
+                              n_patches: int = _PATCHES) -> float:
+    """How much better a capture's PSFs explain a photo than no blur at all.
+
+    The calibration's own test of its result (``calibrate`` warns under
+    :data:`NO_BLUR_MARGIN`), for a capture taken as it is: each of the photo's most textured
+    windows is scored with the PSFs the capture gives there (rolling shutter, roll and lens
+    included), at the calibration's working scale.
+
+    Parameters
+    ----------
+    image : ndarray (H, W) or (H, W, C)
+        The blurred photo, float in [0, 1] (a fourth channel is alpha, ignored).
+    capture : Capture
+        Its capture (scaled to the photo's size when it is another).
+    transfer : str or TransferCurve
+        Transfer curve of the photo's values.
+    n_patches : int
+        Windows scored.
+
+    Returns
+    -------
+    float
+        Tempered nats per 9 windows, as :func:`kernel_gain_over_no_blur`: under
+        :data:`NO_BLUR_MARGIN`, the photo shows little of that blur; under
+        :data:`WRONG_BLUR_MARGIN`, the capture's timing, axes or log are not the photo's
+        (or it is sharp). ``nan`` when the photo is too small for the blur or has no
+        textured window.
+    """
+    photo = CalibrationPhoto(image, capture, transfer, 0)
+    theta = Corrections(axes=photo.cap.axes)
+    extent, path = psf_extent_and_path([photo], theta, [0.0])
+    scale, size = working_patch(max(extent, 2.0), min(photo.H, photo.W))
+    if size < SMALLEST_PATCH:
+        return float("nan")
+    centres = patch_centres([photo], n_patches, int(round(size / scale)))
+    if not centres:
+        return float("nan")
+    band = COMPRESSED_BAND if photo.blockiness() > BLOCKY else np.inf
+    n_samples = int(np.clip(np.ceil(1.3 * path * scale / 0.5), 32, 400))
+    spectra = PatchSpectra([photo], centres, scale, size, rows=(-0.15, 0.0, 0.15),
+                           n_samples=n_samples, band=band)
+    gain = spectra.gain_over_no_blur(theta)
     return float(gain.sum() / _TEMPERATURE * _PATCHES / len(centres))

@@ -124,8 +124,9 @@ def _ignored_options(args) -> None:
             raise InputError("--fix", "applies with --refine only")
         if given("kernel_size"):
             raise InputError("--kernel-size", "applies with --blind only")
-        if args.no_blur_check:
-            raise InputError("--no-blur-check", "applies with --blind only")
+        if args.no_blur_check and args.refine:
+            raise InputError("--no-blur-check", "does not apply with --refine (the "
+                                                "calibration checks the blur itself)")
         if args.mode == "invariant":
             for name in ("grid", "overlap", "model"):
                 if given(name):
@@ -283,6 +284,24 @@ def _rotations(text: str) -> list[int]:
 
 
 # ----------------------------------------------------------------------------- commands
+
+def _warn_if_the_blur_does_not_fit(cap, image, curve) -> None:
+    """Warn where no blur at all explains the photo better than the capture's PSFs do, by
+    :data:`~gyrodeblur.blur_evidence.WRONG_BLUR_MARGIN`
+    (:func:`~gyrodeblur.blur_evidence.capture_gain_over_no_blur`): a time offset, exposure
+    start, axis mapping or log that are not the photo's (or a sharp photo), which the
+    deblur cannot see and which make the photo worse."""
+    from .blur_evidence import WRONG_BLUR_MARGIN, capture_gain_over_no_blur
+    gain = capture_gain_over_no_blur(image, cap, transfer=curve)
+    if gain < WRONG_BLUR_MARGIN:
+        warnings.warn(f"the blur the gyro log implies does not fit the photo: no blur at all "
+                      f"explains its most textured windows better ({gain:+.1f} nats per 9 "
+                      f"windows). The time offset, the exposure start, the axis mapping or the "
+                      f"log is likely not the photo's, and the result is then worse than the "
+                      f"input: run calibrate (or deblur --refine) first. A sharp photo, or one "
+                      f"softer than its pixels (upscaled, digitally zoomed, heavily denoised), "
+                      f"also gives this (--no-blur-check skips the check)", stacklevel=2)
+
 
 def cmd_psf(args, say) -> None:
     from .deblur import plan_psf_field
@@ -468,6 +487,8 @@ def cmd_deblur(args, say) -> None:
                                   overlap=args.overlap, method=args.method,
                                   transfer=curve, progress=progress,
                                   return_report=True, **options)
+        if not (args.refine or args.no_blur_check):      # options are all checked by now
+            _warn_if_the_blur_does_not_fit(cap, colour, curve)
         field = report.field
         mode_txt = args.mode
         grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
@@ -609,7 +630,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-blur-check", action="store_true",
                    help="blind: deconvolve with the estimated kernel even where the photo's "
                         "spectrum shows none of its blur (by default such a photo is left as "
-                        "it is, with a warning)")
+                        "it is, with a warning); with the gyro (without --refine): do not "
+                        "check that the photo shows the blur its log implies (by default a "
+                        "warning says when it does not: a wrong time offset or log)")
     s.add_argument("--refine", action="store_true",
                    help="self-calibrate time offset, bias, readout, focal length and axes first "
                         "(a value given with --time-offset, --bias, --readout-time, --fx/--fy or "
