@@ -226,18 +226,45 @@ def test_displacement_field_is_where_the_light_lands(make_capture):
     assert (d[..., 1] > 0).all()                     # a pitch up moves content down
 
 
-def test_a_skew_beyond_the_shutter_falls_back_to_the_points_own_row(make_capture):
-    # A telephoto tilting fast with a short exposure: content crosses rows faster than the
-    # shutter sweeps them, the landing fixed point has no stable solution, and the PSF
-    # is timed by the point's own row (a clear PSF, not an error or a wild landing pixel).
-    cap = make_capture([-4.0, 0.0, 0.0], f=2400.0, exposure=0.002, readout=0.03)
-    assert np.allclose(landing_pixel(cap, 160.0, 40.0), (160.0, 40.0))
-    psf = render_psf(cap, 160.0, 40.0)               # (the iteration's wild point: an error)
-    _, my = _centroid(psf)                           # content moves up (w_x < 0), own row:
-    assert np.isclose(psf.sum(), 1.0)               # mid-exposure 6 ms after the first row
-    assert abs(my + 2400 * np.tan(4.0 * (0.03 * 40 / 240 + 0.001))) < 1.0
+def test_a_fold_falls_back_to_the_points_own_row_and_a_fast_counter_tilt_does_not(
+        make_capture):
+    # A telephoto tilting fast with a short exposure. Content moving down, along the
+    # shutter's sweep, faster than it (skew 1.2): the forward model records the point on
+    # a hundred rows (the map folds), there is no one landing, and the PSF is timed by the
+    # point's own row (a clear PSF, not an error or a wild landing pixel). Moving up,
+    # against the sweep, as fast: the fixed point diverges (it gave up, the PSF 26 px
+    # off), but the landing is unique, and it is where the forward model puts the light.
+    down = make_capture([4.0, 0.0, 0.0], f=2400.0, exposure=0.002, readout=0.03)
+    assert np.allclose(landing_pixel(down, 160.0, 40.0), (160.0, 40.0))
+    psf = render_psf(down, 160.0, 40.0)
+    _, my = _centroid(psf)                           # own row: mid-exposure 6 ms after
+    assert np.isclose(psf.sum(), 1.0)               # the first row's start
+    assert abs(my - 2400 * np.tan(4.0 * (0.03 * 40 / 240 + 0.001))) < 1.0
+    up = make_capture([-4.0, 0.0, 0.0], f=2400.0, exposure=0.002, readout=0.03)
+    dot = np.zeros((240, 320), np.float32)
+    dot[40, 160] = 1.0
+    g = simulate_blur(dot, up, order=1)
+    g[40:] = 0                       # the copy the mirrored border sends up from below
+    yy, xx = np.mgrid[:240, :320]
+    light = np.array([(g * xx).sum(), (g * yy).sum()]) / g.sum()
+    assert light[1] < 20
+    assert np.allclose(landing_pixel(up, 160.0, 40.0), light, atol=0.2)
     ok = make_capture([-0.5, 0.0, 0.0], f=300.0, exposure=0.03, readout=0.03)
     assert landing_pixel(ok, 160.0, 120.0)[1] < 120.0 - 3      # converged, moved up
+
+
+def test_a_point_whose_light_leaves_the_frame_keeps_its_own_row(make_capture):
+    # Content moving down at half the shutter's sweep: the light of the lower rows' points
+    # lands below the frame (the solution lies hundreds of pixels down). Their PSFs are
+    # timed by their own rows, and every row's PSF renders (a root outside the frame gave
+    # "the blur would span 664 px").
+    cap = make_capture([3.0, 0.0, 0.0], f=1080.0, exposure=0.003, readout=0.04)
+    assert np.allclose(landing_pixel(cap, 160.0, 230.0), (160.0, 230.0))
+    for y in range(0, 240, 20):
+        psf = render_psf(cap, 160.0, float(y))
+        assert np.isclose(psf.sum(), 1.0)
+    ys, xs, d = displacement_field(cap, step=30)
+    assert np.all(np.isfinite(d)) and np.abs(d).max() < 240
 
 
 def test_a_fast_tilt_lands_each_point_where_the_forward_model_puts_its_light(make_capture):

@@ -137,9 +137,9 @@ def offsets_under_rotation(camera, R: np.ndarray, px, py) -> np.ndarray:
 #: stops. Each step shrinks the error by the rolling shutter's skew, the change of the
 #: mean displacement per pixel (about rate x fx x readout / height: 0.06 px per px at
 #: 1.7 rad/s, fx 1000 px, a 25 ms readout and 680 rows), so for hand shake two or three
-#: steps reach the tolerance; a fast tilt (skew 0.5 and more) needs many more, and the
-#: points still moving after these steps are finished by Newton's method
-#: (:func:`_landing_by_newton`).
+#: steps reach the tolerance; a fast tilt (skew 0.5 and more) needs many more, or diverges
+#: (content moving against the sweep faster than it), and the points still moving after
+#: these steps are solved by Newton's method (:func:`_landing_by_newton`).
 _LANDING_STEPS = 8
 _LANDING_TOL = 1e-3
 #: Newton steps at most, and the finite-difference step (px) of their Jacobian.
@@ -154,9 +154,12 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
     ``x0``, ``y0`` are pixel positions (scalars or arrays of one shape); ``n`` time steps
     of ``p``'s row's exposure (or ``row``'s) form the mean. Returns ``(..., 2)`` (x, y).
 
-    A fixed-point iteration, finished by Newton's method where it is slow, solves this
-    while content moves across rows more slowly than the shutter sweeps them (skew under
-    1). Where it does not (a telephoto lens tilting fast with a short exposure), the point
+    A fixed-point iteration solves this in two or three steps for hand shake; where it is
+    slow or does not settle (a fast tilt: content crossing rows at half the shutter's
+    sweep or more), Newton's method finishes it. The solution is unique while the map
+    ``p -> p - mean_t (p - x0_p(t))`` does not fold (content moving along the sweep more
+    slowly than the shutter, or against it at any speed). Where it folds (a telephoto lens
+    tilting fast with a short exposure), or the light lands outside the frame, the point
     falls back to its own position: its PSF is then timed by its own row, as a global
     shutter would have it.
     """
@@ -172,21 +175,21 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
             break
     slow = ~(step.max(axis=-1) < _LANDING_TOL)                    # NaN too
     if np.any(slow):
-        p[slow] = _landing_by_newton(capture, start[slow], p[slow], n, row)
+        p[slow] = _landing_by_newton(capture, start[slow], n, row)
     return p
 
 
-def _landing_by_newton(capture: Capture, start: np.ndarray, p: np.ndarray, n: int,
-                       row) -> np.ndarray:
-    """Finish :func:`landing_pixel` for the points ``start`` ``(m, 2)`` from ``p``: Newton
-    steps on ``F(p) = start + g(p) - p`` (``g`` the mean gather offset), its 2 x 2 Jacobian
-    by finite differences. A point is kept where it converges to :data:`_LANDING_TOL`
-    with the skew (the spectral radius of ``dg/dp``) under 1; others fall back to
-    ``start``."""
+def _landing_by_newton(capture: Capture, start: np.ndarray, n: int, row) -> np.ndarray:
+    """Finish :func:`landing_pixel` for the points ``start`` ``(m, 2)``: Newton steps from
+    them on ``F(p) = start + g(p) - p`` (``g`` the mean gather offset), the 2 x 2 Jacobian
+    by finite differences. A root is kept where it converges to :data:`_LANDING_TOL`
+    inside the frame and the map does not fold there (every eigenvalue of ``dg/dp`` of
+    real part under 1, i.e. ``p - g(p)`` keeps its orientation); else ``start``."""
     def residual(q):
         return start + _gather_offsets(capture, q[:, 0], q[:, 1], n, row).mean(axis=-2) - q
 
     eye = np.eye(2)
+    p = start.copy()
     f = residual(p)
     for _ in range(_NEWTON_STEPS):
         jac = np.stack([(residual(p + _NEWTON_DELTA * e) - f) / _NEWTON_DELTA for e in eye],
@@ -201,9 +204,12 @@ def _landing_by_newton(capture: Capture, start: np.ndarray, p: np.ndarray, n: in
         if not np.nanmax(np.abs(f), initial=0.0) >= _LANDING_TOL:
             break
     finite = np.isfinite(jac).all(axis=(1, 2))
-    skew = np.full(len(p), np.inf)                                # dg/dp = dF/dp + I
-    skew[finite] = np.abs(np.linalg.eigvals(jac[finite] + eye)).max(axis=-1)
-    kept = (np.abs(f).max(axis=-1) < _LANDING_TOL) & (skew < 1.0)  # NaN: not kept
+    fold = np.full(len(p), np.inf)                                # dg/dp = dF/dp + I
+    fold[finite] = np.linalg.eigvals(jac[finite] + eye).real.max(axis=-1)
+    cam = capture.camera
+    inside = ((p[:, 0] >= -0.5) & (p[:, 0] <= cam.width - 0.5)
+              & (p[:, 1] >= -0.5) & (p[:, 1] <= cam.height - 0.5))
+    kept = (np.abs(f).max(axis=-1) < _LANDING_TOL) & (fold < 1.0) & inside  # NaN: not kept
     return np.where(kept[:, None], p, start)
 
 
