@@ -292,7 +292,12 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve) -> None:
     start, axis mapping or log that are not the photo's (or a sharp photo), which the
     deblur cannot see and which make the photo worse."""
     from .blur_evidence import WRONG_BLUR_MARGIN, capture_gain_over_no_blur
-    gain = capture_gain_over_no_blur(image, cap, transfer=curve)
+    try:                              # a check only: it must not cost the finished deblur
+        gain = capture_gain_over_no_blur(image, cap, transfer=curve)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        warnings.warn(f"the check that the photo shows the gyro log's blur could not run "
+                      f"({exc}); the deblurred photo is written", stacklevel=2)
+        return
     if gain < WRONG_BLUR_MARGIN:
         warnings.warn(f"the blur the gyro log implies does not fit the photo: no blur at all "
                       f"explains its most textured windows better ({gain:+.1f} nats per 9 "
@@ -721,13 +726,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(joined_negative_lists(sys.argv[1:] if argv is None else list(argv)))
 
     def say(msg: str) -> None:
-        try:
-            print(msg, flush=True)
-        except BrokenPipeError:     # the reader has gone (``| head``): the work goes on
-            _stdout_to_devnull()
+        _write(sys.stdout, f"{msg}\n")
 
     def warn(message, category, filename, lineno, file=None, line=None):
-        sys.stderr.write(f"gyrodeblur: warning: {message}\n")
+        _write(sys.stderr, f"gyrodeblur: warning: {message}\n")
 
     previous = _on_sigterm(_terminate)
     try:
@@ -743,25 +745,34 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         if exc.source is None and _photos(args):     # a problem of the photo(s) themselves
             exc = InputError(_photos(args), exc.problem)
-        sys.stderr.write(f"gyrodeblur: error: {exc}\n")
+        _write(sys.stderr, f"gyrodeblur: error: {exc}\n")
         return 2
     except KeyboardInterrupt:
-        sys.stderr.write("gyrodeblur: interrupted; nothing written\n")
+        _write(sys.stderr, "gyrodeblur: interrupted; nothing written\n")
         return 130
     except _Terminated:
-        sys.stderr.write("gyrodeblur: terminated; nothing written\n")
+        _write(sys.stderr, "gyrodeblur: terminated; nothing written\n")
         return 143
     finally:
         _on_sigterm(previous)
     return 0
 
 
-def _stdout_to_devnull() -> None:
-    """Send what is still to be printed to the null device: standard output's reader has
-    closed the pipe, and the files the command writes matter more than its report (the
-    interpreter's own flush at exit would fail again on the pipe)."""
+def _write(stream, text: str) -> None:
+    """Write ``text`` to ``stream`` (standard output or error) now. Where the reader has
+    closed the pipe (``| head``, ``2>&1 | true``), what is still to be said goes to the
+    null device: the files the command writes matter more than its report, and the work
+    goes on (the interpreter's own flush at exit would fail again on the pipe)."""
     try:
-        fd = sys.stdout.fileno()
+        stream.write(text)
+        stream.flush()
+    except BrokenPipeError:
+        _to_devnull(stream)
+
+
+def _to_devnull(stream) -> None:
+    try:
+        fd = stream.fileno()
     except (AttributeError, OSError, ValueError):    # not a file (a test's capture)
         return
     null = os.open(os.devnull, os.O_WRONLY)
