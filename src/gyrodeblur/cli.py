@@ -86,7 +86,10 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
     g.add_argument("--gyro", metavar="PATH", help="gyro log (gcsv, csv or android events)")
     g.add_argument("--gyro-format", choices=("gcsv", "csv", "android"))
     g.add_argument("--orientation", metavar="AXES",
-                   help="log axes -> camera axes: three letters, e.g. XYZ or Xyz (lowercase = negated)")
+                   help="log axes -> camera axes: three letters, e.g. XYZ or yxz (lowercase "
+                        "= negated), or a name: identity, android-back-camera (a phone's "
+                        "back camera, sensor orientation 90), android-back-camera-0/-90/"
+                        "-180/-270")
     g.add_argument("--time-offset", type=float, metavar="S",
                    help="seconds: camera_time = gyro_time + offset")
     g.add_argument("--bias", metavar="auto|bx,by,bz",

@@ -80,7 +80,7 @@ DEFAULTS = {
     "windows_per_photo": 3,
     "seed": 0,
     "margin": 0.3,                # s of log kept on each side of the exposure window
-    "orientation": "Xyz",         # log axes -> camera axes (Android device -> back camera)
+    "orientation": "Xyz",         # log axes -> camera axes (android-back-camera-0)
     "sim_step_px": 1.0,           # px between blur-synthesis time samples (see notes)
 }
 #: A step between two log samples longer than this many median steps is a gap (two
@@ -372,7 +372,8 @@ def build_cases(photos=None, gyro=None, *, exposure=DEFAULTS["exposure"],
         Seconds of log kept each side of the exposure window (the case's gyro file), and
         kept gap-free.
     orientation : str or 3x3
-        Log axes -> camera axes (default ``"Xyz"``: Android device axes -> back camera).
+        Log axes -> camera axes (default ``"Xyz"``, ``android-back-camera-0``: Android
+        device axes -> a back camera whose sensor rows run along the device's x axis).
     gyro_format : str, optional
         Format of ``gyro`` (default: guessed).
     sim_step_px : float
@@ -544,9 +545,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-size", type=int, help="downscale photos to this longer side (px)")
     ap.add_argument("--max-photos", type=int, help="use only the first N photos")
     ap.add_argument("--orientation", default=DEFAULTS["orientation"], metavar="AXES",
-                    help="the log's axes -> camera axes, as gyro.orientation (default Xyz: "
-                         "an Android phone's device axes -> its back camera; XYZ for a log "
-                         "already in camera axes)")
+                    help="the log's axes -> camera axes, as gyro.orientation (default Xyz, "
+                         "android-back-camera-0: an Android phone's device axes -> a back "
+                         "camera whose sensor rows run along the device's x axis; XYZ for a "
+                         "log already in camera axes)")
     args = ap.parse_args(argv)
     try:
         folders = build_dataset(
