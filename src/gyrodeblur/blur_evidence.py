@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .calibration_fit import (_TEMPERATURE, BLOCKY, COMPRESSED_BAND, SMALLEST_PATCH,
-                              working_patch)
+from .calibration_fit import (_TEMPERATURE, FINE_ROWS, SMALLEST_PATCH, fine_samples,
+                              spectral_band, working_patch)
 from .calibration_patches import CalibrationPhoto, patch_centres
 from .calibration_search import psf_extent_and_path
 from .spectral_criterion import Corrections, PatchSpectra
@@ -134,9 +134,8 @@ def capture_gain_over_no_blur(image: np.ndarray, capture, *, transfer="srgb",
     centres = patch_centres([photo], n_patches, int(round(size / scale)))
     if not centres:
         return float("nan")
-    band = COMPRESSED_BAND if photo.blockiness() > BLOCKY else np.inf
-    n_samples = int(np.clip(np.ceil(1.3 * path * scale / 0.5), 32, 400))
-    spectra = PatchSpectra([photo], centres, scale, size, rows=(-0.15, 0.0, 0.15),
-                           n_samples=n_samples, band=band)
+    spectra = PatchSpectra([photo], centres, scale, size, rows=FINE_ROWS,
+                           n_samples=fine_samples(path, scale),
+                           band=spectral_band(photo.blockiness()))
     gain = spectra.gain_over_no_blur(theta)
     return float(gain.sum() / _TEMPERATURE * _PATCHES / len(centres))

@@ -22,7 +22,8 @@ from .frame_registration import FrameRegistration
 from .spectral_criterion import Corrections, PatchSpectra
 
 __all__ = ["CalibrationFit", "relative_ranking", "shortlist", "with_twin", "TWIN",
-           "OFFSET_APART", "OFFSET_RIVAL_NATS", "BLOCKY", "COMPRESSED_BAND"]
+           "OFFSET_APART", "OFFSET_RIVAL_NATS", "BLOCKY", "COMPRESSED_BAND", "FINE_ROWS",
+           "fine_samples", "spectral_band"]
 
 #: The mirror twin of a mapping ``M`` is ``TWIN @ M``: the camera's x and y rates negated
 #: (a proper rotation), which nearly reflects every PSF (see Search, 3).
@@ -105,6 +106,22 @@ WIDE_APART = 0.02
 #: for every photo cost too much to be the rule (BENCHMARKS.md, section 4).
 BLOCKY = 1.10
 COMPRESSED_BAND = 0.3
+#: Rows of each fine patch whose rolling-shutter timings are averaged (fractions of the
+#: patch side from its centre), with weights 1/4, 1/2, 1/4.
+FINE_ROWS = (-0.15, 0.0, 0.15)
+
+
+def fine_samples(path: float, scale: float) -> int:
+    """Trace samples per PSF at the fine working ``scale`` for a blur path of ``path``
+    full-resolution px: one per 0.5 working px with 30 % to spare, 32 to 400."""
+    return int(np.clip(np.ceil(1.3 * path * scale / 0.5), 32, 400))
+
+
+def spectral_band(blockiness: float) -> float:
+    """The top of the band the criterion reads (cycles per photo pixel): all of it, or
+    :data:`COMPRESSED_BAND` for a photo whose 8 px block grid (JPEG's) exceeds
+    :data:`BLOCKY`."""
+    return COMPRESSED_BAND if blockiness > BLOCKY else np.inf
 
 
 class CalibrationFit:
@@ -139,9 +156,9 @@ class CalibrationFit:
             raise InputError(None, "no textured, unsaturated patch found for calibration")
         # a JPEG's quantisation empties the top of the spectrum, which would read as blur
         self.blockiness = max(ph.blockiness() for ph in photos)
-        self.band = COMPRESSED_BAND if self.blockiness > BLOCKY else np.inf
-        n_fine = int(np.clip(np.ceil(1.3 * path * s_f / 0.5), 32, 400))
-        self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
+        self.band = spectral_band(self.blockiness)
+        n_fine = fine_samples(path, s_f)
+        self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=FINE_ROWS,
                                  n_samples=n_fine, band=self.band)
         self._phase_args = (photos, per, s_f, P_f, n_fine)
         self._phase = None
@@ -219,7 +236,7 @@ class CalibrationFit:
         if self._phase is None:
             photos, per, s_f, P_f, n_fine = self._phase_args
             centres = patch_centres(photos, _TWIN_PATCH_FACTOR * per, int(round(P_f / s_f)))
-            self._phase = PatchSpectra(photos, centres, s_f, P_f, rows=(-0.15, 0.0, 0.15),
+            self._phase = PatchSpectra(photos, centres, s_f, P_f, rows=FINE_ROWS,
                                        n_samples=n_fine, envelope=False, band=self.band)
         return self._phase
 
