@@ -84,8 +84,8 @@ class BiasPrior:
         off = bias_from_log(axes @ m_log - given_bias, (axes ** 2) @ log_rate[1] ** 2)[2]
         return cls(given_bias, log_rate), (
             f"the gyro log's typical rate over {secs_log:.0f} s: {_vec(m_log)} +- "
-            f"{_vec(log_rate[1])} rad/s (log axes), a prior on the bias (the given bias is off "
-            f"with probability {off:.2f})")
+            f"{_vec(log_rate[1])} rad/s (log axes), a prior on the bias (the given bias, "
+            f"{_vec(given_bias)} rad/s, is off with probability {off:.2f})")
 
     def for_mapping(self, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and sd (rad/s, camera frame) of the bias correction under mapping ``M``."""

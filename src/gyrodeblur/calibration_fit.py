@@ -275,7 +275,8 @@ class CalibrationFit:
             scored = sorted(best, key=lambda r: r[0])
             rankings.append(scored)
             ranking = relative_ranking(scored)
-            self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope): "
+            moved = ", the bias moved by up to a prior sd" if len(bias_steps) > 1 else ""
+            self.say(f"coarse ranking ({'fitted' if envelope else 'flat'} envelope{moved}): "
                      + ", ".join(f"{a} {c:+.0f}" for a, c in ranking[:6]))
         return rankings
 

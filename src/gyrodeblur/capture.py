@@ -520,7 +520,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             report(f"fx = {cam_d['fx']:.1f} px (from EXIF focal length)")
     if "fx" not in cam_d:
         raise InputError(src, "no focal length: give camera.fx (pixels), --fx, or a photo "
-                              "whose EXIF has FocalLength and FocalLengthIn35mmFilm")
+                              "whose EXIF has FocalLengthIn35mmFilm, or FocalLength with "
+                              "FocalPlaneXResolution")
     cam_d.setdefault("fy", cam_d["fx"])
     missing = [k for k in ("width", "height") if k not in cam_d]
     if missing:
