@@ -84,6 +84,42 @@ def test_two_workers_run_the_steps_in_other_processes():
     assert os.getpid() not in pids
 
 
+@forks
+def test_beside_another_thread_the_steps_run_here():
+    """A fork beside another running thread can deadlock (scipy's FFT pool held its lock
+    in a worker under three calibrations in three threads), and two threads' batches
+    would share the forked one: with other Python threads alive every step runs in the
+    caller, with the same results; alone again, it forks."""
+    import threading
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        fit = _Fit()
+        assert StepRunner(fit, 2).map("step", [(1,), (2,), (3,)]) == [1, 4, 9]
+        assert {int(m.split(" in ")[1]) for m in fit.said} == {os.getpid()}
+        results = {}
+
+        def calibrate_in_a_thread(k):
+            f = _Fit()
+            results[k] = (StepRunner(f, 2).map("step", [(k,), (k + 1,)]), f.said)
+
+        threads = [threading.Thread(target=calibrate_in_a_thread, args=(k,)) for k in (1, 5)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert results[1][0] == [1, 4] and results[5][0] == [25, 36]
+        assert all(int(m.split(" in ")[1]) == os.getpid() for _, said in results.values()
+                   for m in said)
+    finally:
+        stop.set()
+        other.join()
+    fit = _Fit()
+    StepRunner(fit, 2).map("step", [(1,), (2,)])
+    assert os.getpid() not in {int(m.split(" in ")[1]) for m in fit.said}
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_failing_step_raises_its_own_error_in_the_caller(workers):
     with pytest.raises(InputError, match="photo.png: cannot be calibrated"):

@@ -335,7 +335,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     workers : int, optional
         Processes that refine independent starts side by side (Linux; default: the CPUs
         available, at most :data:`gyrodeblur.calibration_workers.MAX_WORKERS`; 1: none).
-        The result is the same for any number.
+        The result is the same for any number. Called while the process runs other Python
+        threads (a pipeline calibrating in threads), the steps run one after another in
+        the caller: a fork beside a running thread can deadlock.
 
     Returns
     -------

@@ -15,7 +15,11 @@ calibration gives the same figures with one worker as with several, to the last 
 is replayed in the order the steps were given.
 
 Processes are forked, so workers are used on Linux only (elsewhere, and inside a daemonic
-process, the steps run one after another).
+process, the steps run one after another), and only while the caller's thread is the
+process's only Python thread: a fork beside another running thread can deadlock on a lock
+that thread holds (scipy's FFT pool's, seen under three calibrations in three threads),
+and batches of calibrations in two threads would share the forked batch (:data:`_BATCH`).
+A pipeline that calibrates in threads gets the same figures, one step after another.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -51,7 +56,8 @@ def available_workers() -> int:
 
 def _can_fork() -> bool:
     return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
-            and not multiprocessing.current_process().daemon)
+            and not multiprocessing.current_process().daemon
+            and threading.active_count() == 1)         # no other thread to fork beside
 
 
 @dataclass
