@@ -141,6 +141,10 @@ def test_options_that_do_not_apply_are_refused_and_defaults_fit_the_photo(
         deblur(blurred, cap, mode="invariant", grid="bogus")
     with pytest.raises(InputError, match="overlap: does not apply"):
         deblur(blurred, cap, mode="invariant", overlap=0.1)
+    with pytest.raises(InputError, match="model: does not apply"):   # it was dropped
+        deblur(blurred, cap, mode="invariant", model="global")
+    with pytest.raises(TypeError, match="return_report must be True or False"):
+        deblur(blurred, cap, return_report="no")                  # "no" returned a report
     for phi in (0, -1):                  # one rule, before any work
         with pytest.raises(InputError, match="--phi: must be a positive number"):
             deblur(blurred, cap, method="wiener", phi=phi)

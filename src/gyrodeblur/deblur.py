@@ -806,6 +806,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     patch_grid(image.shape[:2], (1, 1), 0.0)        # a photo too small for any mode: said
     check_capture(capture)
     check_flag(clip, "clip")
+    return_report = check_flag(return_report, "return_report")
     check_callback(progress, "progress")
     get_transfer_curve(transfer)                   # refused before the PSFs are rendered
     if align is not None:
@@ -813,7 +814,8 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     method = method or DEFAULT_METHOD
     defaults = METHOD_DEFAULTS.get(method, _OTHER_DEFAULTS)
     if mode == "invariant":
-        for name, value in (("grid", grid), ("overlap", overlap)):
+        for name, value in (("grid", grid), ("overlap", overlap),
+                            ("model", options.get("model"))):
             if value is not None:
                 raise InputError(name, "does not apply with mode='invariant' (one PSF for "
                                        "the whole photo, no patches)")
