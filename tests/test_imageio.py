@@ -158,6 +158,14 @@ def test_jpeg_round_trip_is_close(tmp_path, shape):
     np.testing.assert_allclose(photo.pixels, ref, atol=1e-6)
 
 
+@pytest.mark.parametrize("quality", ["hi", None, 95.7, True, 0, 101])
+def test_a_jpeg_quality_that_is_not_a_whole_number_in_range_is_refused(tmp_path, quality):
+    """A raw int() error for "hi" and None, and 95.7 cut to 95 without a word."""
+    with pytest.raises(ValueError, match="quality must be a whole number within 1-100"):
+        write_photo(tmp_path / "out.jpg", smooth((24, 32)), quality=quality)
+    assert not (tmp_path / "out.jpg").exists()
+
+
 def test_values_are_clipped_and_rounded_not_truncated(tmp_path):
     pixels = np.array([[-0.3, 1.7, 10.4 / 255, 10.6 / 255, 0.5]], np.float32)
     write_photo(tmp_path / "a.png", pixels)

@@ -800,8 +800,9 @@ def write_photo(
     fmt = _format_of(p)
     pixels = _check_pixels(pixels)
     depth = _choose_bit_depth(p, fmt, bit_depth, like)
-    if not 1 <= int(quality) <= 100:
-        raise ValueError(f"quality must be within 1-100, not {quality!r}")
+    if (isinstance(quality, (bool, np.bool_)) or not isinstance(quality, (int, np.integer))
+            or not 1 <= quality <= 100):      # "hi" raised int()'s error, 95.7 was cut to 95
+        raise ValueError(f"quality must be a whole number within 1-100, not {quality!r}")
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     if fmt == "JPEG" and channels in (2, 4):
         raise InputError(p, "JPEG cannot store an alpha channel; write .png or .tif")
