@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_flag", "check_callback", "check_real"]
+__all__ = ["check_flag", "check_callback", "check_real", "is_whole"]
 
 
 def check_flag(value, name: str) -> bool:
@@ -18,6 +18,13 @@ def check_flag(value, name: str) -> bool:
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     raise TypeError(f"{name} must be True or False, got {value!r}")
+
+
+def is_whole(value) -> bool:
+    """Whether ``value`` is a whole number: a Python or numpy integer, not a ``bool``
+    (``True`` is an ``int``, and ``3.0`` or ``"3"`` are not whole numbers here). The
+    callers add their own range and message."""
+    return not isinstance(value, bool) and isinstance(value, (int, np.integer))
 
 
 def check_callback(value, name: str):

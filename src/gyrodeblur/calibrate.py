@@ -155,6 +155,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
+from .arguments import is_whole
 from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
 from .blur_evidence import NO_BLUR_MARGIN
@@ -740,7 +741,7 @@ def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarra
 
 def _is_count(value) -> bool:
     """Whether ``value`` is a whole number >= 1 (an int, not a bool)."""
-    return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= 1
+    return is_whole(value) and value >= 1
 
 
 def repeated_photo(images) -> tuple[int, int] | None:

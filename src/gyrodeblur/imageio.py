@@ -63,6 +63,7 @@ import numpy as np
 import tifffile
 from PIL import Image, PngImagePlugin, TiffImagePlugin, UnidentifiedImageError
 
+from gyrodeblur.arguments import is_whole
 from gyrodeblur.atomicfile import atomic_write, check_folder_of, check_writable
 from gyrodeblur.errors import InputError
 
@@ -800,8 +801,7 @@ def write_photo(
     fmt = _format_of(p)
     pixels = _check_pixels(pixels)
     depth = _choose_bit_depth(p, fmt, bit_depth, like)
-    if (isinstance(quality, (bool, np.bool_)) or not isinstance(quality, (int, np.integer))
-            or not 1 <= quality <= 100):      # "hi" raised int()'s error, 95.7 was cut to 95
+    if not (is_whole(quality) and 1 <= quality <= 100):   # not "hi", 95.7 or True
         raise ValueError(f"quality must be a whole number within 1-100, not {quality!r}")
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     if fmt == "JPEG" and channels in (2, 4):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from skimage.metrics import structural_similarity
 
+from .arguments import is_whole
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, split_alpha
 
 __all__ = ["psnr", "ssim", "crop_border", "default_border"]
@@ -28,7 +29,7 @@ def default_border(shape: tuple[int, ...], psf_radius: int | None = None,
 
 def crop_border(image: np.ndarray, border: int) -> np.ndarray:
     """``image`` without ``border`` pixels on each side."""
-    if isinstance(border, bool) or not isinstance(border, (int, np.integer)) or border < 0:
+    if not (is_whole(border) and border >= 0):
         raise ValueError(f"border must be a whole number of pixels >= 0, got {border!r}")
     if border == 0:
         return image

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arguments import check_flag
+from .arguments import check_flag, is_whole
 from .capture import Capture, check_capture
 from .errors import InputError
 
@@ -84,7 +84,7 @@ def _timing_row(capture: Capture, row) -> float | None:
 
 def _sample_count(n) -> int:
     """``n`` as a whole number of samples >= 1, or ValueError."""
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+    if not (is_whole(n) and n >= 1):
         raise ValueError(f"n must be a whole number of samples >= 1, got {n!r}")
     return int(n)
 
@@ -387,8 +387,8 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         raise InputError(None, f"max_step must be a positive number of pixels, got {max_step!r}")
     check_flag(centred, "centred")
     cam = check_capture(capture).camera
-    if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, np.integer))
-                               or not 0 <= radius <= max(cam.width, cam.height)):
+    if radius is not None and not (is_whole(radius)
+                                   and 0 <= radius <= max(cam.width, cam.height)):
         raise InputError(None, f"radius must be a whole number of pixels from 0 to "
                                f"{max(cam.width, cam.height)}, got {radius!r}")
     x, y = _pixel_position(x, y)

@@ -20,13 +20,13 @@ Convolution convention as in :mod:`gyrodeblur.fftutils`: ``(k * u)(x) = sum_s k(
 
 from __future__ import annotations
 
-import numbers
 from concurrent.futures import ThreadPoolExecutor
 from typing import Sequence
 
 import cv2
 import numpy as np
 
+from .arguments import is_whole
 from .fftutils import FFT_WORKERS, fast_shape
 from .sparse import _dx, _dx_t_set, _dy, _dy_t_add, _shrink_residual
 from .tiling import Patch, blend_weights
@@ -245,7 +245,7 @@ def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur
     if g.shape != u0.shape or g.shape[:2] != blur.shape:
         raise ValueError(f"image {g.shape}, start {u0.shape} and model {blur.shape} differ")
     for name, v in (("outer", outer), ("cg_steps", cg_steps)):
-        if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 1:
+        if not (is_whole(v) and v >= 1):
             raise ValueError(f"{name} must be a positive whole number, got {v!r}")
     if not (np.isfinite(weight) and weight > 0):
         raise ValueError(f"weight must be a positive number, got {weight!r}")

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 import scipy.ndimage as ndi
 
-from .arguments import check_flag
+from .arguments import check_flag, is_whole
 from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad
 from .images import check_image, check_psf
 from .noise import estimate_noise_sigma
@@ -180,10 +180,8 @@ def check_sparse_options(*, exponent: float | None = None, iterations: int | Non
                                    <= _WEIGHT_RANGE[1]):
         raise ValueError(f"weight must be a positive number in {_WEIGHT_RANGE[0]:g} to "
                          f"{_WEIGHT_RANGE[1]:g} (beyond, float32 overflows), got {weight!r}")
-    if saturation_dilation is not None and (isinstance(saturation_dilation, bool)
-                                            or not isinstance(saturation_dilation,
-                                                              numbers.Integral)
-                                            or saturation_dilation < 0):
+    if saturation_dilation is not None and not (is_whole(saturation_dilation)
+                                                and saturation_dilation >= 0):
         raise ValueError(f"saturation_dilation must be a whole number of pixels >= 0, got "
                          f"{saturation_dilation!r}")
 

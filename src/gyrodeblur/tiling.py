@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .arguments import is_whole
 from .errors import InputError
 from .fftutils import FFT_WORKERS
 
@@ -306,12 +307,11 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
     for psf in psfs:
         if np.ndim(psf) != 2:
             raise ValueError(f"every PSF must be 2-D, got shape {np.shape(psf)}")
-    if margin is not None and (isinstance(margin, bool) or not isinstance(margin, numbers.Integral)
-                               or margin < 0):
+    if margin is not None and not (is_whole(margin) and margin >= 0):
         raise ValueError(f"margin must be a non-negative integer, got {margin!r}")
     if workers is None:
         workers = min(FFT_WORKERS, MAX_AUTO_WORKERS)
-    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 1:
+    if not (is_whole(workers) and workers >= 1):
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
 
     margins = [patch_margin(psf) for psf in psfs]
@@ -410,8 +410,7 @@ def check_grid(grid: Sequence[int] | str) -> tuple[int, int]:
     except TypeError:
         items = None
     if (items is None or len(items) != 2
-            or not all(isinstance(v, numbers.Integral) and not isinstance(v, bool)
-                       for v in items)
+            or not all(is_whole(v) for v in items)
             or not all(v >= 1 for v in items)):
         raise InputError("--grid", f"must be two positive integers (rows, columns), got {grid!r}")
     return int(items[0]), int(items[1])
@@ -479,8 +478,7 @@ def check_patches(patches: Sequence[Patch], height: int, width: int) -> None:
         if not isinstance(p, Patch):
             raise TypeError(f"patches must be gyrodeblur.tiling.Patch windows (y0, y1, x0, "
                             f"x1), got {type(p).__name__} {p!r}")
-        if not all(isinstance(v, numbers.Integral) and not isinstance(v, bool)
-                   for v in (p.y0, p.y1, p.x0, p.x1)):
+        if not all(is_whole(v) for v in (p.y0, p.y1, p.x0, p.x1)):
             raise TypeError(f"{p}: a window's bounds must be whole numbers of pixels")
         if not (0 <= p.y0 < p.y1 <= height and 0 <= p.x0 < p.x1 <= width):
             raise ValueError(f"{p} is empty or leaves the {height}x{width} image")
