@@ -85,15 +85,11 @@ def kernel_gain_over_no_blur(image: np.ndarray, psf: np.ndarray, *, transfer="sr
     rows, cols = np.nonzero(k > 0)
     extent = float(max(np.ptp(rows), np.ptp(cols)) + 1) if rows.size else 1.0
     photo = CalibrationPhoto(image, None, transfer, 0)
-    scale, size = working_patch(extent, min(photo.H, photo.W))
-    if size < SMALLEST_PATCH:
+    windows = _windows(photo, extent, n_patches)
+    if windows is None:
         return float("nan")
-    centres = patch_centres([photo], n_patches, int(round(size / scale)))
-    if not centres:
-        return float("nan")
-    spectra = PatchSpectra([photo], centres, scale, size)
-    gain = spectra.psf_gain_over_no_blur(k)
-    return float(gain.sum() / _TEMPERATURE * _PATCHES / len(centres))
+    spectra = PatchSpectra([photo], *windows)
+    return _per_9_patches(spectra.psf_gain_over_no_blur(k))
 
 
 def capture_gain_over_no_blur(image: np.ndarray, capture, *, transfer="srgb",
@@ -128,14 +124,28 @@ def capture_gain_over_no_blur(image: np.ndarray, capture, *, transfer="srgb",
     photo = CalibrationPhoto(image, capture, transfer, 0)
     theta = Corrections(axes=photo.cap.axes)
     extent, path = psf_extent_and_path([photo], theta, [0.0])
-    scale, size = working_patch(max(extent, 2.0), min(photo.H, photo.W))
-    if size < SMALLEST_PATCH:
+    windows = _windows(photo, max(extent, 2.0), n_patches)
+    if windows is None:
         return float("nan")
-    centres = patch_centres([photo], n_patches, int(round(size / scale)))
-    if not centres:
-        return float("nan")
+    centres, scale, size = windows
     spectra = PatchSpectra([photo], centres, scale, size, rows=FINE_ROWS,
                            n_samples=fine_samples(path, scale),
                            band=spectral_band(photo.blockiness()))
-    gain = spectra.gain_over_no_blur(theta)
-    return float(gain.sum() / _TEMPERATURE * _PATCHES / len(centres))
+    return _per_9_patches(spectra.gain_over_no_blur(theta))
+
+
+def _windows(photo: CalibrationPhoto, extent: float, n_patches: int):
+    """``(centres, scale, size)`` of the photo's ``n_patches`` most textured windows at the
+    working scale where a blur of ``extent`` px spans at most 32 px, as calibration takes
+    them; ``None`` when a working patch would be under :data:`SMALLEST_PATCH` px or no
+    window is textured."""
+    scale, size = working_patch(extent, min(photo.H, photo.W))
+    if size < SMALLEST_PATCH:
+        return None
+    centres = patch_centres([photo], n_patches, int(round(size / scale)))
+    return (centres, scale, size) if centres else None
+
+
+def _per_9_patches(gain: np.ndarray) -> float:
+    """Per-patch gains (untempered nats) as tempered nats per :data:`_PATCHES` patches."""
+    return float(gain.sum() / _TEMPERATURE * _PATCHES / len(gain))
