@@ -208,12 +208,11 @@ class _Progress:
         self.shown = True
         _Progress.drawn = self
         n = 30 * done // max(total, 1)
-        sys.stderr.write(f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {done}/{total}")
-        sys.stderr.flush()
+        _write(sys.stderr, f"\r{self.label} [{'#' * n}{'.' * (30 - n)}] {done}/{total}")
 
     def close(self) -> None:
         if self.shown:
-            sys.stderr.write("\n")
+            _write(sys.stderr, "\n")
             self.shown = False
         if _Progress.drawn is self:
             _Progress.drawn = None

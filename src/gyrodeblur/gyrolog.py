@@ -43,10 +43,9 @@ import numpy as np
 
 from .errors import InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
-                          default_rate_columns, default_time_column, is_number,
-                          looks_like_time, parse_number, refuse_signed_names,
-                          sniff_delimiter,
-                          time_unit_from_interval, unit_from_name)
+                          default_rate_columns, default_time_column, from_a_phone_app,
+                          is_number, looks_like_time, parse_number, refuse_signed_names,
+                          sniff_delimiter, time_unit_from_interval, unit_from_name)
 
 __all__ = [
     "GyroLog",
@@ -584,7 +583,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     rows = _parse_numeric_rows(path, lines[1:], [ti] + ri, first_line=skip + 2,
                                sep=delimiter, names=header)     # time, x, y, z
     meta = {}
-    if _from_a_phone_app(header, ri):
+    if from_a_phone_app(header, ri):
         meta["axes"] = "phone device"
     if tu is None and not looks_like_time(header[ti]):
         raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
@@ -612,15 +611,6 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                           "pan throughout; if they are deg/s, give --rate-unit deg/s "
                           "(gyro.rate_unit)", stacklevel=3)
     return log
-
-
-def _from_a_phone_app(header: list[str], rate_columns: list[int]) -> bool:
-    """Whether a CSV's columns are a phone app's, whose rates are in the device's axes:
-    Sensor Logger's ``seconds_elapsed`` column, or rates named as Core Motion's
-    ``rotationRateX`` (iOS apps)."""
-    names = [h.strip().lower() for h in header]
-    return "seconds_elapsed" in names or any(names[i].startswith("rotationrate")
-                                             for i in rate_columns)
 
 
 #: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.

@@ -22,7 +22,7 @@ __all__ = ["TIME_UNITS", "RATE_UNITS", "RATE_UNIT_ENDINGS", "RATE_ALIASES",
            "GUESSED_RATE_RANGE", "parse_number", "is_number", "unit_from_name",
            "bracketed_unit", "sniff_delimiter", "time_unit_from_interval", "rate_axis",
            "looks_like_time", "default_time_column", "default_rate_columns",
-           "refuse_signed_names"]
+           "from_a_phone_app", "refuse_signed_names"]
 
 #: Seconds per unit of time.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -188,6 +188,15 @@ def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
             raise InputError(path, f"column {header[i]!r} would be read as the {a} rate, "
                                    f"which its name contradicts{where}")
     return ri
+
+
+def from_a_phone_app(header: list[str], rate_columns: list[int]) -> bool:
+    """Whether a CSV's columns are a phone app's, whose rates are in the device's axes:
+    Sensor Logger's ``seconds_elapsed`` column, or rates named as Core Motion's
+    ``rotationRateX`` (iOS apps)."""
+    names = [h.strip().lower() for h in header]
+    return "seconds_elapsed" in names or any(names[i].startswith("rotationrate")
+                                             for i in rate_columns)
 
 
 def refuse_signed_names(path: str, header: list[str], columns: list[int]) -> None:
