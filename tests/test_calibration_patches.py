@@ -101,6 +101,24 @@ def test_texture_in_every_direction_beats_stripes():
     assert 0.7 * 64 - 3 < min(d) < 0.7 * 64 + 8, min(d)
 
 
+def test_the_thumbnail_is_block_means_made_once_and_read_only():
+    """A 1030 x 700 RGB photo at 512 px: blocks of 3 (the remainder cut), the mean of the
+    encoded channels and the share of pixels with a channel over 0.98. Asked again (the
+    twin's patches, the frame registration) it is the same arrays, which no caller can
+    change under another."""
+    rng = np.random.default_rng(3)
+    img = rng.uniform(0.0, 1.0, (700, 1030, 3)).astype(np.float32)
+    photo = CalibrationPhoto(img, _capture(1030, 700), "srgb", 0)
+    th, st, k = photo.thumbnail()
+    assert k == 3 and th.shape == st.shape == (233, 343)
+    np.testing.assert_allclose(th[5, 7], img[15:18, 21:24].mean(), rtol=1e-5)
+    assert st[5, 7] == pytest.approx((img[15:18, 21:24].max(axis=2) > 0.98).mean())
+    again = photo.thumbnail()
+    assert again[0] is th and again[1] is st
+    with pytest.raises(ValueError):
+        th[0, 0] = 0.0
+
+
 def test_a_photo_must_be_an_image():
     with pytest.raises(InputError, match="photo 1"):
         CalibrationPhoto(np.zeros(10), _capture(), "srgb", 0)

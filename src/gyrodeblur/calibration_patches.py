@@ -41,6 +41,7 @@ class CalibrationPhoto:
         self.cap = None if capture is None else capture.scaled_to(self.W, self.H)
         self.curve = get_transfer_curve(transfer)
         self.index = index
+        self._thumbnails: dict = {}
 
     def gray(self, y0, y1, x0, x1) -> np.ndarray:
         """Linear-light luminance of a crop (float64)."""
@@ -70,7 +71,14 @@ class CalibrationPhoto:
         return max(ratios, default=1.0)
 
     def thumbnail(self, max_side: int = 512):
-        """Block-averaged encoded luminance and saturated fraction, and the block size."""
+        """Block-averaged encoded luminance and saturated fraction, and the block size
+        (made once per ``max_side``: a calibration asks for it again for its twin's
+        patches, and at 12 MP each costs 0.7 s)."""
+        if max_side not in self._thumbnails:
+            self._thumbnails[max_side] = self._make_thumbnail(max_side)
+        return self._thumbnails[max_side]
+
+    def _make_thumbnail(self, max_side: int):
         k = max(1, int(np.ceil(max(self.H, self.W) / max_side)))
         h, w = self.H // k, self.W // k
         img = np.asarray(self.image[:h * k, :w * k], np.float32)
@@ -81,6 +89,8 @@ class CalibrationPhoto:
             sat = img > 0.98
         th = img.reshape(h, k, w, k).mean(axis=(1, 3))
         st = sat.reshape(h, k, w, k).mean(axis=(1, 3))
+        th.setflags(write=False)                 # shared by every caller
+        st.setflags(write=False)
         return th, st, k
 
 
