@@ -716,6 +716,59 @@ def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
             == json.loads((d / "out" / "shared.json").read_text()))
 
 
+def test_cli_writes_each_photo_its_corrected_description(cli_dir, capsys, monkeypatch):
+    """-o once per photo (like --capture): each output is its own photo's description,
+    with its own exposure start, and the shared corrections. Counts that do not pair, and
+    one file named twice, are refused before any work; a failed write leaves none."""
+    from gyrodeblur.imageio import read_photo, write_photo
+
+    d = cli_dir
+    first = read_photo(d / "blurred.png").pixels
+    noise = np.random.default_rng(9).normal(0, 2 / 255, first.shape).astype(np.float32)
+    write_photo(d / "later.png", np.clip(first + noise, 0, 1), bit_depth=8)
+    doc = json.loads((d / "cap.json").read_text())
+    doc["exposure_start"] += 2e-4
+    (d / "cap2.json").write_text(json.dumps(doc))
+    photos = [str(d / "blurred.png"), str(d / "later.png")]
+    common = [*photos, "--capture", f"{d / 'cap.json'},{d / 'cap2.json'}",
+              "--fix", "bias,readout,focal,axes"]
+    a, b = d / "out" / "a.json", d / "out" / "b.json"
+    assert main(["calibrate", *common, "-o", str(a), "-o", str(b)]) == 0
+    out = capsys.readouterr().out
+    assert f"wrote {a}, {b}" in out and "give one -o per photo" not in out
+    ca, cb = json.loads(a.read_text()), json.loads(b.read_text())
+    assert cb["exposure_start"] - ca["exposure_start"] == pytest.approx(2e-4, abs=1e-9)
+    given = json.loads((d / "cap.json").read_text())
+    assert ca["exposure_start"] == given["exposure_start"]
+    assert ca["gyro"]["time_offset"] != given["gyro"]["time_offset"]     # corrected ...
+    for key in ("readout_time", "camera", "gyro"):                        # ... alike
+        assert ca[key] == cb[key], key
+    # one output: the first photo's, and the way to the others said
+    assert main(["calibrate", *common, "-o", str(d / "out" / "one.json")]) == 0
+    assert "give one -o per photo" in capsys.readouterr().out
+    assert json.loads((d / "out" / "one.json").read_text()) == ca
+    # refused before the work
+    for outs, said in (([str(d / "out" / "x.json")] * 2, "is named twice as an output"),
+                       ([",".join(str(d / "out" / f"{k}.json") for k in "xyz")],
+                        "3 outputs for 2 photos")):
+        assert main(["calibrate", *common, *[v for o in outs for v in ("-o", o)]]) == 2
+        assert said in capsys.readouterr().err
+    assert not (d / "out" / "x.json").exists()
+    # a failure writing the second removes the first
+    save = Capture.save
+
+    def full_disk(self, path, *args, **kwargs):
+        if str(path).endswith("q.json"):
+            raise InputError(path, "cannot write the file: No space left on device")
+        return save(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(Capture, "save", full_disk)
+    p, q = d / "out" / "p.json", d / "out" / "q.json"
+    assert main(["calibrate", *common, "-o", f"{p},{q}"]) == 2
+    assert "No space left" in capsys.readouterr().err
+    assert not p.exists() and not q.exists()
+
+
 def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):
     """The real Shield-tablet pan (examples/shield-tablet): from the published focal length,
     no time offset and the wrong one of the two proper mappings next to the published matrix,

@@ -87,15 +87,17 @@ def _refuse_repeats(paths, photos) -> None:
 
 
 def calibrate_command(args, say, load_capture) -> None:
-    """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json`.
+    """`gyrodeblur calibrate PHOTO... --capture C.json[,C2.json...] -o OUT.json[,OUT2.json...]`.
 
     Several photos of one session are calibrated together; each needs its own exposure
     start, so ``--capture`` may list one description per photo (comma-separated, or the
-    option repeated). The
-    corrected description written is the first photo's (the corrections are shared)."""
+    option repeated). ``-o`` likewise: one output is the first photo's corrected
+    description (the corrections are shared), one per photo gives each its own. All of
+    them are written, or none."""
     from .imageio import check_destination, read_photo
 
     fix = fixed_parameters(args)
+    outputs = _outputs(args.output, len(args.photos))
 
     turns = args.photo_rotation if isinstance(args.photo_rotation, list) else [args.photo_rotation]
     if len(turns) not in (1, len(args.photos)):
@@ -103,7 +105,8 @@ def calibrate_command(args, say, load_capture) -> None:
                                              "photos: give one, or one per photo")
     turns = turns * len(args.photos) if len(turns) == 1 else turns
     # before reading anything; the inputs are checked once the captures name their logs
-    check_destination(args.output, None, args.overwrite, image=False, inputs=args.photos)
+    for out in outputs:
+        check_destination(out, None, args.overwrite, image=False, inputs=args.photos)
     photos = [read_photo(p) for p in args.photos]
     photos = [replace(ph, pixels=to_sensor_layout(ph.stored_channels, deg))
               for ph, deg in zip(photos, turns)]
@@ -124,11 +127,12 @@ def calibrate_command(args, say, load_capture) -> None:
         a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
-    check_destination(args.output, None, args.overwrite, image=False, inputs=inputs)
-    # after the inputs' check: "it is an input" says more than "not .json"
-    if not os.fspath(args.output).lower().endswith(".json"):
-        raise InputError(args.output, "the corrected capture description is JSON: give an "
-                                      "output ending in .json")
+    for out in outputs:
+        check_destination(out, None, args.overwrite, image=False, inputs=inputs)
+    for out in outputs:     # after the inputs' check: "it is an input" says more than "not .json"
+        if not os.fspath(out).lower().endswith(".json"):
+            raise InputError(out, "the corrected capture description is JSON: give an "
+                                  "output ending in .json")
     from .icc import said_transfer_curve
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
@@ -138,5 +142,40 @@ def calibrate_command(args, say, load_capture) -> None:
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
         say(line)
-    res.capture.save(args.output)       # whole or not at all
-    say(f"wrote {args.output}")
+    _save_all(res.captures[:len(outputs)], outputs)
+    say(f"wrote {', '.join(outputs)}")
+    if len(outputs) < len(photos):
+        say("(the first photo's description: the others keep their own exposure start, "
+            "exposure time and log; give one -o per photo to write each)")
+
+
+def _outputs(given, n_photos: int) -> list[str]:
+    """The output paths of ``-o`` (repeated or comma-separated): one, or one per photo,
+    no two the same file."""
+    given = given if isinstance(given, list) else [given]
+    outs = [o for entry in given for o in os.fspath(entry).split(",") if o]
+    if len(outs) not in (1, n_photos):
+        raise InputError("-o", f"{len(outs)} outputs for {n_photos} photos: give one (the "
+                               "first photo's corrected description), or one per photo "
+                               "(comma-separated)")
+    for k, out in enumerate(outs):
+        for other in outs[:k]:
+            if os.path.realpath(out) == os.path.realpath(other):
+                raise InputError(out, "is named twice as an output; give each photo its own")
+    return outs
+
+
+def _save_all(captures, outputs) -> None:
+    """Write each capture to its output, whole; a failure removes those this call made
+    (all of them or none)."""
+    made = []
+    try:
+        for cap, out in zip(captures, outputs):
+            new = not os.path.lexists(out)
+            cap.save(out)
+            if new:
+                made.append(out)
+    except BaseException:
+        for out in made:
+            os.remove(out)
+        raise

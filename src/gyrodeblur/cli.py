@@ -675,7 +675,10 @@ def build_parser() -> argparse.ArgumentParser:
                        "gyro bias, readout time, focal-length scale and the axis mapping. Several "
                        "photos of one session share offset, mapping and bias. " + FRAMES_HELP)
     s.add_argument("photos", nargs="+", metavar="PHOTO")
-    s.add_argument("-o", "--output", required=True, metavar="CORRECTED.json")
+    s.add_argument("-o", "--output", required=True, metavar="CORRECTED.json", action="append",
+                   help="corrected capture description: one (the first photo's; the "
+                        "corrections are shared), or one per photo, in their order, each "
+                        "with its own exposure start: comma-separated or the option repeated")
     s.add_argument("--fix", default="", metavar="NAMES",
                    help="comma-separated parameters not to estimate: offset,bias,readout,focal,"
                         "axes (a value given with --time-offset, --bias, --readout-time, "
