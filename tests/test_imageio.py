@@ -6,6 +6,7 @@ import dataclasses
 import errno
 import math
 import os
+import re
 import struct
 import zlib
 
@@ -258,6 +259,45 @@ def test_unsupported_integer_tiffs_are_refused(tmp_path, dtype, text):
     tifffile.imwrite(tmp_path / "i.tif", np.zeros((4, 4), dtype), metadata=None)
     with pytest.raises(InputError, match=f"i.tif.*{text}"):
         read_photo(tmp_path / "i.tif")
+
+
+def test_camera_raw_files_and_previews_are_refused_not_read_as_the_photo(tmp_path):
+    """A DNG's (or a NEF's, an ARW's) first image is a small RGB preview that any TIFF
+    reader opens: reading it would deblur a thumbnail without a word. Refused, with what
+    to do, whichever decoder reads the file (Pillow; tifffile for float samples); so is
+    undemosaiced sensor data. A TIFF of the same pixels without those tags is read."""
+    preview = np.full((12, 16, 3), 128, np.uint8)
+    dng = [(50706, "B", 4, (1, 4, 0, 0), True)]                     # DNGVersion
+    cases = {"dng.dng": dict(data=preview, photometric="rgb", extratags=dng),
+             "dngf.dng": dict(data=preview.astype(np.float32) / 255, photometric="rgb",
+                              extratags=dng),
+             "nef.tif": dict(data=preview, photometric="rgb", subfiletype=1),
+             "cfa.tif": dict(data=np.zeros((12, 16), np.uint16), photometric=32803)}
+    said = {"dng.dng": "a DNG (camera raw) file", "dngf.dng": "a DNG (camera raw) file",
+            "nef.tif": "its first image is a reduced-resolution preview",
+            "cfa.tif": "camera raw data (colour-filter-array)"}
+    for name, kw in cases.items():
+        tifffile.imwrite(tmp_path / name, metadata=None, **kw)
+        with pytest.raises(InputError, match=re.escape(f"{name}: {said[name]}") + ".*develop it"):
+            read_photo(tmp_path / name)
+    tifffile.imwrite(tmp_path / "plain.tif", preview, photometric="rgb", metadata=None)
+    assert read_photo(tmp_path / "plain.tif").pixels.shape == (12, 16, 3)
+
+
+def test_a_heic_photo_is_named_with_what_to_do(tmp_path):
+    """An iPhone's default HEIC (an ISO media file, brand ``heic``) gets a message saying
+    what it is and how to get a JPEG; bytes of no known kind get the general one."""
+    head = b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic"
+    (tmp_path / "IMG_0001.HEIC").write_bytes(head + bytes(200))
+    with pytest.raises(InputError, match="IMG_0001.HEIC: a HEIF/HEIC image, which this tool "
+                                         "does not read: convert it .*Most Compatible"):
+        read_photo(tmp_path / "IMG_0001.HEIC")
+    (tmp_path / "x.cr3").write_bytes(b"\x00\x00\x00\x18ftypcrx " + bytes(200))
+    with pytest.raises(InputError, match="a Canon CR3 raw file.*develop it"):
+        read_photo(tmp_path / "x.cr3")
+    (tmp_path / "junk.jpg").write_bytes(bytes(range(256)))
+    with pytest.raises(InputError, match="junk.jpg: not a JPEG, PNG or TIFF image"):
+        read_photo(tmp_path / "junk.jpg")
 
 
 @pytest.mark.parametrize("shape,bits", [((6, 10), 8), ((6, 10, 3), 8), ((6, 10), 16)])

@@ -198,7 +198,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     except PermissionError:
         raise InputError(p, "cannot read the file: permission denied") from None
     except UnidentifiedImageError:
-        raise InputError(p, "not a JPEG, PNG or TIFF image (or the file is damaged)") from None
+        raise InputError(p, _unread_kind(p)) from None
     except Image.DecompressionBombError as exc:
         raise InputError(p, f"image too large to read safely ({exc})") from None
     except _DECODE_ERRORS as exc:
@@ -258,6 +258,7 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
         if fmt not in ("JPEG", "PNG", "TIFF"):
             raise InputError(p, f"{im.format} images are not supported; use JPEG, PNG or TIFF")
         if fmt == "TIFF":
+            _refuse_raw_or_preview(p, dict(im.tag_v2))
             exif, icc = _tiff_exif(im), im.info.get("icc_profile")
             ints = _read_tiff_pixels(p, im)
         else:
@@ -275,6 +276,56 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
         g = im.info.get("gamma")
         gamma = float(g) if isinstance(g, (int, float)) and 0 < g < 10 else None
     return fmt, ints, exif, icc, tables, gamma
+
+
+#: ISO base media file brands (bytes 8-12 after ``ftyp``) of formats read elsewhere, and
+#: what to call them: an iPhone saves HEIC by default, a Canon camera its raw as CR3.
+_MEDIA_BRANDS = {**dict.fromkeys((b"heic", b"heix", b"hevc", b"hevx", b"heim", b"heis",
+                                  b"mif1", b"msf1"), "a HEIF/HEIC image"),
+                 b"avif": "an AVIF image", b"avis": "an AVIF image",
+                 b"crx ": "a Canon CR3 raw file"}
+
+
+def _unread_kind(p: str) -> str:
+    """The message for a file no decoder took: what it is, where the first bytes say so,
+    and what to do."""
+    try:
+        with open(p, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        head = b""
+    kind = _MEDIA_BRANDS.get(head[8:12]) if head[4:8] == b"ftyp" else None
+    if kind is None:
+        return "not a JPEG, PNG or TIFF image (or the file is damaged)"
+    develop = ("develop it" if "raw" in kind else "convert it (on an iPhone: Settings > Camera > "
+               "Formats > Most Compatible takes JPEGs)")
+    return (f"{kind}, which this tool does not read: {develop} to a JPEG, PNG or 16-bit TIFF "
+            "at full size, keeping its EXIF")
+
+
+#: TIFF tags of camera raw files and previews: DNGVersion, NewSubfileType and
+#: PhotometricInterpretation (its CFA and LinearRaw values).
+_DNG_VERSION, _NEW_SUBFILE_TYPE, _PHOTOMETRIC = 50706, 254, 262
+_RAW_PHOTOMETRIC = {32803: "colour-filter-array", 34892: "linear raw"}
+
+
+def _refuse_raw_or_preview(p: str, tags: dict) -> None:
+    """Refuse a TIFF-structured file whose first image is not the photo: a DNG or another
+    TIFF-based camera raw (NEF, CR2, ARW...), whose first image is a small preview or the
+    sensor's undemosaiced data. ``tags`` maps the first image's tag codes to values."""
+    def first(v):
+        return v[0] if isinstance(v, (tuple, list)) and v else v
+
+    develop = ("develop it to a JPEG, PNG or 16-bit TIFF at full size (demosaiced, not "
+               "resized or cropped), keeping its EXIF")
+    if _DNG_VERSION in tags:
+        raise InputError(p, f"a DNG (camera raw) file, which this tool does not read: {develop}")
+    raw = _RAW_PHOTOMETRIC.get(int(first(tags.get(_PHOTOMETRIC, 0)) or 0))
+    if raw is not None:
+        raise InputError(p, f"camera raw data ({raw}), which this tool does not read: {develop}")
+    if int(first(tags.get(_NEW_SUBFILE_TYPE, 0)) or 0) & 1:
+        raise InputError(p, "its first image is a reduced-resolution preview, not the photo "
+                            f"(a camera raw file?): {develop}")
 
 
 def _reason(exc: BaseException) -> str:
@@ -487,6 +538,7 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
             warnings.warn(f"{path}: only the first of its {len(tif.pages)} pages is read",
                           stacklevel=2)
         page = tif.pages.first
+        _refuse_raw_or_preview(path, {t.code: t.value for t in page.tags.values()})
         _refuse_too_many_pixels(path, int(page.imagewidth), int(page.imagelength))
         photometric = int(page.photometric)
         if photometric not in (0, 1, 2):  # MINISWHITE, MINISBLACK, RGB
