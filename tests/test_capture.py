@@ -508,3 +508,40 @@ def test_a_phone_apps_csv_given_no_mapping_is_read_as_the_back_camera(tmp_path, 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert np.array_equal(load_capture(tmp_path / "c.json").axes, np.eye(3))
+
+
+def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
+    """A phone app's log on Unix time and a description without exposure_start: the
+    photo's EXIF capture time (in Unix time) serves, and the tool says it is only a
+    start for calibration. It does not serve where the log runs on another clock, where
+    it falls outside the log, or where its time zone is unknown (each said), nor where
+    exposure_start is given."""
+    t = 1733380029.0 + np.arange(0, 3, 0.005)
+    (tmp_path / "unix.csv").write_text("t_s,wx,wy,wz\n" + "\n".join(
+        f"{a:.4f},0.1,0.2,0.3" for a in t) + "\n")
+    (tmp_path / "boot.csv").write_text("t_s,wx,wy,wz\n" + "\n".join(
+        f"{a - 1733379000.0:.4f},0.1,0.2,0.3" for a in t) + "\n")
+    doc = {"exposure_time": 0.03, "camera": {"fx": 500, "width": 640, "height": 480},
+           "gyro": {"path": "unix.csv"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    hints = {"capture_time_unix": 1733380030.512,
+             "capture_time_text": "2024:12:05 07:27:10.512 +01:00"}
+    said = []
+    cap = load_capture(tmp_path / "c.json", exif_hints=hints, report=said.append)
+    assert cap.exposure_start == 1733380030.512
+    assert any("from the photo's EXIF time 2024:12:05 07:27:10.512 +01:00" in s
+               and "--offset-range 1" in s for s in said), said
+    for gyro, h, problem in (
+            ("boot.csv", hints, "the gyro log's clock is not (its times run 1029.000"),
+            ("unix.csv", dict(hints, capture_time_unix=1733380130.0),
+             "is not within the gyro log's 3 s"),
+            ("unix.csv", {"capture_time_text": "2024:12:05 07:27:10"}, "has no time zone")):
+        (tmp_path / "c.json").write_text(json.dumps(dict(doc, gyro={"path": gyro})))
+        with pytest.raises(InputError, match="c.json: missing 'exposure_start'.*"
+                                             + problem.replace("(", "\\(")):
+            load_capture(tmp_path / "c.json", exif_hints=h)
+    (tmp_path / "c.json").write_text(json.dumps(dict(doc, exposure_start=1733380031.0)))
+    assert load_capture(tmp_path / "c.json", exif_hints=hints).exposure_start == 1733380031.0
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="c.json: missing 'exposure_start'$"):
+        load_capture(tmp_path / "c.json", exif_hints={})

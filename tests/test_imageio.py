@@ -432,6 +432,20 @@ def test_hints_focal_plane_resolution(unit, mm):
         pytest.approx(hints["fx"])
 
 
+def test_hints_capture_time_in_unix_time_from_its_zone_and_fraction():
+    """DateTimeOriginal is the local time; OffsetTimeOriginal its zone (without it there
+    is no Unix time, only the text); SubSecTimeOriginal the digits after the second."""
+    hints = hints_for((4, 4), x_9003="2024:12:05 07:27:10", x_9011="+01:00", x_9291="512")
+    assert hints["capture_time_unix"] == pytest.approx(1733380030.512, abs=1e-6)
+    assert hints["capture_time_text"] == "2024:12:05 07:27:10.512 +01:00"
+    west = hints_for((4, 4), x_9003="2024:12:05 00:57:10", x_9011="-05:30", x_9291="05")
+    assert west["capture_time_unix"] == pytest.approx(1733380030.05, abs=1e-6)
+    local = hints_for((4, 4), x_9003="2024:12:05 07:27:10")
+    assert "capture_time_unix" not in local
+    assert local["capture_time_text"] == "2024:12:05 07:27:10"
+    assert "capture_time_text" not in hints_for((4, 4), x_9003="0000:00:00 00:00:00")
+
+
 def test_hints_missing_or_damaged_exif():
     assert "fx" not in hints_for((40, 60))
     assert exif_capture_hints(like()) == {}

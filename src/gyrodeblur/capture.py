@@ -19,7 +19,9 @@ Optional keys in ``gyro``: ``bias`` (``[bx, by, bz]`` rad/s in the camera frame,
 ``"auto"``), ``max_gap`` (s, default 0.05) and, for ``csv``, ``time_unit``, ``rate_unit``,
 ``time_column``, ``rate_columns``. Row ``y`` starts exposing at
 ``exposure_start + readout_time * y / height``; without a ``readout_time``, a gcsv log's
-``frame_readout_time`` header (ms) gives it, else it is 0 (a global shutter).
+``frame_readout_time`` header (ms) gives it, else it is 0 (a global shutter). Without an
+``exposure_start``, a photo's EXIF capture time serves where the log runs on Unix time (a
+phone app's), to be refined by calibration (see :func:`load_capture`).
 """
 
 from __future__ import annotations
@@ -307,6 +309,39 @@ def _get(d: dict, key: str, source: str, kind=float, required=True):
         raise InputError(source, f"{key!r} must be a number, got {v!r}") from None
 
 
+#: Unix times (s) a log's clock is taken to be Unix time within: 2000 to 2100.
+_UNIX_CLOCK = (946_684_800.0, 4_102_444_800.0)
+#: Seconds either side of the log within which a photo's EXIF time is taken.
+_EXIF_TIME_SLACK = 5.0
+
+
+def _exposure_start_from_exif(hints: dict, log, offset: float, src: str, report) -> float:
+    """The photo's EXIF capture time as ``exposure_start``, where the capture description
+    gives none and the gyro log runs on Unix time (a phone app's, e.g. Sensor Logger's
+    ``time``); an :class:`InputError` saying why not where it cannot serve."""
+    text, unix = hints["capture_time_text"], hints.get("capture_time_unix")
+    lo, hi = float(log.t[0]) + offset, float(log.t[-1]) + offset      # camera clock
+    if unix is None:
+        raise InputError(src, f"missing 'exposure_start': the photo's EXIF time ({text}) "
+                              "has no time zone (OffsetTimeOriginal), so it is no Unix time; "
+                              "give exposure_start on the gyro log's clock")
+    if not (_UNIX_CLOCK[0] <= lo and hi <= _UNIX_CLOCK[1]):
+        raise InputError(src, f"missing 'exposure_start': the photo's EXIF time ({text}) is "
+                              f"Unix time, but the gyro log's clock is not (its times run "
+                              f"{lo:.3f} to {hi:.3f} s); give exposure_start on the log's "
+                              "clock")
+    if not lo - _EXIF_TIME_SLACK <= unix <= hi + _EXIF_TIME_SLACK:
+        raise InputError(src, f"missing 'exposure_start', and the photo's EXIF time ({text}, "
+                              f"Unix {unix:.3f} s) is not within the gyro log's {hi - lo:.0f} s "
+                              f"(Unix {lo:.3f} to {hi:.3f}): is it the log of this photo's "
+                              "session, and the phone's clock and time zone right?")
+    if report:
+        report(f"exposure_start = {unix:.3f} s (Unix time, from the photo's EXIF time {text}): "
+               "that marks the exposure only to tens or hundreds of milliseconds; calibrate "
+               "with --offset-range 1 (or deblur --refine --offset-range 1) to find it")
+    return unix
+
+
 def _readout_direction(value, source: str) -> int:
     """A gcsv header's ``frame_readout_direction`` (0 top to bottom, 1 bottom to top, 2 and
     3 along the rows), written ``0`` or ``0.0``; anything else is an InputError."""
@@ -447,8 +482,11 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         height, the principal point (image centre) when it is missing, and rescales the
         intrinsics to the photo.
     exif_hints : dict, optional
-        ``exposure_time`` (s) and ``fx`` (pixels at ``image_size``) read from the photo,
-        used only where the JSON and the options leave the value out.
+        ``exposure_time`` (s), ``fx`` (pixels at ``image_size``) and the capture time
+        (``capture_time_unix``, ``capture_time_text``) read from the photo
+        (:func:`gyrodeblur.imageio.exif_capture_hints`), used only where the JSON and the
+        options leave the value out: the capture time as ``exposure_start`` only when
+        the gyro log runs on Unix time and covers it (to within 5 s).
     report : callable(str), optional
         Told which values came from EXIF.
     """
@@ -592,6 +630,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       f"calibrate find it)", stacklevel=2)
     axes = parse_axes(orientation, source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
+    if data.get("exposure_start") is None and "capture_time_text" in hints:
+        data["exposure_start"] = _exposure_start_from_exif(hints, log, offset, src, report)
     exposure_start = _get(data, "exposure_start", src)
     exposure_time = _get(data, "exposure_time", src)
     readout = _get(data, "readout_time", src, required=False)

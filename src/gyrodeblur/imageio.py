@@ -49,6 +49,7 @@ the rotation Pillow applies to TIFFs undone.
 
 from __future__ import annotations
 
+import datetime
 import logging
 import math
 import os
@@ -88,6 +89,7 @@ _ORIENTATION = 274  #                                  DateTime, Artist, Copyrig
 _EXPOSURE_TIME, _FOCAL_LENGTH, _FOCAL_35MM = 0x829A, 0x920A, 0xA405
 _FP_XRES, _FP_UNIT = 0xA20E, 0xA210
 _PIXEL_X_DIM, _PIXEL_Y_DIM = 0xA002, 0xA003
+_DATETIME_ORIGINAL, _OFFSET_TIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9011, 0x9291
 _MM_PER_UNIT = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}  # inch, cm, and the mm/um extension
 _FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)  # 43.27 mm
 
@@ -739,6 +741,14 @@ def exif_capture_hints(photo: Photo) -> dict:
             The lens's real focal length, from FocalLength.
         ``"fx"`` : float
             Focal length in pixels at this photo's stored width and height.
+        ``"capture_time_unix"`` : float
+            When the photo was taken, Unix time (s), from DateTimeOriginal,
+            OffsetTimeOriginal (the time zone: without it there is no Unix time) and
+            SubSecTimeOriginal (fractions of a second). A phone writes it to the
+            millisecond but it marks the exposure only to tens or hundreds of them.
+        ``"capture_time_text"`` : str
+            DateTimeOriginal as written, with its zone and fraction where present
+            (``"2024:12:05 07:27:10.512 +01:00"``).
 
     Notes
     -----
@@ -796,7 +806,33 @@ def exif_capture_hints(photo: Photo) -> dict:
         if px is not None and py is not None:
             fx *= max(width, height) / max(px, py)
         hints["fx"] = fx
+    hints.update(_capture_time(sub, ifd0))
     return hints
+
+
+def _capture_time(sub: dict, ifd0: dict) -> dict:
+    """``capture_time_unix`` and ``capture_time_text`` of :func:`exif_capture_hints` from
+    the Exif sub-IFD (or IFD0) tags; ``{}`` without a readable DateTimeOriginal."""
+    def text(tag):
+        v = sub.get(tag, ifd0.get(tag))
+        if isinstance(v, bytes):
+            v = v.decode("ascii", "replace")
+        return v.strip().strip("\x00").strip() if isinstance(v, str) else None
+
+    stamp, zone, frac = text(_DATETIME_ORIGINAL), text(_OFFSET_TIME_ORIGINAL), text(_SUBSEC_ORIGINAL)
+    try:
+        local = datetime.datetime.strptime(stamp or "", "%Y:%m:%d %H:%M:%S")
+    except ValueError:
+        return {}
+    frac = frac if frac and frac.isdigit() else None
+    out = {"capture_time_text": stamp + (f".{frac}" if frac else "") + (f" {zone}" if zone else "")}
+    try:
+        tz = datetime.datetime.strptime(zone or "", "%z").tzinfo
+    except ValueError:
+        return out                             # a local time of no known zone
+    out["capture_time_unix"] = (local.replace(tzinfo=tz).timestamp()
+                                + (float("0." + frac) if frac else 0.0))
+    return out
 
 
 # --------------------------------------------------------------------------- writing
