@@ -1043,3 +1043,51 @@ def test_an_interrupted_run_ends_its_progress_bar_before_saying_so(capture_dir, 
     err = capsys.readouterr().err
     assert "3/10\ngyrodeblur: interrupted; nothing written" in err
     assert cli._Progress.drawn is None
+
+
+def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkeypatch, capsys):
+    """With the exposure start taken from the photo's EXIF time (a phone app's log on Unix
+    time), calibrate and deblur --refine search +-1 s, and say so: the default +-40 ms would
+    miss a phone's EXIF time. A range given, a start given, or the offset fixed: as
+    asked."""
+    import gyrodeblur.calibrate_cli
+    from gyrodeblur.imageio import Photo
+
+    class Stop(Exception):
+        pass
+
+    asked = []
+
+    def spy(images, captures, **kwargs):
+        asked.append(kwargs["offset_range"])
+        raise Stop
+
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", spy)
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", spy)
+    exif = Image.Exif()
+    sub = exif.get_ifd(0x8769)
+    sub[0x9003], sub[0x9011], sub[0x9291] = "2024:12:05 07:27:10", "+01:00", "512"
+    pixels = np.full((48, 64, 3), 0.5, np.float32)
+    write_photo(tmp_path / "p.png", pixels, like=Photo(pixels, 8, "PNG", None, exif.tobytes()))
+    t = 1733380029.0 + np.arange(0, 3, 0.005)
+    (tmp_path / "g.csv").write_text("t_s,wx,wy,wz\n" + "\n".join(
+        f"{a:.4f},0.1,0.2,0.3" for a in t) + "\n")
+    doc = {"exposure_time": 0.03, "readout_time": 0.02, "camera": {"fx": 60},
+           "gyro": {"path": "g.csv"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    (tmp_path / "s.json").write_text(json.dumps(dict(doc, exposure_start=1733380030.4)))
+    photo, out = str(tmp_path / "p.png"), str(tmp_path / "o.json")
+    runs = [(["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out], 1.0),
+            (["deblur", photo, "--capture", str(tmp_path / "c.json"), "--refine", "-o",
+              str(tmp_path / "o.png")], 1.0),
+            (["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out,
+              "--offset-range", "0.3"], 0.3),
+            (["calibrate", photo, "--capture", str(tmp_path / "s.json"), "-o", out], None),
+            (["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out,
+              "--fix", "offset"], None)]
+    for argv, span in runs:
+        with pytest.raises(Stop):
+            main(argv)
+        assert asked[-1] == span, argv
+        said = capsys.readouterr().out
+        assert ("time offsets within +-1 s of it are searched" in said) == (span == 1.0), said

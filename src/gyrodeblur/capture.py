@@ -338,7 +338,8 @@ def _exposure_start_from_exif(hints: dict, log, offset: float, src: str, report)
     if report:
         report(f"exposure_start = {unix:.3f} s (Unix time, from the photo's EXIF time {text}): "
                "that marks the exposure only to tens or hundreds of milliseconds; calibrate "
-               "with --offset-range 1 (or deblur --refine --offset-range 1) to find it")
+               "before deblurring (gyrodeblur calibrate, or deblur --refine, searches +-1 s "
+               "around an EXIF time)")
     return unix
 
 

@@ -476,7 +476,7 @@ def cmd_deblur(args, say) -> None:
     else:
         fix = None
         if args.refine:
-            from .calibrate_cli import fixed_parameters
+            from .calibrate_cli import fixed_parameters, offset_range_for, start_from_exif
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf)
@@ -484,9 +484,9 @@ def cmd_deblur(args, say) -> None:
         if args.refine:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates
+            span = offset_range_for(args, fix, start_from_exif(args, photo, cap), say)
             res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
-                            workers=args.workers, transfer=curve,
-                            offset_range=args.offset_range)
+                            workers=args.workers, transfer=curve, offset_range=span)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture
@@ -536,7 +536,8 @@ DOWNSCALE_HELP = ("calibrate on the photos shrunk by this factor, 0 < F <= 1 (de
                   "photos softer than their pixel grid, e.g. upscaled or heavily denoised, "
                   "try 0.5; the corrected capture keeps the given resolution")
 OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (default "
-                     "0.04); where the gyro and camera clocks are known only roughly, e.g. "
+                     "0.04, or 1 around an exposure start taken from the photo's EXIF "
+                     "time); where the gyro and camera clocks are known only roughly, e.g. "
                      "1: as far as the log covers it, about 100 s more per second on each "
                      "side on 2 cores")
 WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
