@@ -1091,3 +1091,13 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkey
         assert asked[-1] == span, argv
         said = capsys.readouterr().out
         assert ("time offsets within +-1 s of it are searched" in said) == (span == 1.0), said
+        assert "start at their EXIF times" not in said
+    # two photos of a session, each started at its own EXIF time: one shared offset may fit
+    # neither, which is said
+    write_photo(tmp_path / "q.png", pixels * 0.9, like=Photo(pixels, 8, "PNG", None,
+                                                             exif.tobytes()))
+    with pytest.raises(Stop):
+        main(["calibrate", photo, str(tmp_path / "q.png"), "--capture",
+              str(tmp_path / "c.json"), "-o", out])
+    assert asked[-1] == 1.0
+    assert "2 photos start at their EXIF times" in capsys.readouterr().out

@@ -151,7 +151,12 @@ def calibrate_command(args, say, load_capture) -> None:
         a.capture = paths[k] if len(paths) > 1 else paths[0]
         a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
-    from_exif = any(start_from_exif(args, ph, cap) for ph, cap in zip(photos, caps))
+    exif_starts = [start_from_exif(args, ph, cap) for ph, cap in zip(photos, caps)]
+    from_exif = any(exif_starts)
+    if sum(exif_starts) > 1 and "offset" not in fix:
+        say(f"note: {sum(exif_starts)} photos start at their EXIF times, and a session shares "
+            "one time offset: where each photo's EXIF time is off by its own amount, no "
+            "offset fits them all; calibrate such photos one at a time")
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=inputs)
