@@ -662,28 +662,38 @@ def test_a_linear_photo_is_deblurred_through_the_curve_its_icc_profile_declares(
     assert np.abs(got - expected).max() < 2e-5      # 16-bit rounding
 
 
+class _StopCalibration(Exception):
+    """Raised by :func:`_spy_on_calibrate`'s stand-in: the command stops there."""
+
+
+def _spy_on_calibrate(monkeypatch, key: str) -> list:
+    """Put a stand-in for ``calibrate`` where the commands find it: it records the value of
+    its keyword argument ``key`` in the list returned, then raises
+    :class:`_StopCalibration`."""
+    import gyrodeblur.calibrate
+    import gyrodeblur.calibrate_cli
+
+    seen = []
+
+    def spy(images, captures, **kwargs):
+        seen.append(kwargs[key])
+        raise _StopCalibration
+
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", spy)
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", spy)
+    return seen
+
+
 def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir, capsys,
                                                                     monkeypatch):
     """``calibrate`` takes each photo's curve from its profile (or ``--transfer``), and
     ``deblur --refine`` calibrates through the curve it deblurs with (it used sRGB's)."""
     from iccprofiles import curv_identity, make_icc
 
-    import gyrodeblur.calibrate
-    import gyrodeblur.calibrate_cli
     from gyrodeblur.imageio import Photo
     from gyrodeblur.tonecurve import LINEAR, SRGB
 
-    class Stop(Exception):
-        pass
-
-    seen = []
-
-    def spy(images, captures, **kwargs):
-        seen.append(kwargs["transfer"])
-        raise Stop
-
-    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", spy)
-    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", spy)
+    seen = _spy_on_calibrate(monkeypatch, "transfer")
     d = capture_dir
     cap = str(d / "cap.json")
     main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "a.png"),
@@ -692,15 +702,15 @@ def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir,
     b = np.clip(a + 0.01, 0, 1)
     write_photo(d / "b.png", b, bit_depth=16, like=Photo(b, 16, "PNG",
                                                          icc_profile=make_icc(curv_identity())))
-    with pytest.raises(Stop):
+    with pytest.raises(_StopCalibration):
         main(["calibrate", str(d / "a.png"), str(d / "b.png"), "--capture", cap,
               "-o", str(d / "o.json")])
     assert seen[-1] == [SRGB, LINEAR]
-    with pytest.raises(Stop):
+    with pytest.raises(_StopCalibration):
         main(["calibrate", str(d / "a.png"), str(d / "b.png"), "--capture", cap,
               "-o", str(d / "o.json"), "--transfer", "srgb"])
     assert seen[-1] == [SRGB, SRGB]
-    with pytest.raises(Stop):
+    with pytest.raises(_StopCalibration):
         main(["deblur", str(d / "a.png"), "--capture", cap, "--refine", "--transfer",
               "linear", "-o", str(d / "o.png")])
     assert seen[-1] is LINEAR
@@ -1050,20 +1060,9 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkey
     time), calibrate and deblur --refine search +-1 s, and say so: the default +-40 ms would
     miss a phone's EXIF time. A range given, a start given, or the offset fixed: as
     asked."""
-    import gyrodeblur.calibrate_cli
     from gyrodeblur.imageio import Photo
 
-    class Stop(Exception):
-        pass
-
-    asked = []
-
-    def spy(images, captures, **kwargs):
-        asked.append(kwargs["offset_range"])
-        raise Stop
-
-    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", spy)
-    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", spy)
+    asked = _spy_on_calibrate(monkeypatch, "offset_range")
     exif = Image.Exif()
     sub = exif.get_ifd(0x8769)
     sub[0x9003], sub[0x9011], sub[0x9291] = "2024:12:05 07:27:10", "+01:00", "512"
@@ -1086,7 +1085,7 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkey
             (["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out,
               "--fix", "offset"], None)]
     for argv, span in runs:
-        with pytest.raises(Stop):
+        with pytest.raises(_StopCalibration):
             main(argv)
         assert asked[-1] == span, argv
         said = capsys.readouterr().out
@@ -1096,7 +1095,7 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkey
     # neither, which is said
     write_photo(tmp_path / "q.png", pixels * 0.9, like=Photo(pixels, 8, "PNG", None,
                                                              exif.tobytes()))
-    with pytest.raises(Stop):
+    with pytest.raises(_StopCalibration):
         main(["calibrate", photo, str(tmp_path / "q.png"), "--capture",
               str(tmp_path / "c.json"), "-o", out])
     assert asked[-1] == 1.0
