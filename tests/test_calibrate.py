@@ -716,6 +716,45 @@ def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
             == json.loads((d / "out" / "shared.json").read_text()))
 
 
+def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatch):
+    """A capture whose exposure start is its photo's EXIF time is searched +-1 s (the
+    default +-40 ms would miss a phone's EXIF time), and says why; a range given, or the
+    offset fixed, rule. A session with such a start is told that one shared offset may
+    fit none of its photos. The corrected capture is no longer marked."""
+    import gyrodeblur.calibrate as cal
+
+    class Stop(Exception):
+        pass
+
+    asked = []
+
+    def search_space(photos, fix, offset_range):
+        asked.append(offset_range)
+        raise Stop
+
+    _, true, blurred = case
+    exif = true.replace(exposure_start_from_exif=True)
+    later = true.replace(exposure_start=true.exposure_start + 0.5)
+    monkeypatch.setattr(cal, "SearchSpace", search_space)
+    said = []
+    for captures, kwargs, span in (([exif], {}, cal.EXIF_START_OFFSET_RANGE),
+                                   ([true], {}, cal.DEFAULT_OFFSET_RANGE),
+                                   ([exif], {"offset_range": 0.3}, 0.3),
+                                   ([exif], {"fix": "offset"}, cal.DEFAULT_OFFSET_RANGE),
+                                   ([exif, later], {}, cal.EXIF_START_OFFSET_RANGE)):
+        with pytest.raises(Stop):
+            calibrate([blurred, blurred[::-1]][:len(captures)], captures, say=said.append,
+                      **kwargs)
+        assert asked[-1] == span
+        session = [m for m in said if "start at their EXIF times" in m]
+        assert bool(session) == (len(captures) == 2), said
+        assert session[-1].startswith("1 of the 2 photos") if session else True
+        said.clear()
+    monkeypatch.undo()
+    corrected = calibrate([blurred], exif, fix="axes,focal,readout,bias").capture
+    assert exif.exposure_start_from_exif and not corrected.exposure_start_from_exif
+
+
 def test_cli_writes_each_photo_its_corrected_description(cli_dir, capsys, monkeypatch):
     """-o once per photo (like --capture): each output is its own photo's description,
     with its own exposure start, and the shared corrections. Counts that do not pair, and
@@ -758,15 +797,21 @@ def test_cli_writes_each_photo_its_corrected_description(cli_dir, capsys, monkey
     save = Capture.save
 
     def full_disk(self, path, *args, **kwargs):
-        if str(path).endswith("q.json"):
+        if "q.json" in str(path):
             raise InputError(path, "cannot write the file: No space left on device")
         return save(self, path, *args, **kwargs)
 
     monkeypatch.setattr(Capture, "save", full_disk)
-    p, q = d / "out" / "p.json", d / "out" / "q.json"
+    p, q = d / "out" / "first.json", d / "out" / "q.json"
     assert main(["calibrate", *common, "-o", f"{p},{q}"]) == 2
     assert "No space left" in capsys.readouterr().err
     assert not p.exists() and not q.exists()
+    p.write_text("OLD")                               # nor over a file --overwrite allows
+    assert main(["calibrate", *common, "-o", f"{p},{q}", "--overwrite"]) == 2
+    assert p.read_text() == "OLD" and not q.exists()
+    assert sorted(f.name for f in (d / "out").iterdir() if f.name.startswith(".")) == []
+    for f in (a, b, d / "out" / "one.json", p):      # the folder is shared with other tests
+        f.unlink()
 
 
 def test_the_real_shield_capture_is_calibrated_from_its_frames(shared_data):

@@ -528,20 +528,24 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
              "capture_time_text": "2024:12:05 07:27:10.512 +01:00"}
     said = []
     cap = load_capture(tmp_path / "c.json", exif_hints=hints, report=said.append)
-    assert cap.exposure_start == 1733380030.512
+    assert cap.exposure_start == 1733380030.512 and cap.exposure_start_from_exif
     assert any("from the photo's EXIF time 2024:12:05 07:27:10.512 +01:00" in s
                and "calibrate before deblurring" in s for s in said), said
     for gyro, h, problem in (
             ("boot.csv", hints, "the gyro log's clock is not (its times run 1029.000"),
             ("unix.csv", dict(hints, capture_time_unix=1733380130.0),
-             "is not within the gyro log's 3 s"),
-            ("unix.csv", {"capture_time_text": "2024:12:05 07:27:10"}, "has no time zone")):
+             "does not cover the exposure from the photo's EXIF time"),
+            ("unix.csv", dict(hints, capture_time_unix=t[-1] - 0.02),     # no room for it
+             "does not cover the exposure from the photo's EXIF time"),
+            ("unix.csv", {"capture_time_text": "2024:12:05 07:27:10"},
+             "has no readable time zone")):
         (tmp_path / "c.json").write_text(json.dumps(dict(doc, gyro={"path": gyro})))
         with pytest.raises(InputError, match="c.json: missing 'exposure_start'.*"
                                              + problem.replace("(", "\\(")):
             load_capture(tmp_path / "c.json", exif_hints=h)
     (tmp_path / "c.json").write_text(json.dumps(dict(doc, exposure_start=1733380031.0)))
-    assert load_capture(tmp_path / "c.json", exif_hints=hints).exposure_start == 1733380031.0
+    given = load_capture(tmp_path / "c.json", exif_hints=hints)
+    assert given.exposure_start == 1733380031.0 and not given.exposure_start_from_exif
     (tmp_path / "c.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="c.json: missing 'exposure_start'$"):
         load_capture(tmp_path / "c.json", exif_hints={})

@@ -666,17 +666,17 @@ class _StopCalibration(Exception):
     """Raised by :func:`_spy_on_calibrate`'s stand-in: the command stops there."""
 
 
-def _spy_on_calibrate(monkeypatch, key: str) -> list:
+def _spy_on_calibrate(monkeypatch, key: str | None, record=None) -> list:
     """Put a stand-in for ``calibrate`` where the commands find it: it records the value of
-    its keyword argument ``key`` in the list returned, then raises
-    :class:`_StopCalibration`."""
+    its keyword argument ``key`` (or ``record(images, captures, kwargs)``) in the list
+    returned, then raises :class:`_StopCalibration`."""
     import gyrodeblur.calibrate
     import gyrodeblur.calibrate_cli
 
     seen = []
 
     def spy(images, captures, **kwargs):
-        seen.append(kwargs[key])
+        seen.append(kwargs[key] if record is None else record(images, captures, kwargs))
         raise _StopCalibration
 
     monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", spy)
@@ -1055,14 +1055,19 @@ def test_an_interrupted_run_ends_its_progress_bar_before_saying_so(capture_dir, 
     assert cli._Progress.drawn is None
 
 
-def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkeypatch, capsys):
+def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, monkeypatch,
+                                                                   capsys):
     """With the exposure start taken from the photo's EXIF time (a phone app's log on Unix
-    time), calibrate and deblur --refine search +-1 s, and say so: the default +-40 ms would
-    miss a phone's EXIF time. A range given, a start given, or the offset fixed: as
-    asked."""
+    time), calibrate and deblur --refine hand calibration a capture marked as such (it
+    then searches a second either way); a description that gives the start, the same
+    time or not, is not marked, nor is calibrate's own corrected description."""
     from gyrodeblur.imageio import Photo
 
-    asked = _spy_on_calibrate(monkeypatch, "offset_range")
+    def flags(captures):
+        return [c.exposure_start_from_exif for c in
+                (captures if isinstance(captures, list) else [captures])]
+
+    seen = _spy_on_calibrate(monkeypatch, None, lambda images, captures, kw: flags(captures))
     exif = Image.Exif()
     sub = exif.get_ifd(0x8769)
     sub[0x9003], sub[0x9011], sub[0x9291] = "2024:12:05 07:27:10", "+01:00", "512"
@@ -1074,29 +1079,23 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(tmp_path, monkey
     doc = {"exposure_time": 0.03, "readout_time": 0.02, "camera": {"fx": 60},
            "gyro": {"path": "g.csv"}}
     (tmp_path / "c.json").write_text(json.dumps(doc))
-    (tmp_path / "s.json").write_text(json.dumps(dict(doc, exposure_start=1733380030.4)))
+    for name, start in (("s.json", 1733380030.4), ("same.json", 1733380030.512)):
+        (tmp_path / name).write_text(json.dumps(dict(doc, exposure_start=start)))
     photo, out = str(tmp_path / "p.png"), str(tmp_path / "o.json")
-    runs = [(["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out], 1.0),
+    runs = [(["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out], [True]),
             (["deblur", photo, "--capture", str(tmp_path / "c.json"), "--refine", "-o",
-              str(tmp_path / "o.png")], 1.0),
+              str(tmp_path / "o.png")], [True]),
+            (["calibrate", photo, "--capture", str(tmp_path / "s.json"), "-o", out], [False]),
+            (["calibrate", photo, "--capture", str(tmp_path / "same.json"), "-o", out],
+             [False]),
             (["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out,
-              "--offset-range", "0.3"], 0.3),
-            (["calibrate", photo, "--capture", str(tmp_path / "s.json"), "-o", out], None),
-            (["calibrate", photo, "--capture", str(tmp_path / "c.json"), "-o", out,
-              "--fix", "offset"], None)]
-    for argv, span in runs:
+              "--exposure-start", "1733380030.512"], [False])]
+    for argv, marked in runs:
         with pytest.raises(_StopCalibration):
             main(argv)
-        assert asked[-1] == span, argv
-        said = capsys.readouterr().out
-        assert ("time offsets within +-1 s of it are searched" in said) == (span == 1.0), said
-        assert "start at their EXIF times" not in said
-    # two photos of a session, each started at its own EXIF time: one shared offset may fit
-    # neither, which is said
-    write_photo(tmp_path / "q.png", pixels * 0.9, like=Photo(pixels, 8, "PNG", None,
-                                                             exif.tobytes()))
-    with pytest.raises(_StopCalibration):
-        main(["calibrate", photo, str(tmp_path / "q.png"), "--capture",
-              str(tmp_path / "c.json"), "-o", out])
-    assert asked[-1] == 1.0
-    assert "2 photos start at their EXIF times" in capsys.readouterr().out
+        assert seen[-1] == marked, argv
+        assert "from the photo's EXIF time" in capsys.readouterr().out or not marked[0]
+    # a sharp scene's EXIF time says nothing of the exposure simulate makes
+    msg = _run_error(["simulate", photo, "--capture", str(tmp_path / "c.json"), "-o",
+                      str(tmp_path / "b.png")], capsys)
+    assert msg.endswith("c.json: missing 'exposure_start'")

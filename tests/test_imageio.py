@@ -284,9 +284,10 @@ def test_camera_raw_files_and_previews_are_refused_not_read_as_the_photo(tmp_pat
     assert read_photo(tmp_path / "plain.tif").pixels.shape == (12, 16, 3)
 
 
-def test_a_heic_photo_is_named_with_what_to_do(tmp_path):
+def test_a_heic_photo_or_a_raw_file_is_named_with_what_to_do(tmp_path):
     """An iPhone's default HEIC (an ISO media file, brand ``heic``) gets a message saying
-    what it is and how to get a JPEG; bytes of no known kind get the general one."""
+    what it is and how to get a JPEG, and so do camera raw files known by their first
+    bytes; bytes of no known kind get the general one."""
     head = b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic"
     (tmp_path / "IMG_0001.HEIC").write_bytes(head + bytes(200))
     with pytest.raises(InputError, match="IMG_0001.HEIC: a HEIF/HEIC image, which this tool "
@@ -295,6 +296,15 @@ def test_a_heic_photo_is_named_with_what_to_do(tmp_path):
     (tmp_path / "x.cr3").write_bytes(b"\x00\x00\x00\x18ftypcrx " + bytes(200))
     with pytest.raises(InputError, match="a Canon CR3 raw file.*develop it"):
         read_photo(tmp_path / "x.cr3")
+    for name, head, kind in (("a.orf", b"IIRO\x08\x00\x00\x00", "an Olympus ORF raw file"),
+                             ("a.rw2", b"IIU\x00\x18\x00\x00\x00", "a Panasonic RW2 raw file"),
+                             ("a.raf", b"FUJIFILMCCD-RAW 0201", "a Fujifilm RAF raw file"),
+                             ("a.cr2", b"II*\x00\x10\x00\x00\x00CR\x02\x00",
+                              "a Canon CR2 raw file")):
+        (tmp_path / name).write_bytes(head + bytes(200))
+        with pytest.raises(InputError, match=f"{name}: {kind}, which this tool does not read: "
+                                             "develop it"):
+            read_photo(tmp_path / name)
     (tmp_path / "junk.jpg").write_bytes(bytes(range(256)))
     with pytest.raises(InputError, match="junk.jpg: not a JPEG, PNG or TIFF image"):
         read_photo(tmp_path / "junk.jpg")
@@ -440,6 +450,9 @@ def test_hints_capture_time_in_unix_time_from_its_zone_and_fraction():
     assert hints["capture_time_text"] == "2024:12:05 07:27:10.512 +01:00"
     west = hints_for((4, 4), x_9003="2024:12:05 00:57:10", x_9011="-05:30", x_9291="05")
     assert west["capture_time_unix"] == pytest.approx(1733380030.05, abs=1e-6)
+    short = hints_for((4, 4), x_9003="2024:12:05 07:27:10", x_9010="+01", x_9291="5\xb2")
+    assert short["capture_time_unix"] == pytest.approx(1733380030.0, abs=1e-6)  # OffsetTime's
+    assert short["capture_time_text"] == "2024:12:05 07:27:10 +01"  # a damaged fraction: none
     local = hints_for((4, 4), x_9003="2024:12:05 07:27:10")
     assert "capture_time_unix" not in local
     assert local["capture_time_text"] == "2024:12:05 07:27:10"

@@ -172,7 +172,7 @@ from .gyrolog import rate_noise
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
            "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
-           "MAX_OFFSET_RANGE"]
+           "EXIF_START_OFFSET_RANGE", "MAX_OFFSET_RANGE"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
@@ -275,6 +275,10 @@ _FAR_QUANTILE = 0.95
 #: Seconds searched, by default, on each side of the given time offset (tens of ms is
 #: the typical error of a phone's gyro and camera timestamps).
 DEFAULT_OFFSET_RANGE = 0.04
+#: Seconds searched, by default, on each side of an exposure start that is a photo's EXIF
+#: capture time (:attr:`~gyrodeblur.capture.Capture.exposure_start_from_exif`): that marks the exposure only
+#: to tens or hundreds of milliseconds.
+EXIF_START_OFFSET_RANGE = 1.0
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
 #: per second of log searched on one photo, so 5 s either side is about eight minutes
@@ -314,7 +318,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         each axis mapping, and over more than 0.1 s each candidate mapping is started
         from its three best distinct coarse minima: about 100 s more per second on each
         side, on 2 cores (a 1024 x 764 photo: 118 s for +-1 s against 18 s for the
-        default). Refused with the offset fixed.
+        default). Refused with the offset fixed. Where a capture's exposure start is its
+        photo's EXIF time (``exposure_start_from_exif``), the default is
+        :data:`EXIF_START_OFFSET_RANGE`, 1 s.
     transfer : str or TransferCurve, or a list of them
         Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
         :class:`~gyrodeblur.tonecurve.TransferCurve`, e.g. from
@@ -363,8 +369,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
     if workers is not None and not _is_count(workers):
         raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
+    from_exif = [cap.exposure_start_from_exif for cap in captures]
     if offset_range is None:
-        offset_range = DEFAULT_OFFSET_RANGE
+        free = "offset" not in fix and any(from_exif)
+        offset_range = EXIF_START_OFFSET_RANGE if free else DEFAULT_OFFSET_RANGE
     elif "offset" in fix:
         raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
                                            "offset): there is no range to search")
@@ -387,13 +395,19 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                                        "photos: give one, or one per photo")
     photos = [CalibrationPhoto(img, cap, curve, i)
               for i, (img, cap, curve) in enumerate(zip(images, work_caps, transfers))]
-    search = SearchSpace(photos, fix, offset_range)
-    c0 = photos[0].cap
     notes: list[str] = []
 
     def note(msg: str, indent: str = "") -> None:
         notes.append(msg)
         say_(indent + msg)
+
+    if len(captures) > 1 and any(from_exif) and "offset" not in fix:
+        note(f"{sum(from_exif)} of the {len(captures)} photos start at their EXIF times, "
+             "and a session shares one time offset: where each photo's EXIF time is off by "
+             "its own amount, no offset fits them all; calibrate such photos one at a time, "
+             "or give their starts on the log's clock")
+    search = SearchSpace(photos, fix, offset_range)
+    c0 = photos[0].cap
 
     if "offset" not in fix and (search.tau_lo > -offset_range + _RANGE_SLACK
                                 or search.tau_hi < offset_range - _RANGE_SLACK):
@@ -402,9 +416,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
              f"(asked: +-{offset_range * 1e3:.0f} ms): searched there")
     elif offset_range > DEFAULT_OFFSET_RANGE:
         extra = _SECONDS_PER_SPAN * (search.tau_hi - search.tau_lo - 2 * DEFAULT_OFFSET_RANGE)
-        say_(f"searching time offsets within +-{offset_range * 1e3:.0f} ms of the given one: "
-             f"about {extra:.0f} s more than the default +-{DEFAULT_OFFSET_RANGE * 1e3:.0f} ms "
-             f"(on 2 cores)")
+        why = ("the exposure start is the photo's EXIF time: " if any(from_exif) else "")
+        say_(f"{why}searching time offsets within +-{offset_range * 1e3:.0f} ms of the given "
+             f"one: about {extra:.0f} s more than the default "
+             f"+-{DEFAULT_OFFSET_RANGE * 1e3:.0f} ms (on 2 cores)")
 
     # the bias that the log's typical rate implies, when the log is long (hand motion
     # averages out over seconds; a gyro's bias does not)

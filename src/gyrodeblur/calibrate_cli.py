@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
 from dataclasses import replace
 
 import numpy as np
@@ -13,13 +14,7 @@ from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix, repeated_pho
 from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
-__all__ = ["format_estimates", "fixed_parameters", "calibrate_command",
-           "EXIF_START_OFFSET_RANGE", "start_from_exif", "offset_range_for"]
-
-#: Seconds searched on each side of an exposure start that is the photo's EXIF time, when
-#: ``--offset-range`` is not given: a phone's EXIF time marks the exposure to tens or
-#: hundreds of milliseconds, far beyond the default +-40 ms.
-EXIF_START_OFFSET_RANGE = 1.0
+__all__ = ["format_estimates", "fixed_parameters", "calibrate_command"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -80,25 +75,6 @@ def fixed_parameters(args) -> set[str]:
     return fix
 
 
-def start_from_exif(args, photo, cap) -> bool:
-    """Whether ``cap``'s exposure start is ``photo``'s EXIF capture time (no
-    ``--exposure-start``; the description gave none, or that same time)."""
-    if getattr(args, "exposure_start", None) is not None:
-        return False
-    from .imageio import exif_capture_hints
-    return exif_capture_hints(photo).get("capture_time_unix") == cap.exposure_start
-
-
-def offset_range_for(args, fix, from_exif: bool, say):
-    """``--offset-range``; where it is not given, the offset is free and an exposure start
-    is a photo's EXIF time, :data:`EXIF_START_OFFSET_RANGE` (and the user is told)."""
-    if args.offset_range is not None or not from_exif or "offset" in fix:
-        return args.offset_range
-    say(f"the exposure start is the photo's EXIF time: time offsets within "
-        f"+-{EXIF_START_OFFSET_RANGE:g} s of it are searched (--offset-range sets another range)")
-    return EXIF_START_OFFSET_RANGE
-
-
 def _refuse_repeats(paths, photos) -> None:
     """One photo given twice would count its evidence twice (:func:`calibrate.calibrate`
     refuses it too); said here with the files' names, whether the same file or a copy."""
@@ -151,12 +127,6 @@ def calibrate_command(args, say, load_capture) -> None:
         a.capture = paths[k] if len(paths) > 1 else paths[0]
         a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
-    exif_starts = [start_from_exif(args, ph, cap) for ph, cap in zip(photos, caps)]
-    from_exif = any(exif_starts)
-    if sum(exif_starts) > 1 and "offset" not in fix:
-        say(f"note: {sum(exif_starts)} photos start at their EXIF times, and a session shares "
-            "one time offset: where each photo's EXIF time is off by its own amount, no "
-            "offset fits them all; calibrate such photos one at a time")
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=inputs)
@@ -168,7 +138,7 @@ def calibrate_command(args, say, load_capture) -> None:
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
                     downscale=args.downscale, workers=args.workers, transfer=curves,
-                    offset_range=offset_range_for(args, fix, from_exif, say))
+                    offset_range=args.offset_range)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
@@ -197,16 +167,23 @@ def _outputs(given, n_photos: int) -> list[str]:
 
 
 def _save_all(captures, outputs) -> None:
-    """Write each capture to its output, whole; a failure removes those this call made
-    (all of them or none)."""
-    made = []
+    """Write each capture to its output: all of them or none. Each is written whole beside
+    its output first (the gyro path made relative to that folder), and only once every
+    one is written are they moved into place, over files ``--overwrite`` allows."""
+    import secrets
+
+    parts = []
     try:
         for cap, out in zip(captures, outputs):
-            new = not os.path.lexists(out)
-            cap.save(out)
-            if new:
-                made.append(out)
-    except BaseException:
-        for out in made:
-            os.remove(out)
-        raise
+            folder, name = os.path.split(os.path.abspath(out))
+            part = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.part")
+            parts.append(part)
+            cap.save(part)
+        for part, out in zip(parts, outputs):
+            if os.path.exists(out):          # a file written over keeps its permission bits
+                os.chmod(part, stat.S_IMODE(os.stat(out).st_mode))
+            os.replace(part, out)
+    finally:
+        for part in parts:
+            if os.path.lexists(part):
+                os.remove(part)

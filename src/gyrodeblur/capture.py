@@ -94,6 +94,11 @@ class Capture:
         The JSON file, for messages.
     max_gap : float
         Largest allowed gap between gyro samples inside the exposure (s).
+    exposure_start_from_exif : bool
+        Whether ``exposure_start`` is the photo's EXIF capture time (:func:`load_capture`),
+        which marks the exposure only to tens or hundreds of milliseconds:
+        :func:`gyrodeblur.calibrate.calibrate` then searches a second either way, and
+        its corrected capture is no longer so.
 
     Notes
     -----
@@ -112,6 +117,7 @@ class Capture:
     gyro_spec: dict = field(default_factory=dict)
     source: str | None = None
     max_gap: float = 0.05
+    exposure_start_from_exif: bool = False
 
     def __post_init__(self):
         src = self.source
@@ -311,35 +317,35 @@ def _get(d: dict, key: str, source: str, kind=float, required=True):
 
 #: Unix times (s) a log's clock is taken to be Unix time within: 2000 to 2100.
 _UNIX_CLOCK = (946_684_800.0, 4_102_444_800.0)
-#: Seconds either side of the log within which a photo's EXIF time is taken.
-_EXIF_TIME_SLACK = 5.0
 
 
-def _exposure_start_from_exif(hints: dict, log, offset: float, src: str, report) -> float:
-    """The photo's EXIF capture time as ``exposure_start``, where the capture description
-    gives none and the gyro log runs on Unix time (a phone app's, e.g. Sensor Logger's
-    ``time``); an :class:`InputError` saying why not where it cannot serve."""
+def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, src: str,
+                              report) -> float:
+    """The photo's EXIF capture time as ``exposure_start`` (Unix seconds), where the
+    capture description gives none and the gyro log runs on Unix time (a phone app's,
+    e.g. Sensor Logger's ``time``) and covers it and the ``duration`` (s: readout and
+    exposure) after it; an :class:`InputError` saying why not where it cannot serve."""
     text, unix = hints["capture_time_text"], hints.get("capture_time_unix")
     lo, hi = float(log.t[0]) + offset, float(log.t[-1]) + offset      # camera clock
     if unix is None:
         raise InputError(src, f"missing 'exposure_start': the photo's EXIF time ({text}) "
-                              "has no time zone (OffsetTimeOriginal), so it is no Unix time; "
-                              "give exposure_start on the gyro log's clock")
+                              "has no readable time zone (OffsetTimeOriginal), so it is no "
+                              "Unix time; give exposure_start on the gyro log's clock")
     if not (_UNIX_CLOCK[0] <= lo and hi <= _UNIX_CLOCK[1]):
         raise InputError(src, f"missing 'exposure_start': the photo's EXIF time ({text}) is "
                               f"Unix time, but the gyro log's clock is not (its times run "
                               f"{lo:.3f} to {hi:.3f} s); give exposure_start on the log's "
                               "clock")
-    if not lo - _EXIF_TIME_SLACK <= unix <= hi + _EXIF_TIME_SLACK:
-        raise InputError(src, f"missing 'exposure_start', and the photo's EXIF time ({text}, "
-                              f"Unix {unix:.3f} s) is not within the gyro log's {hi - lo:.0f} s "
-                              f"(Unix {lo:.3f} to {hi:.3f}): is it the log of this photo's "
-                              "session, and the phone's clock and time zone right?")
+    if not lo <= unix <= hi - duration:
+        raise InputError(src, f"missing 'exposure_start', and the gyro log (Unix {lo:.3f} to "
+                              f"{hi:.3f} s, {hi - lo:.1f} s) does not cover the exposure from "
+                              f"the photo's EXIF time ({text}, Unix {unix:.3f} s): is it the "
+                              "log of this photo's session, and the phone's clock and time "
+                              "zone right?")
     if report:
         report(f"exposure_start = {unix:.3f} s (Unix time, from the photo's EXIF time {text}): "
                "that marks the exposure only to tens or hundreds of milliseconds; calibrate "
-               "before deblurring (gyrodeblur calibrate, or deblur --refine, searches +-1 s "
-               "around an EXIF time)")
+               "before deblurring")
     return unix
 
 
@@ -487,7 +493,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         (``capture_time_unix``, ``capture_time_text``) read from the photo
         (:func:`gyrodeblur.imageio.exif_capture_hints`), used only where the JSON and the
         options leave the value out: the capture time as ``exposure_start`` only when
-        the gyro log runs on Unix time and covers it (to within 5 s).
+        the gyro log runs on Unix time and covers the exposure from it (the capture's
+        ``exposure_start_from_exif`` then says so).
     report : callable(str), optional
         Told which values came from EXIF.
     """
@@ -631,9 +638,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       f"calibrate find it)", stacklevel=2)
     axes = parse_axes(orientation, source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
-    if data.get("exposure_start") is None and "capture_time_text" in hints:
-        data["exposure_start"] = _exposure_start_from_exif(hints, log, offset, src, report)
-    exposure_start = _get(data, "exposure_start", src)
+    from_exif = data.get("exposure_start") is None and "capture_time_text" in hints
     exposure_time = _get(data, "exposure_time", src)
     readout = _get(data, "readout_time", src, required=False)
     direction = _readout_direction(log.meta.get("frame_readout_direction", "0"), gpath)
@@ -655,6 +660,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         report("readout_time = 0: not given, a global shutter (a phone's rolling shutter "
                "reads out in about 10-30 ms: give a guess, which calibrate refines)")
     readout = 0.0 if readout is None else readout
+    if from_exif:
+        data["exposure_start"] = _exposure_start_from_exif(
+            hints, log, offset, readout + exposure_time, src, report)
+    exposure_start = _get(data, "exposure_start", src)
     bias_spec = gyro_d.get("bias")
     if isinstance(bias_spec, str):
         if bias_spec != "auto":
@@ -673,7 +682,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     max_gap = _get(gyro_d, "max_gap", src, required=False)
     try:
         return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
-                       spec, src, 0.05 if max_gap is None else max_gap)
+                       spec, src, 0.05 if max_gap is None else max_gap, from_exif)
     except InputError as exc:       # a field an option set: name the option too
         if exc.source != src:
             raise                   # the log's own errors (coverage) name the log

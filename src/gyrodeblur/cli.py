@@ -146,7 +146,10 @@ def _ignored_options(args) -> None:
         raise InputError("--offset-range", "applies with --refine only")
 
 
-def _load_capture(args, photo=None, say=None):
+def _load_capture(args, photo=None, say=None, exif_start: bool = True):
+    """The capture the options and ``--capture`` describe, fitted to ``photo``; its EXIF
+    fills what they leave out (the capture time as the exposure start only where
+    ``exif_start``: a sharp scene's time says nothing of a blurred exposure)."""
     from .capture import load_capture
 
     overrides = {
@@ -167,6 +170,8 @@ def _load_capture(args, photo=None, say=None):
         from .imageio import exif_capture_hints
         size = (photo.pixels.shape[1], photo.pixels.shape[0])
         hints = exif_capture_hints(photo)
+        if not exif_start:
+            hints = {k: v for k, v in hints.items() if not k.startswith("capture_time")}
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
                        report=say)
     if photo is not None:
@@ -376,7 +381,7 @@ def cmd_simulate(args, say) -> None:
         raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
     if args.seed is not None and args.snr_db is None:
         raise InputError("--seed", "seeds the noise: it applies with --snr-db only")
-    cap = _load_capture(args, photo, say)
+    cap = _load_capture(args, photo, say, exif_start=False)
     _check_not_over_capture(cap, args.overwrite, args.output)
     curve = said_transfer_curve(given, args.transfer, say)
     brightest = float(split_alpha(given.pixels)[0].max())
@@ -476,7 +481,7 @@ def cmd_deblur(args, say) -> None:
     else:
         fix = None
         if args.refine:
-            from .calibrate_cli import fixed_parameters, offset_range_for, start_from_exif
+            from .calibrate_cli import fixed_parameters
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf)
@@ -484,9 +489,9 @@ def cmd_deblur(args, say) -> None:
         if args.refine:
             from .calibrate import calibrate
             from .calibrate_cli import format_estimates
-            span = offset_range_for(args, fix, start_from_exif(args, photo, cap), say)
             res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
-                            workers=args.workers, transfer=curve, offset_range=span)
+                            workers=args.workers, transfer=curve,
+                            offset_range=args.offset_range)
             for line in format_estimates(res.estimates):
                 say(line)
             cap = res.capture

@@ -53,6 +53,7 @@ import datetime
 import logging
 import math
 import os
+import re
 import struct
 import sys
 import warnings
@@ -89,7 +90,8 @@ _ORIENTATION = 274  #                                  DateTime, Artist, Copyrig
 _EXPOSURE_TIME, _FOCAL_LENGTH, _FOCAL_35MM = 0x829A, 0x920A, 0xA405
 _FP_XRES, _FP_UNIT = 0xA20E, 0xA210
 _PIXEL_X_DIM, _PIXEL_Y_DIM = 0xA002, 0xA003
-_DATETIME_ORIGINAL, _OFFSET_TIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9011, 0x9291
+_DATETIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9291
+_OFFSET_TIME, _OFFSET_TIME_ORIGINAL = 0x9010, 0x9011      # the zones of DateTime, and of it
 _MM_PER_UNIT = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}  # inch, cm, and the mm/um extension
 _FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)  # 43.27 mm
 
@@ -193,6 +195,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
         raise InputError(p, "file not found")
     if os.path.isdir(p):
         raise InputError(p, "is a folder, not an image file")
+    _refuse_other_kinds(p)
     try:
         fmt, ints, exif, icc, tables, gamma = _decode(p)
     except InputError:
@@ -200,7 +203,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     except PermissionError:
         raise InputError(p, "cannot read the file: permission denied") from None
     except UnidentifiedImageError:
-        raise InputError(p, _unread_kind(p)) from None
+        raise InputError(p, "not a JPEG, PNG or TIFF image (or the file is damaged)") from None
     except Image.DecompressionBombError as exc:
         raise InputError(p, f"image too large to read safely ({exc})") from None
     except _DECODE_ERRORS as exc:
@@ -286,23 +289,32 @@ _MEDIA_BRANDS = {**dict.fromkeys((b"heic", b"heix", b"hevc", b"hevx", b"heim", b
                                   b"mif1", b"msf1"), "a HEIF/HEIC image"),
                  b"avif": "an AVIF image", b"avis": "an AVIF image",
                  b"crx ": "a Canon CR3 raw file"}
+#: First bytes of camera raw formats (a CR2 is a little-endian TIFF marked ``CR`` 2 at
+#: byte 8).
+_RAW_MAGIC = ((b"IIRO", "an Olympus ORF raw file"), (b"IIRS", "an Olympus ORF raw file"),
+              (b"MMOR", "an Olympus ORF raw file"), (b"IIU\x00", "a Panasonic RW2 raw file"),
+              (b"FUJIFILMCCD-RAW", "a Fujifilm RAF raw file"),
+              (b"II*\x00\x10\x00\x00\x00CR\x02", "a Canon CR2 raw file"))
+_DEVELOP = ("develop it to a JPEG, PNG or 16-bit TIFF at full size (demosaiced, not resized "
+            "or cropped), keeping its EXIF")
 
 
-def _unread_kind(p: str) -> str:
-    """The message for a file no decoder took: what it is, where the first bytes say so,
-    and what to do."""
+def _refuse_other_kinds(p: str) -> None:
+    """Refuse, by its first bytes, a photo of a kind this tool does not read but can name
+    (HEIC, AVIF, camera raw), with what to do; others go on to the decoders."""
     try:
         with open(p, "rb") as f:
             head = f.read(16)
     except OSError:
-        head = b""
+        return                                 # the decoder says what is wrong
     kind = _MEDIA_BRANDS.get(head[8:12]) if head[4:8] == b"ftyp" else None
+    kind = kind or next((k for magic, k in _RAW_MAGIC if head.startswith(magic)), None)
     if kind is None:
-        return "not a JPEG, PNG or TIFF image (or the file is damaged)"
-    develop = ("develop it" if "raw" in kind else "convert it (on an iPhone: Settings > Camera > "
-               "Formats > Most Compatible takes JPEGs)")
-    return (f"{kind}, which this tool does not read: {develop} to a JPEG, PNG or 16-bit TIFF "
-            "at full size, keeping its EXIF")
+        return
+    what = (_DEVELOP if "raw" in kind else
+            "convert it (on an iPhone: Settings > Camera > Formats > Most Compatible takes "
+            "JPEGs) to a JPEG, PNG or 16-bit TIFF at full size, keeping its EXIF")
+    raise InputError(p, f"{kind}, which this tool does not read: {what}")
 
 
 #: TIFF tags of camera raw files and previews: DNGVersion, NewSubfileType and
@@ -318,8 +330,7 @@ def _refuse_raw_or_preview(p: str, tags: dict) -> None:
     def first(v):
         return v[0] if isinstance(v, (tuple, list)) and v else v
 
-    develop = ("develop it to a JPEG, PNG or 16-bit TIFF at full size (demosaiced, not "
-               "resized or cropped), keeping its EXIF")
+    develop = _DEVELOP
     if _DNG_VERSION in tags:
         raise InputError(p, f"a DNG (camera raw) file, which this tool does not read: {develop}")
     raw = _RAW_PHOTOMETRIC.get(int(first(tags.get(_PHOTOMETRIC, 0)) or 0))
@@ -812,20 +823,24 @@ def exif_capture_hints(photo: Photo) -> dict:
 
 def _capture_time(sub: dict, ifd0: dict) -> dict:
     """``capture_time_unix`` and ``capture_time_text`` of :func:`exif_capture_hints` from
-    the Exif sub-IFD (or IFD0) tags; ``{}`` without a readable DateTimeOriginal."""
+    the Exif sub-IFD (or IFD0) tags; ``{}`` without a readable DateTimeOriginal. The zone
+    is OffsetTimeOriginal's, else OffsetTime's (the file's, which phones write alike)."""
     def text(tag):
         v = sub.get(tag, ifd0.get(tag))
         if isinstance(v, bytes):
             v = v.decode("ascii", "replace")
         return v.strip().strip("\x00").strip() if isinstance(v, str) else None
 
-    stamp, zone, frac = text(_DATETIME_ORIGINAL), text(_OFFSET_TIME_ORIGINAL), text(_SUBSEC_ORIGINAL)
+    stamp, frac = text(_DATETIME_ORIGINAL), text(_SUBSEC_ORIGINAL)
+    zone = text(_OFFSET_TIME_ORIGINAL) or text(_OFFSET_TIME)
     try:
         local = datetime.datetime.strptime(stamp or "", "%Y:%m:%d %H:%M:%S")
     except ValueError:
         return {}
-    frac = frac if frac and frac.isdigit() else None
+    frac = frac if frac and re.fullmatch("[0-9]+", frac) else None
     out = {"capture_time_text": stamp + (f".{frac}" if frac else "") + (f" {zone}" if zone else "")}
+    if zone and re.fullmatch(r"[+-][0-9]{2}", zone):
+        zone += ":00"                          # whole hours written short
     try:
         tz = datetime.datetime.strptime(zone or "", "%z").tzinfo
     except ValueError:

@@ -81,7 +81,8 @@ class Corrections:
         return cap.replace(time_offset=cap.time_offset + self.offset,
                            readout_time=max(0.0, cap.readout_time + self.readout),
                            camera=cap.camera.with_focal_scale(self.focal),
-                           bias=cap.bias + self.bias, axes=self.axes)
+                           bias=cap.bias + self.bias, axes=self.axes,
+                           exposure_start_from_exif=False)     # calibrated now
 
 
 class PatchSpectra:
