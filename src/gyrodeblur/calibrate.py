@@ -276,8 +276,8 @@ _FAR_QUANTILE = 0.95
 #: the typical error of a phone's gyro and camera timestamps).
 DEFAULT_OFFSET_RANGE = 0.04
 #: Seconds searched, by default, on each side of an exposure start that is a photo's EXIF
-#: capture time (:attr:`~gyrodeblur.capture.Capture.exposure_start_from_exif`): that marks the exposure only
-#: to tens or hundreds of milliseconds.
+#: capture time (:attr:`~gyrodeblur.capture.Capture.exposure_start_from_exif`): that
+#: marks the exposure only to tens or hundreds of milliseconds.
 EXIF_START_OFFSET_RANGE = 1.0
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s

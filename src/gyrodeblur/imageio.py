@@ -330,15 +330,14 @@ def _refuse_raw_or_preview(p: str, tags: dict) -> None:
     def first(v):
         return v[0] if isinstance(v, (tuple, list)) and v else v
 
-    develop = _DEVELOP
     if _DNG_VERSION in tags:
-        raise InputError(p, f"a DNG (camera raw) file, which this tool does not read: {develop}")
+        raise InputError(p, f"a DNG (camera raw) file, which this tool does not read: {_DEVELOP}")
     raw = _RAW_PHOTOMETRIC.get(int(first(tags.get(_PHOTOMETRIC, 0)) or 0))
     if raw is not None:
-        raise InputError(p, f"camera raw data ({raw}), which this tool does not read: {develop}")
+        raise InputError(p, f"camera raw data ({raw}), which this tool does not read: {_DEVELOP}")
     if int(first(tags.get(_NEW_SUBFILE_TYPE, 0)) or 0) & 1:
         raise InputError(p, "its first image is a reduced-resolution preview, not the photo "
-                            f"(a camera raw file?): {develop}")
+                            f"(a camera raw file?): {_DEVELOP}")
 
 
 def _reason(exc: BaseException) -> str:
@@ -754,8 +753,8 @@ def exif_capture_hints(photo: Photo) -> dict:
             Focal length in pixels at this photo's stored width and height.
         ``"capture_time_unix"`` : float
             When the photo was taken, Unix time (s), from DateTimeOriginal,
-            OffsetTimeOriginal (the time zone: without it there is no Unix time) and
-            SubSecTimeOriginal (fractions of a second). A phone writes it to the
+            OffsetTimeOriginal or else OffsetTime (the time zone: without one there is
+            no Unix time) and SubSecTimeOriginal (fractions of a second). A phone writes it to the
             millisecond but it marks the exposure only to tens or hundreds of them.
         ``"capture_time_text"`` : str
             DateTimeOriginal as written, with its zone and fraction where present
