@@ -727,15 +727,20 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatc
         pass
 
     asked = []
+    real_search_space = cal.SearchSpace
 
     def search_space(photos, fix, offset_range):
         asked.append(offset_range)
+        return real_search_space(photos, fix, offset_range)
+
+    def stop(*args, **kwargs):                  # after the range is said, before the work
         raise Stop
 
     _, true, blurred = case
     exif = true.replace(exposure_start_from_exif=True)
     later = true.replace(exposure_start=true.exposure_start + 0.5)
     monkeypatch.setattr(cal, "SearchSpace", search_space)
+    monkeypatch.setattr(cal, "CalibrationFit", stop)
     said = []
     for captures, kwargs, span in (([exif], {}, cal.EXIF_START_OFFSET_RANGE),
                                    ([true], {}, cal.DEFAULT_OFFSET_RANGE),
@@ -746,9 +751,12 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatc
             calibrate([blurred, blurred[::-1]][:len(captures)], captures, say=said.append,
                       **kwargs)
         assert asked[-1] == span
-        session = [m for m in said if "start at their EXIF times" in m]
+        why = [m for m in said if "an exposure start from EXIF; --offset-range sets" in m]
+        assert bool(why) == (span == cal.EXIF_START_OFFSET_RANGE), said
+        session = [m for m in said if "EXIF time" in m and "a session shares" in m]
         assert bool(session) == (len(captures) == 2), said
-        assert session[-1].startswith("1 of the 2 photos") if session else True
+        assert session[-1].startswith("1 of the 2 photos starts at its EXIF time") \
+            if session else True
         said.clear()
     monkeypatch.undo()
     corrected = calibrate([blurred], exif, fix="axes,focal,readout,bias").capture
@@ -809,6 +817,18 @@ def test_cli_writes_each_photo_its_corrected_description(cli_dir, capsys, monkey
     p.write_text("OLD")                               # nor over a file --overwrite allows
     assert main(["calibrate", *common, "-o", f"{p},{q}", "--overwrite"]) == 2
     assert p.read_text() == "OLD" and not q.exists()
+    monkeypatch.setattr(Capture, "save", save)         # a move refused: said, not a traceback
+    real_replace = os.replace
+
+    def refused(src, dst):
+        if str(dst).endswith("q.json"):
+            raise PermissionError(1, "Operation not permitted")
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", refused)
+    assert main(["calibrate", *common, "-o", f"{p},{q}", "--overwrite"]) == 2
+    assert f"{q}: cannot write the file: Operation not permitted" in capsys.readouterr().err
+    monkeypatch.setattr(os, "replace", real_replace)
     assert sorted(f.name for f in (d / "out").iterdir() if f.name.startswith(".")) == []
     for f in (a, b, d / "out" / "one.json", p):      # the folder is shared with other tests
         f.unlink()

@@ -543,6 +543,9 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
         with pytest.raises(InputError, match="c.json: missing 'exposure_start'.*"
                                              + problem.replace("(", "\\(")):
             load_capture(tmp_path / "c.json", exif_hints=h)
+    (tmp_path / "c.json").write_text(json.dumps(dict(doc, readout_time=20)))   # ms, by mistake
+    with pytest.raises(InputError, match="readout_time 20 s is longer than any sensor's"):
+        load_capture(tmp_path / "c.json", exif_hints=hints)
     (tmp_path / "c.json").write_text(json.dumps(dict(doc, exposure_start=1733380031.0)))
     given = load_capture(tmp_path / "c.json", exif_hints=hints)
     assert given.exposure_start == 1733380031.0 and not given.exposure_start_from_exif

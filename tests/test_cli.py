@@ -1059,8 +1059,9 @@ def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, mon
                                                                    capsys):
     """With the exposure start taken from the photo's EXIF time (a phone app's log on Unix
     time), calibrate and deblur --refine hand calibration a capture marked as such (it
-    then searches a second either way); a description that gives the start, the same
-    time or not, is not marked, nor is calibrate's own corrected description."""
+    then searches a second either way); a description or an option that gives the start
+    is not marked, whether it is the EXIF time itself (as in calibrate's own corrected
+    description) or another."""
     from gyrodeblur.imageio import Photo
 
     def flags(captures):
@@ -1095,6 +1096,14 @@ def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, mon
             main(argv)
         assert seen[-1] == marked, argv
         assert "from the photo's EXIF time" in capsys.readouterr().out or not marked[0]
+    # two photos of one description: each takes its own EXIF time, not the description's
+    write_photo(tmp_path / "q.png", pixels * 0.9, like=Photo(pixels, 8, "PNG", None,
+                                                             exif.tobytes()))
+    with pytest.raises(_StopCalibration):
+        main(["calibrate", photo, str(tmp_path / "q.png"), "--capture",
+              str(tmp_path / "c.json"), "-o", out])
+    assert seen[-1] == [True, True]
+    assert "take their exposure start from" not in capsys.readouterr().out
     # a sharp scene's EXIF time says nothing of the exposure simulate makes
     msg = _run_error(["simulate", photo, "--capture", str(tmp_path / "c.json"), "-o",
                       str(tmp_path / "b.png")], capsys)

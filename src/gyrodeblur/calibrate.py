@@ -370,9 +370,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if workers is not None and not _is_count(workers):
         raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
     from_exif = [cap.exposure_start_from_exif for cap in captures]
+    widened = offset_range is None and "offset" not in fix and any(from_exif)
     if offset_range is None:
-        free = "offset" not in fix and any(from_exif)
-        offset_range = EXIF_START_OFFSET_RANGE if free else DEFAULT_OFFSET_RANGE
+        offset_range = EXIF_START_OFFSET_RANGE if widened else DEFAULT_OFFSET_RANGE
     elif "offset" in fix:
         raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
                                            "offset): there is no range to search")
@@ -402,23 +402,28 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         say_(indent + msg)
 
     if len(captures) > 1 and any(from_exif) and "offset" not in fix:
-        note(f"{sum(from_exif)} of the {len(captures)} photos start at their EXIF times, "
-             "and a session shares one time offset: where each photo's EXIF time is off by "
-             "its own amount, no offset fits them all; calibrate such photos one at a time, "
-             "or give their starts on the log's clock")
+        n = sum(from_exif)
+        note(f"{n} of the {len(captures)} photos start{'s' if n == 1 else ''} at "
+             f"{'its EXIF time' if n == 1 else 'their EXIF times'}, and a session shares one "
+             "time offset: where each photo's EXIF time is off by its own amount, no offset "
+             "fits them all; calibrate such photos one at a time, or give their starts on "
+             "the log's clock")
     search = SearchSpace(photos, fix, offset_range)
     c0 = photos[0].cap
 
+    asked = (f"+-{offset_range * 1e3:.0f} ms around an exposure start from EXIF; "
+             f"--offset-range sets another range" if widened
+             else f"asked: +-{offset_range * 1e3:.0f} ms")
     if "offset" not in fix and (search.tau_lo > -offset_range + _RANGE_SLACK
                                 or search.tau_hi < offset_range - _RANGE_SLACK):
         note(f"the gyro log covers the exposure only for time offsets "
              f"{search.tau_lo * 1e3:+.0f} to {search.tau_hi * 1e3:+.0f} ms from the given one "
-             f"(asked: +-{offset_range * 1e3:.0f} ms): searched there")
+             f"({asked}): searched there")
     elif offset_range > DEFAULT_OFFSET_RANGE:
         extra = _SECONDS_PER_SPAN * (search.tau_hi - search.tau_lo - 2 * DEFAULT_OFFSET_RANGE)
-        why = ("the exposure start is the photo's EXIF time: " if any(from_exif) else "")
-        say_(f"{why}searching time offsets within +-{offset_range * 1e3:.0f} ms of the given "
-             f"one: about {extra:.0f} s more than the default "
+        why = " (an exposure start from EXIF; --offset-range sets another range)"
+        say_(f"searching time offsets within +-{offset_range * 1e3:.0f} ms of the given one"
+             f"{why if widened else ''}: about {extra:.0f} s more than the default "
              f"+-{DEFAULT_OFFSET_RANGE * 1e3:.0f} ms (on 2 cores)")
 
     # the bias that the log's typical rate implies, when the log is long (hand motion

@@ -117,16 +117,17 @@ def calibrate_command(args, say, load_capture) -> None:
         raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
                                       "photos: give one, or one per photo (comma-separated)")
     _refuse_repeats(args.photos, photos)
-    if len(paths) == 1 and len(photos) > 1:
-        say(f"note: all {len(photos)} photos take their exposure start from {paths[0]}; give "
-            "one capture per photo (--capture a.json,b.json,... or --capture repeated) if "
-            "they were taken at different times")
     caps = []
     for k, ph in enumerate(photos):
         a = argparse.Namespace(**vars(args))
         a.capture = paths[k] if len(paths) > 1 else paths[0]
         a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
+    if len(paths) == 1 and len(photos) > 1 and not any(c.exposure_start_from_exif
+                                                       for c in caps):
+        say(f"note: all {len(photos)} photos take their exposure start from {paths[0]}; give "
+            "one capture per photo (--capture a.json,b.json,... or --capture repeated) if "
+            "they were taken at different times")
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=inputs)
@@ -169,7 +170,9 @@ def _outputs(given, n_photos: int) -> list[str]:
 def _save_all(captures, outputs) -> None:
     """Write each capture to its output: all of them or none. Each is written whole beside
     its output first (the gyro path made relative to that folder), and only once every
-    one is written are they moved into place, over files ``--overwrite`` allows."""
+    one is written are they moved into place, over files ``--overwrite`` allows (a
+    failure or Ctrl-C between two of these renames, microseconds apart, would leave the
+    first moved)."""
     import secrets
 
     parts = []
@@ -180,9 +183,12 @@ def _save_all(captures, outputs) -> None:
             parts.append(part)
             cap.save(part)
         for part, out in zip(parts, outputs):
-            if os.path.exists(out):          # a file written over keeps its permission bits
-                os.chmod(part, stat.S_IMODE(os.stat(out).st_mode))
-            os.replace(part, out)
+            try:
+                if os.path.exists(out):      # a file written over keeps its permission bits
+                    os.chmod(part, stat.S_IMODE(os.stat(out).st_mode))
+                os.replace(part, out)
+            except OSError as exc:
+                raise InputError(out, f"cannot write the file: {exc.strerror}") from None
     finally:
         for part in parts:
             if os.path.lexists(part):

@@ -329,8 +329,9 @@ def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, 
     lo, hi = float(log.t[0]) + offset, float(log.t[-1]) + offset      # camera clock
     if unix is None:
         raise InputError(src, f"missing 'exposure_start': the photo's EXIF time ({text}) "
-                              "has no readable time zone (OffsetTimeOriginal), so it is no "
-                              "Unix time; give exposure_start on the gyro log's clock")
+                              "has no readable time zone (OffsetTimeOriginal or OffsetTime), "
+                              "so it is no Unix time; give exposure_start on the gyro log's "
+                              "clock")
     if not (_UNIX_CLOCK[0] <= lo and hi <= _UNIX_CLOCK[1]):
         raise InputError(src, f"missing 'exposure_start': the photo's EXIF time ({text}) is "
                               f"Unix time, but the gyro log's clock is not (its times run "
@@ -660,9 +661,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         report("readout_time = 0: not given, a global shutter (a phone's rolling shutter "
                "reads out in about 10-30 ms: give a guess, which calibrate refines)")
     readout = 0.0 if readout is None else readout
-    if from_exif:
+    if from_exif:                # the durations' own checks come later, in Capture
+        sane = 0 <= readout <= MAX_READOUT_TIME and exposure_time > 0
         data["exposure_start"] = _exposure_start_from_exif(
-            hints, log, offset, readout + exposure_time, src, report)
+            hints, log, offset, readout + exposure_time if sane else 0.0, src, report)
     exposure_start = _get(data, "exposure_start", src)
     bias_spec = gyro_d.get("bias")
     if isinstance(bias_spec, str):
