@@ -529,14 +529,19 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
     said = []
     cap = load_capture(tmp_path / "c.json", exif_hints=hints, report=said.append)
     assert cap.exposure_start == 1733380030.512 and cap.exposure_start_from_exif
-    assert any("from the photo's EXIF time 2024:12:05 07:27:10.512 +01:00" in s
-               and "calibrate before deblurring" in s for s in said), said
+    assert any("from the photo's EXIF time 2024:12:05 07:27:10.512 +01:00)" in s
+               and "calibration searches 1 s either way" in s for s in said), said
+    # a time just outside what the log covers (a log stopped right after the shot): the
+    # search starts from the nearest start the log covers, and says so
+    said.clear()
+    late = load_capture(tmp_path / "c.json", exif_hints=dict(hints, capture_time_unix=t[-1]),
+                        report=said.append)
+    assert late.exposure_start == pytest.approx(t[-1] - 0.03) and late.exposure_start_from_exif
+    assert any("30 ms after the exposures the log covers" in s for s in said), said
     for gyro, h, problem in (
             ("boot.csv", hints, "the gyro log's clock is not (its times run 1029.000"),
             ("unix.csv", dict(hints, capture_time_unix=1733380130.0),
-             "does not cover the exposure from the photo's EXIF time"),
-            ("unix.csv", dict(hints, capture_time_unix=t[-1] - 0.02),     # no room for it
-             "does not cover the exposure from the photo's EXIF time"),
+             "does not cover an exposure within 1 s of the photo's EXIF time"),
             ("unix.csv", {"capture_time_text": "2024:12:05 07:27:10"},
              "has no readable time zone")):
         (tmp_path / "c.json").write_text(json.dumps(dict(doc, gyro={"path": gyro})))

@@ -1104,7 +1104,38 @@ def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, mon
               str(tmp_path / "c.json"), "-o", out])
     assert seen[-1] == [True, True]
     assert "take their exposure start from" not in capsys.readouterr().out
+    # deblur without --refine would deblur with a start tens of milliseconds off
+    msg = _run_error(["deblur", photo, "--capture", str(tmp_path / "c.json"), "-o",
+                      str(tmp_path / "plain.png")], capsys)
+    assert "--refine: the exposure start is the photo's EXIF time" in msg
+    assert not (tmp_path / "plain.png").exists()
     # a sharp scene's EXIF time says nothing of the exposure simulate makes
     msg = _run_error(["simulate", photo, "--capture", str(tmp_path / "c.json"), "-o",
                       str(tmp_path / "b.png")], capsys)
     assert msg.endswith("c.json: missing 'exposure_start'")
+
+
+def test_a_phone_photo_taller_than_wide_is_said_to_need_its_rotation(tmp_path, monkeypatch,
+                                                                     capsys):
+    """A phone's sensor is wider than tall, so a photo from a phone app's log that is
+    taller than wide was most likely turned upright by an app or an export: the rows are
+    then not the readout's, and the tool says to give --photo-rotation. Given, or a photo
+    as the sensor stored it: nothing said."""
+    seen = _spy_on_calibrate(monkeypatch, "fix")
+    t = 1733380029.0 + np.arange(0, 3, 0.005)
+    (tmp_path / "Gyroscope.csv").write_text("time,seconds_elapsed,z,y,x\n" + "\n".join(
+        f"{int(round(a * 1e9))},{a - t[0]:.3f},0.3,0.2,0.1" for a in t) + "\n")
+    doc = {"exposure_start": 1733380030.0, "exposure_time": 0.03, "readout_time": 0.02,
+           "camera": {"fx": 60}, "gyro": {"path": "Gyroscope.csv",
+                                          "orientation": "android-back-camera"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    write_photo(tmp_path / "upright.png", np.full((64, 48, 3), 0.5, np.float32))
+    write_photo(tmp_path / "stored.png", np.full((48, 64, 3), 0.5, np.float32))
+    said = "taller than wide, while a phone's sensor is wider than tall"
+    for name, extra, told in (("upright.png", [], True), ("upright.png", ["--photo-rotation",
+                              "90"], False), ("stored.png", [], False)):
+        with pytest.raises(_StopCalibration):
+            main(["calibrate", str(tmp_path / name), "--capture", str(tmp_path / "c.json"),
+                  "-o", str(tmp_path / "o.json"), *extra])
+        assert (said in capsys.readouterr().out) == told, (name, extra)
+    assert len(seen) == 3

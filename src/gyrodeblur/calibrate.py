@@ -165,7 +165,7 @@ from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_N
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .calibration_workers import StepRunner, available_workers
-from .capture import Capture
+from .capture import EXIF_START_TOLERANCE, Capture
 from .errors import InputError
 from .images import check_image
 from .gyrolog import rate_noise
@@ -278,7 +278,7 @@ DEFAULT_OFFSET_RANGE = 0.04
 #: Seconds searched, by default, on each side of an exposure start that is a photo's EXIF
 #: capture time (:attr:`~gyrodeblur.capture.Capture.exposure_start_from_exif`): that
 #: marks the exposure only to tens or hundreds of milliseconds.
-EXIF_START_OFFSET_RANGE = 1.0
+EXIF_START_OFFSET_RANGE = EXIF_START_TOLERANCE
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
 #: per second of log searched on one photo, so 5 s either side is about eight minutes
@@ -320,7 +320,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         side, on 2 cores (a 1024 x 764 photo: 118 s for +-1 s against 18 s for the
         default). Refused with the offset fixed. Where a capture's exposure start is its
         photo's EXIF time (``exposure_start_from_exif``), the default is
-        :data:`EXIF_START_OFFSET_RANGE`, 1 s.
+        :data:`EXIF_START_OFFSET_RANGE`, 1 s; several photos with such starts, whose
+        errors differ, are refused as a session unless the offset is fixed.
     transfer : str or TransferCurve, or a list of them
         Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
         :class:`~gyrodeblur.tonecurve.TransferCurve`, e.g. from
@@ -370,6 +371,14 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if workers is not None and not _is_count(workers):
         raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
     from_exif = [cap.exposure_start_from_exif for cap in captures]
+    if len(captures) > 1 and any(from_exif) and "offset" not in fix:
+        which = ", ".join(str(k + 1) for k, f in enumerate(from_exif) if f)
+        raise InputError("--capture", f"photo{'s' if sum(from_exif) > 1 else ''} {which} of "
+                         f"this session start{'' if sum(from_exif) > 1 else 's'} at the EXIF "
+                         "capture time, which is off by its own amount in each photo, while a "
+                         "session shares one time offset: no offset would fit them all. "
+                         "Calibrate such photos one at a time, or give their exposure starts "
+                         "on the gyro log's clock")
     widened = offset_range is None and "offset" not in fix and any(from_exif)
     if offset_range is None:
         offset_range = EXIF_START_OFFSET_RANGE if widened else DEFAULT_OFFSET_RANGE
@@ -401,13 +410,6 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         notes.append(msg)
         say_(indent + msg)
 
-    if len(captures) > 1 and any(from_exif) and "offset" not in fix:
-        n = sum(from_exif)
-        note(f"{n} of the {len(captures)} photos start{'s' if n == 1 else ''} at "
-             f"{'its EXIF time' if n == 1 else 'their EXIF times'}, and a session shares one "
-             "time offset: where each photo's EXIF time is off by its own amount, no offset "
-             "fits them all; calibrate such photos one at a time, or give their starts on "
-             "the log's clock")
     search = SearchSpace(photos, fix, offset_range)
     c0 = photos[0].cap
 

@@ -157,7 +157,8 @@ def _outputs(given, n_photos: int) -> list[str]:
     given = given if isinstance(given, list) else [given]
     outs = [o for entry in given for o in os.fspath(entry).split(",") if o]
     if len(outs) not in (1, n_photos):
-        raise InputError("-o", f"{len(outs)} outputs for {n_photos} photos: give one (the "
+        raise InputError("-o", f"{len(outs)} outputs for {n_photos} photo"
+                               f"{'' if n_photos == 1 else 's'}: give one (the "
                                "first photo's corrected description), or one per photo "
                                "(comma-separated)")
     for k, out in enumerate(outs):

@@ -40,7 +40,8 @@ from .errors import InputError
 from .gyrolog import RATE_UNITS, TIME_UNITS, GyroLog, check_coverage, check_format, read_gyro_log
 from .orientation import Orientation
 
-__all__ = ["Capture", "check_capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS"]
+__all__ = ["Capture", "check_capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS",
+           "EXIF_START_TOLERANCE"]
 
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
@@ -317,6 +318,10 @@ def _get(d: dict, key: str, source: str, kind=float, required=True):
 
 #: Unix times (s) a log's clock is taken to be Unix time within: 2000 to 2100.
 _UNIX_CLOCK = (946_684_800.0, 4_102_444_800.0)
+#: Seconds a photo's EXIF capture time may be off its exposure start: calibration searches
+#: this far either way (:data:`gyrodeblur.calibrate.EXIF_START_OFFSET_RANGE`), and a time
+#: this close to the log is moved to the log's nearest covered start.
+EXIF_START_TOLERANCE = 1.0
 
 
 def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, src: str,
@@ -337,17 +342,22 @@ def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, 
                               f"Unix time, but the gyro log's clock is not (its times run "
                               f"{lo:.3f} to {hi:.3f} s); give exposure_start on the log's "
                               "clock")
-    if not lo <= unix <= hi - duration:
+    first, last = lo, hi - duration           # the starts whose exposure the log covers
+    start = min(max(unix, first), last)
+    if last < first or abs(start - unix) > EXIF_START_TOLERANCE:
         raise InputError(src, f"missing 'exposure_start', and the gyro log (Unix {lo:.3f} to "
-                              f"{hi:.3f} s, {hi - lo:.1f} s) does not cover the exposure from "
-                              f"the photo's EXIF time ({text}, Unix {unix:.3f} s): is it the "
-                              "log of this photo's session, and the phone's clock and time "
-                              "zone right?")
+                              f"{hi:.3f} s, {hi - lo:.1f} s) does not cover an exposure within "
+                              f"{EXIF_START_TOLERANCE:g} s of the photo's EXIF time ({text}, "
+                              f"Unix {unix:.3f} s): is it the log of this photo's session, "
+                              "and the phone's clock and time zone right?")
     if report:
-        report(f"exposure_start = {unix:.3f} s (Unix time, from the photo's EXIF time {text}): "
-               "that marks the exposure only to tens or hundreds of milliseconds; calibrate "
-               "before deblurring")
-    return unix
+        moved = (f"; {abs(start - unix) * 1e3:.0f} ms {'before' if unix < start else 'after'} "
+                 f"the exposures the log covers, so the search starts from the nearest one"
+                 if start != unix else "")
+        report(f"exposure_start = {start:.3f} s (Unix time, from the photo's EXIF time {text}"
+               f"{moved}): that marks the exposure only to tens or hundreds of milliseconds, "
+               f"and calibration searches {EXIF_START_TOLERANCE:g} s either way")
+    return start
 
 
 def _readout_direction(value, source: str) -> int:

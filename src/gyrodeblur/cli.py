@@ -174,6 +174,11 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
             hints = {k: v for k, v in hints.items() if not k.startswith("capture_time")}
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
                        report=say)
+    if (photo is not None and size[1] > size[0] and not getattr(args, "photo_rotation", 0)
+            and cap.log.meta.get("axes") in ("android device", "phone device")):
+        say(f"note: {photo.path}: taller than wide, while a phone's sensor is wider than tall: "
+            "if an app or an export turned the photo upright, give --photo-rotation (90 on "
+            "most phones), or the rows are not the sensor's readout rows")
     if photo is not None:
         given_cam = cap.camera
         try:
@@ -485,6 +490,12 @@ def cmd_deblur(args, say) -> None:
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf)
+        if cap.exposure_start_from_exif and not args.refine:
+            raise InputError("--refine", "the exposure start is the photo's EXIF time, known "
+                                         "only to tens or hundreds of milliseconds, and the "
+                                         "PSFs need it to well under one: add --refine (it "
+                                         "searches a second either way), calibrate first, or "
+                                         "give exposure_start")
         jpeg_noise()
         if args.refine:
             from .calibrate import calibrate
