@@ -637,7 +637,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                "deg/s if they are degrees)")
     orientation = gyro_d.get("orientation", "XYZ")
     device = log.meta.get("axes")
-    if "orientation" not in gyro_d and device in ("android device", "phone device"):
+    if "orientation" not in gyro_d and log.in_device_axes:
         orientation = "android-back-camera"      # not the camera's axes, as XYZ would say
         what = ("an Android sensor log" if device == "android device" else
                 "a phone app's log (its column names are Sensor Logger's or Core Motion's)")

@@ -174,12 +174,13 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
             hints = {k: v for k, v in hints.items() if not k.startswith("capture_time")}
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
                        report=say)
-    if (photo is not None and size[1] > size[0] and not getattr(args, "photo_rotation", 0)
-            and cap.log.meta.get("axes") in ("android device", "phone device")):
-        say(f"note: {photo.path}: taller than wide, while a phone's sensor is wider than tall: "
-            "if an app or an export turned the photo upright, give --photo-rotation (90 on "
-            "most phones), or the rows are not the sensor's readout rows")
     if photo is not None:
+        if size[1] > size[0] and not getattr(args, "photo_rotation", 0) \
+                and cap.log.in_device_axes:
+            say(f"note: {photo.path}: taller than wide, while a phone's sensor is wider than "
+                "tall: if an app or an export turned the photo upright, give "
+                "--photo-rotation (90 on most phones), or the rows are not the sensor's "
+                "readout rows")
         given_cam = cap.camera
         try:
             cap = cap.scaled_to(size[0], size[1], source=photo.path)

@@ -129,6 +129,13 @@ class GyroLog:
     def __len__(self) -> int:
         return len(self.t)
 
+    @property
+    def in_device_axes(self) -> bool:
+        """Whether the rates are in a phone's device axes (x right, y up, z out of the
+        screen) by the log's own format: an Android sensor dump, or a phone app's CSV
+        (``meta["axes"]``, set by the readers)."""
+        return self.meta.get("axes") in ("android device", "phone device")
+
     def rotated(self, matrix: np.ndarray) -> "GyroLog":
         """The same log expressed in another frame: ``omega_new = matrix @ omega``."""
         m = np.asarray(matrix, dtype=np.float64)
