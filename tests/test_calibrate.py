@@ -26,6 +26,7 @@ from gyrodeblur.capture import Capture, load_capture
 from gyrodeblur.cli import main
 from gyrodeblur.errors import InputError
 from gyrodeblur.gyrolog import GyroLog, write_gcsv
+from gyrodeblur.imageio import read_photo
 from gyrodeblur.simulate import add_noise, quantize_8bit, simulate_blur
 from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
@@ -563,13 +564,42 @@ def test_cli_a_photo_without_texture_is_named_in_the_error(cli_dir, capsys):
 
 
 def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
+    """``deblur --refine`` calibrates, then deblurs; ``--save-capture`` writes the capture
+    it refined, which deblurs the photo again to the same pixels with no calibration."""
     d = cli_dir
     out = d / "out" / "refined.png"
+    saved = d / "out" / "refined.json"
     assert main(["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
-                 "--refine", "--grid", "2x3", "--quiet", "-o", str(out)]) == 0
+                 "--refine", "--grid", "2x3", "--quiet", "-o", str(out),
+                 "--save-capture", str(saved)]) == 0
     text = capsys.readouterr().out
     assert "coarse ranking" in text and "deblurred" in text
-    assert out.exists()
+    assert f"wrote the corrected capture description {saved}" in text
+    given, refined = load_capture(d / "cap.json"), load_capture(saved)
+    assert axes_to_letters(refined.axes) == TRUE_AXES != axes_to_letters(given.axes)
+    again = d / "out" / "again.png"
+    assert main(["deblur", str(d / "blurred.png"), "--capture", str(saved), "--grid", "2x3",
+                 "--quiet", "-o", str(again)]) == 0
+    assert "coarse ranking" not in capsys.readouterr().out
+    assert np.array_equal(read_photo(again).pixels, read_photo(out).pixels)
+
+
+def test_cli_save_capture_needs_refine_and_a_json_file_apart(cli_dir, capsys):
+    """``--save-capture`` is refused before any work: without --refine, not .json, the
+    same file as -o, or the capture description it reads."""
+    d = cli_dir
+    base = ["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
+            "-o", str(d / "out" / "o.png")]
+    for extra, says in ((["--save-capture", str(d / "c.json")], "applies with --refine only"),
+                        (["--refine", "--save-capture", str(d / "c.txt")], "ending in .json"),
+                        (["--refine", "--save-capture", str(d / "out" / "o.png")],
+                         "is also the -o output"),
+                        (["--refine", "--save-capture", str(d / "cap.json"), "--overwrite"],
+                         "cap.json")):
+        assert main(base + extra) == 2
+        err = capsys.readouterr().err
+        assert says in err, err
+    assert not (d / "out" / "o.png").exists() and not (d / "c.json").exists()
 
 
 def test_cli_values_given_on_the_command_line_are_kept(cli_dir, case, capsys):
@@ -1081,3 +1111,4 @@ def test_cli_a_photo_that_needs_turning_is_told_so_whatever_the_others_rotation(
     err = capsys.readouterr().err
     assert rc == 2 and "portrait1.png" in err and "turned by 90 degrees" in err, err
     assert "leave the option out" not in err
+

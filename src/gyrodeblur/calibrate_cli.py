@@ -14,7 +14,7 @@ from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix, repeated_pho
 from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
-__all__ = ["format_estimates", "fixed_parameters", "calibrate_command"]
+__all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -144,7 +144,7 @@ def calibrate_command(args, say, load_capture) -> None:
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
         say(line)
-    _save_all(res.captures[:len(outputs)], outputs)
+    save_captures(res.captures[:len(outputs)], outputs)
     say(f"wrote {', '.join(outputs)}")
     if len(outputs) < len(photos):
         say("(the first photo's description: the others keep their own exposure start, "
@@ -168,7 +168,7 @@ def _outputs(given, n_photos: int) -> list[str]:
     return outs
 
 
-def _save_all(captures, outputs) -> None:
+def save_captures(captures, outputs) -> None:
     """Write each capture to its output: all of them or none. Each is written whole beside
     its output first (the gyro path made relative to that folder), and only once every
     one is written are they moved into place, over files ``--overwrite`` allows (a

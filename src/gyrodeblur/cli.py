@@ -252,6 +252,22 @@ def _check_output(path: str, like, overwrite: bool, image: bool = True, inputs=(
     check_destination(path, like, overwrite, image=image, inputs=inputs, bit_depth=bit_depth)
 
 
+def _check_saved_capture(args) -> None:
+    """``--save-capture``: with ``--refine`` only, a ``.json`` file, neither the photo nor
+    another output (the capture and its log are checked once loaded)."""
+    path = args.save_capture
+    if not args.refine:
+        raise InputError("--save-capture", "applies with --refine only (without it the "
+                                           "capture is used as given)")
+    _check_output(path, None, args.overwrite, image=False, inputs=[args.photo])
+    for other, option in ((args.output, "-o"), (args.save_psf, "--save-psf")):
+        if other and os.path.realpath(path) == os.path.realpath(other):
+            raise InputError(path, f"is also the {option} output; choose another file")
+    if not os.fspath(path).lower().endswith(".json"):
+        raise InputError(path, "the corrected capture description is JSON: give a file "
+                               "ending in .json")
+
+
 def _check_not_over_capture(cap, overwrite: bool, *outputs) -> None:
     """Refuse outputs that are the capture description or its gyro log (known only once
     the capture is loaded), ``--overwrite`` or not."""
@@ -428,6 +444,8 @@ def cmd_deblur(args, say) -> None:
                       inputs=[args.photo])
         if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
             raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
+    if args.save_capture:
+        _check_saved_capture(args)
     _ignored_options(args)
     overlap = DEFAULT_OVERLAP if args.overlap is None else args.overlap
     method = args.method or DEFAULT_METHOD
@@ -490,7 +508,8 @@ def cmd_deblur(args, say) -> None:
             from .calibrate_cli import fixed_parameters
             fix = fixed_parameters(args)
         cap = _load_capture(args, photo, say)
-        _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf)
+        _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf,
+                                args.save_capture)
         if cap.exposure_start_from_exif and not args.refine:
             raise InputError("--refine", "the exposure start is the photo's EXIF time, known "
                                          "only to tens or hundreds of milliseconds, and the "
@@ -522,19 +541,27 @@ def cmd_deblur(args, say) -> None:
     drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
                if args.save_psf else None)
     new_output = not os.path.lexists(args.output)
+    new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
     write_photo(args.output, to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
                 like=given, overwrite=args.overwrite)
-    if args.save_psf:
-        try:
+    try:                             # all outputs or none (a photo it replaced is gone)
+        if args.save_psf:
             _write_picture(args.save_psf, drawing, args.overwrite)
-        except BaseException:        # all outputs or none (a photo it replaced is gone)
-            if new_output:
-                os.remove(args.output)
-            raise
+        if args.save_capture:
+            from .calibrate_cli import save_captures
+            save_captures([cap], [args.save_capture])
+    except BaseException:
+        if new_output:
+            os.remove(args.output)
+        if new_drawing and os.path.lexists(args.save_psf):
+            os.remove(args.save_psf)
+        raise
     e = field.extents
     gh, gw = given.pixels.shape[:2]
     say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
         f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")
+    if args.save_capture:
+        say(f"wrote the corrected capture description {args.save_capture}")
 
 
 def cmd_demo(args, say) -> None:
@@ -672,6 +699,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--offset-range", type=float, default=None, metavar="S",
                    help="with --refine: " + OFFSET_RANGE_HELP)
     s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
+    s.add_argument("--save-capture", metavar="CORRECTED.json",
+                   help="with --refine: also write the corrected capture description, as "
+                        "calibrate -o does, so that deblurring the photo again needs no "
+                        "second calibration")
     _add_rotation_option(s)
     s.add_argument("--overwrite", action="store_true")
     s.add_argument("--quiet", action="store_true", help="no progress bar (none is drawn where stderr is not a terminal)")
