@@ -79,6 +79,12 @@ def test_exif_hints_fill_gaps(capture_files):
                        exif_hints={"exposure_time": 0.02, "fx": 640.0}, report=said.append)
     assert cap.exposure_time == 0.02 and cap.camera.fx == 640 and cap.camera.cx == 399.5
     assert len(said) == 2 and all("EXIF" in s for s in said)
+    # a FocalLength in mm with nothing that gives its pixels' size: said what was found
+    with pytest.raises(InputError, match=r"cap.json: no focal length in pixels: the photo's "
+                                         r"EXIF gives FocalLength 4.25 mm but neither .*"
+                                         r"4.25 mm x the photo's width in pixels"):
+        load_capture(d / "cap.json", image_size=(800, 600),
+                     exif_hints={"exposure_time": 0.02, "focal_length_mm": 4.25})
 
 
 def test_readout_time_from_the_gcsv_header(capture_files):

@@ -575,6 +575,13 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         cam_d["fx"] = hints["fx"] * s
         if report:
             report(f"fx = {cam_d['fx']:.1f} px (from EXIF focal length)")
+    if "fx" not in cam_d and "focal_length_mm" in hints:
+        mm = hints["focal_length_mm"]
+        raise InputError(src, f"no focal length in pixels: the photo's EXIF gives FocalLength "
+                              f"{mm:g} mm but neither FocalLengthIn35mmFilm nor "
+                              f"FocalPlaneXResolution, so the size of its pixels is unknown: "
+                              f"give camera.fx or --fx, in pixels: {mm:g} mm x the photo's "
+                              f"width in pixels / the sensor's width in mm")
     if "fx" not in cam_d:
         raise InputError(src, "no focal length: give camera.fx (pixels), --fx, or a photo "
                               "whose EXIF has FocalLengthIn35mmFilm, or FocalLength with "
