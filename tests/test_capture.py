@@ -544,6 +544,14 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
                         report=said.append)
     assert late.exposure_start == pytest.approx(t[-1] - 0.03) and late.exposure_start_from_exif
     assert any("30 ms after the exposures the log covers" in s for s in said), said
+    # a time to the whole second (no SubSecTimeOriginal) is its middle, and said so
+    said.clear()
+    whole = load_capture(tmp_path / "c.json", report=said.append, exif_hints={
+        "capture_time_unix": 1733380030.5, "capture_time_whole_second": True,
+        "capture_time_text": "2024:12:05 07:27:10 +01:00"})
+    assert whole.exposure_start == 1733380030.5
+    assert any("EXIF time 2024:12:05 07:27:10 +01:00, to the second only (no "
+               "SubSecTimeOriginal): its middle)" in s for s in said), said
     for gyro, h, problem in (
             ("boot.csv", hints, "the gyro log's clock is not (its times run 1029.000"),
             ("unix.csv", dict(hints, capture_time_unix=1733380130.0),

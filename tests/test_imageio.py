@@ -451,8 +451,10 @@ def test_hints_capture_time_in_unix_time_from_its_zone_and_fraction():
     west = hints_for((4, 4), x_9003="2024:12:05 00:57:10", x_9011="-05:30", x_9291="05")
     assert west["capture_time_unix"] == pytest.approx(1733380030.05, abs=1e-6)
     short = hints_for((4, 4), x_9003="2024:12:05 07:27:10", x_9010="+01", x_9291="5\xb2")
-    assert short["capture_time_unix"] == pytest.approx(1733380030.0, abs=1e-6)  # OffsetTime's
-    assert short["capture_time_text"] == "2024:12:05 07:27:10 +01"  # a damaged fraction: none
+    # OffsetTime's zone; a damaged fraction is none: the time is the second's middle
+    assert short["capture_time_unix"] == pytest.approx(1733380030.5, abs=1e-6)
+    assert short["capture_time_text"] == "2024:12:05 07:27:10 +01"
+    assert short["capture_time_whole_second"] and "capture_time_whole_second" not in west
     local = hints_for((4, 4), x_9003="2024:12:05 07:27:10")
     assert "capture_time_unix" not in local
     assert local["capture_time_text"] == "2024:12:05 07:27:10"

@@ -354,8 +354,10 @@ def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, 
         moved = (f"; {abs(start - unix) * 1e3:.0f} ms {'before' if unix < start else 'after'} "
                  f"the exposures the log covers, so the search starts from the nearest one"
                  if start != unix else "")
+        whole = (", to the second only (no SubSecTimeOriginal): its middle"
+                 if hints.get("capture_time_whole_second") else "")
         report(f"exposure_start = {start:.3f} s (Unix time, from the photo's EXIF time {text}"
-               f"{moved}): that marks the exposure only to tens or hundreds of milliseconds, "
+               f"{whole}{moved}): that marks the exposure only to tens or hundreds of milliseconds, "
                f"and calibration searches {EXIF_START_TOLERANCE:g} s either way")
     return start
 

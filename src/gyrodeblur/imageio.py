@@ -754,8 +754,11 @@ def exif_capture_hints(photo: Photo) -> dict:
         ``"capture_time_unix"`` : float
             When the photo was taken, Unix time (s), from DateTimeOriginal,
             OffsetTimeOriginal or else OffsetTime (the time zone: without one there is
-            no Unix time) and SubSecTimeOriginal (fractions of a second). A phone writes it to the
+            no Unix time) and SubSecTimeOriginal (fractions of a second; without it, the
+            middle of the second). A phone writes it to the
             millisecond but it marks the exposure only to tens or hundreds of them.
+        ``"capture_time_whole_second"`` : bool
+            Present (True) where there was no SubSecTimeOriginal.
         ``"capture_time_text"`` : str
             DateTimeOriginal as written, with its zone and fraction where present
             (``"2024:12:05 07:27:10.512 +01:00"``).
@@ -844,8 +847,11 @@ def _capture_time(sub: dict, ifd0: dict) -> dict:
         tz = datetime.datetime.strptime(zone or "", "%z").tzinfo
     except ValueError:
         return out                             # a local time of no known zone
+    # without SubSecTimeOriginal the time is the whole second it fell in: its middle
     out["capture_time_unix"] = (local.replace(tzinfo=tz).timestamp()
-                                + (float("0." + frac) if frac else 0.0))
+                                + (float("0." + frac) if frac else 0.5))
+    if not frac:
+        out["capture_time_whole_second"] = True
     return out
 
 
