@@ -585,21 +585,70 @@ def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
 
 
 def test_cli_save_capture_needs_refine_and_a_json_file_apart(cli_dir, capsys):
-    """``--save-capture`` is refused before any work: without --refine, not .json, the
-    same file as -o, or the capture description it reads."""
+    """``--save-capture`` is refused before any work: without --refine, with --blind, not
+    .json, the -o file (also through a link), an input, or a file that exists."""
     d = cli_dir
-    base = ["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"),
-            "-o", str(d / "out" / "o.png")]
-    for extra, says in ((["--save-capture", str(d / "c.json")], "applies with --refine only"),
-                        (["--refine", "--save-capture", str(d / "c.txt")], "ending in .json"),
-                        (["--refine", "--save-capture", str(d / "out" / "o.png")],
-                         "is also the -o output"),
-                        (["--refine", "--save-capture", str(d / "cap.json"), "--overwrite"],
-                         "cap.json")):
+    out = d / "out" / "o.png"
+    link = d / "out" / "link.json"
+    link.symlink_to(out)
+    (d / "old.json").write_text("{}")
+    base = ["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "-o", str(out)]
+    for extra, says in (
+            (["--save-capture", str(d / "c.json")], "--save-capture: applies with --refine only"),
+            (["--blind", "--save-capture", str(d / "c.json")],
+             "--save-capture: does not apply with --blind"),
+            (["--refine", "--save-capture", str(d / "c.txt")], "c.txt: the corrected capture "
+                                                               "description is JSON"),
+            (["--refine", "--save-capture", str(link)], "link.json: is also the -o output"),
+            (["--refine", "--save-capture", str(d / "cap.json"), "--overwrite"],
+             "cap.json: is one of the command's inputs"),
+            (["--refine", "--save-capture", str(d / "cap.json")],
+             "cap.json: is one of the command's inputs"),
+            (["--refine", "--save-capture", str(d / "old.json")],
+             "old.json: exists; pass --overwrite")):
         assert main(base + extra) == 2
         err = capsys.readouterr().err
         assert says in err, err
-    assert not (d / "out" / "o.png").exists() and not (d / "c.json").exists()
+    assert not out.exists() and not (d / "c.json").exists()
+    assert (d / "old.json").read_text() == "{}"
+    link.unlink()
+
+
+def test_cli_save_capture_failing_leaves_the_other_outputs_as_they_were(cli_dir, capsys,
+                                                                       monkeypatch):
+    """The corrected capture is written before the photo and moved into place last: where
+    it cannot be written, no output is left, and files --overwrite allowed stay as they
+    were."""
+    import types
+
+    import gyrodeblur.calibrate
+    import gyrodeblur.calibrate_cli
+
+    d = cli_dir
+    given = load_capture(d / "cap.json")
+    fake = types.SimpleNamespace(capture=given, estimates=None)
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", lambda *a, **k: fake)
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est: [])
+
+    def refused(self, path, gyro_path=None):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Capture, "save", refused)
+    out, psf, saved = d / "out" / "kept.png", d / "out" / "kept_psf.png", d / "out" / "c.json"
+    argv = ["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--refine",
+            "--grid", "2x3", "--quiet", "-o", str(out), "--save-psf", str(psf),
+            "--save-capture", str(saved)]
+    assert main(argv) == 2
+    assert "c.json: cannot write the file: Permission denied" in capsys.readouterr().err
+    assert not out.exists() and not psf.exists() and not saved.exists()
+    out.write_bytes(b"old photo")
+    psf.write_bytes(b"old drawing")
+    assert main(argv + ["--overwrite"]) == 2
+    assert out.read_bytes() == b"old photo" and psf.read_bytes() == b"old drawing"
+    assert sorted(p.name for p in (d / "out").iterdir() if "kept" in p.name or
+                  p.name.startswith(".")) == ["kept.png", "kept_psf.png"]
+    out.unlink()
+    psf.unlink()
 
 
 def test_cli_values_given_on_the_command_line_are_kept(cli_dir, case, capsys):

@@ -81,10 +81,13 @@ def test_exif_hints_fill_gaps(capture_files):
     assert len(said) == 2 and all("EXIF" in s for s in said)
     # a FocalLength in mm with nothing that gives its pixels' size: said what was found
     with pytest.raises(InputError, match=r"cap.json: no focal length in pixels: the photo's "
-                                         r"EXIF gives FocalLength 4.25 mm but neither .*"
-                                         r"4.25 mm x the photo's width in pixels"):
+                                         r"EXIF gives FocalLength 4.25 mm but no .*"
+                                         r"4.25 mm x its longer side in pixels"):
         load_capture(d / "cap.json", image_size=(800, 600),
                      exif_hints={"exposure_time": 0.02, "focal_length_mm": 4.25})
+    with pytest.raises(InputError, match=r"cap.json: no focal length: give camera.fx"):
+        load_capture(d / "cap.json",        # the hint in pixels, but no photo size to fit it
+                     exif_hints={"exposure_time": 0.02, "focal_length_mm": 4.25, "fx": 9.0})
 
 
 def test_readout_time_from_the_gcsv_header(capture_files):
@@ -550,8 +553,9 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
         "capture_time_unix": 1733380030.5, "capture_time_whole_second": True,
         "capture_time_text": "2024:12:05 07:27:10 +01:00"})
     assert whole.exposure_start == 1733380030.5
-    assert any("EXIF time 2024:12:05 07:27:10 +01:00, to the second only (no "
-               "SubSecTimeOriginal): its middle)" in s for s in said), said
+    assert any("EXIF time 2024:12:05 07:27:10 +01:00, the middle of its second): that "
+               "marks the exposure only to half a second either way (no SubSecTimeOriginal)"
+               in s for s in said), said
     for gyro, h, problem in (
             ("boot.csv", hints, "the gyro log's clock is not (its times run 1029.000"),
             ("unix.csv", dict(hints, capture_time_unix=1733380130.0),

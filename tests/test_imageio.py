@@ -455,6 +455,9 @@ def test_hints_capture_time_in_unix_time_from_its_zone_and_fraction():
     assert short["capture_time_unix"] == pytest.approx(1733380030.5, abs=1e-6)
     assert short["capture_time_text"] == "2024:12:05 07:27:10 +01"
     assert short["capture_time_whole_second"] and "capture_time_whole_second" not in west
+    whole = hints_for((4, 4), x_9003="2024:12:05 07:27:10", x_9011="+01:00")  # no SubSec
+    assert whole["capture_time_unix"] == pytest.approx(1733380030.5, abs=1e-6)
+    assert whole["capture_time_whole_second"]
     local = hints_for((4, 4), x_9003="2024:12:05 07:27:10")
     assert "capture_time_unix" not in local
     assert local["capture_time_text"] == "2024:12:05 07:27:10"

@@ -168,12 +168,13 @@ def _outputs(given, n_photos: int) -> list[str]:
     return outs
 
 
-def save_captures(captures, outputs) -> None:
+def save_captures(captures, outputs, before_moving=None) -> None:
     """Write each capture to its output: all of them or none. Each is written whole beside
-    its output first (the gyro path made relative to that folder), and only once every
-    one is written are they moved into place, over files ``--overwrite`` allows (a
-    failure or Ctrl-C between two of these renames, microseconds apart, would leave the
-    first moved)."""
+    its output first (the gyro path made relative to that folder), then
+    ``before_moving()`` is called (the command's other outputs), and only once all that
+    is done are they moved into place, over files ``--overwrite`` allows (a failure or
+    Ctrl-C between two of these renames, microseconds apart, would leave the first
+    moved)."""
     import secrets
 
     parts = []
@@ -182,7 +183,12 @@ def save_captures(captures, outputs) -> None:
             folder, name = os.path.split(os.path.abspath(out))
             part = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.part")
             parts.append(part)
-            cap.save(part)
+            try:
+                cap.save(part)
+            except OSError as exc:
+                raise InputError(out, f"cannot write the file: {exc.strerror}") from None
+        if before_moving is not None:
+            before_moving()
         for part, out in zip(parts, outputs):
             try:
                 if os.path.exists(out):      # a file written over keeps its permission bits

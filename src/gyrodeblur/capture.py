@@ -354,11 +354,14 @@ def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, 
         moved = (f"; {abs(start - unix) * 1e3:.0f} ms {'before' if unix < start else 'after'} "
                  f"the exposures the log covers, so the search starts from the nearest one"
                  if start != unix else "")
-        whole = (", to the second only (no SubSecTimeOriginal): its middle"
-                 if hints.get("capture_time_whole_second") else "")
+        if hints.get("capture_time_whole_second"):
+            which, how_well = (", the middle of its second",
+                               "half a second either way (no SubSecTimeOriginal)")
+        else:
+            which, how_well = "", "tens or hundreds of milliseconds"
         report(f"exposure_start = {start:.3f} s (Unix time, from the photo's EXIF time {text}"
-               f"{whole}{moved}): that marks the exposure only to tens or hundreds of milliseconds, "
-               f"and calibration searches {EXIF_START_TOLERANCE:g} s either way")
+               f"{which}{moved}): that marks the exposure only to {how_well}, and "
+               f"calibration searches {EXIF_START_TOLERANCE:g} s either way")
     return start
 
 
@@ -577,13 +580,14 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         cam_d["fx"] = hints["fx"] * s
         if report:
             report(f"fx = {cam_d['fx']:.1f} px (from EXIF focal length)")
-    if "fx" not in cam_d and "focal_length_mm" in hints:
+    if "fx" not in cam_d and "fx" not in hints and "focal_length_mm" in hints:
         mm = hints["focal_length_mm"]
         raise InputError(src, f"no focal length in pixels: the photo's EXIF gives FocalLength "
-                              f"{mm:g} mm but neither FocalLengthIn35mmFilm nor "
-                              f"FocalPlaneXResolution, so the size of its pixels is unknown: "
-                              f"give camera.fx or --fx, in pixels: {mm:g} mm x the photo's "
-                              f"width in pixels / the sensor's width in mm")
+                              f"{mm:g} mm but no FocalLengthIn35mmFilm, nor a "
+                              f"FocalPlaneXResolution in a known unit, so the size of its "
+                              f"pixels is unknown: give camera.fx or --fx, in pixels: for an "
+                              f"uncropped photo {mm:g} mm x its longer side in pixels / the "
+                              f"sensor's longer side in mm")
     if "fx" not in cam_d:
         raise InputError(src, "no focal length: give camera.fx (pixels), --fx, or a photo "
                               "whose EXIF has FocalLengthIn35mmFilm, or FocalLength with "

@@ -113,7 +113,7 @@ def _ignored_options(args) -> None:
         return v is not None and v is not False and not (isinstance(v, str) and v == "")
 
     if args.blind:
-        for name in ("refine", "fix") + _CAPTURE_OPTIONS:
+        for name in ("refine", "fix", "save_capture") + _CAPTURE_OPTIONS:
             if given(name):
                 raise InputError("--" + name.replace("_", "-"),
                                  "does not apply with --blind, which uses no gyro log")
@@ -253,16 +253,18 @@ def _check_output(path: str, like, overwrite: bool, image: bool = True, inputs=(
 
 
 def _check_saved_capture(args) -> None:
-    """``--save-capture``: with ``--refine`` only, a ``.json`` file, neither the photo nor
-    another output (the capture and its log are checked once loaded)."""
+    """``--save-capture``: with ``--refine`` only, a ``.json`` file, neither another
+    output nor an input named on the command line (the log a capture description names
+    is checked once it is loaded)."""
     path = args.save_capture
     if not args.refine:
         raise InputError("--save-capture", "applies with --refine only (without it the "
                                            "capture is used as given)")
-    _check_output(path, None, args.overwrite, image=False, inputs=[args.photo])
     for other, option in ((args.output, "-o"), (args.save_psf, "--save-psf")):
         if other and os.path.realpath(path) == os.path.realpath(other):
             raise InputError(path, f"is also the {option} output; choose another file")
+    inputs = [p for p in (args.photo, args.capture, args.gyro) if p]
+    _check_output(path, None, args.overwrite, image=False, inputs=inputs)
     if not os.fspath(path).lower().endswith(".json"):
         raise InputError(path, "the corrected capture description is JSON: give a file "
                                "ending in .json")
@@ -444,9 +446,9 @@ def cmd_deblur(args, say) -> None:
                       inputs=[args.photo])
         if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
             raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
+    _ignored_options(args)
     if args.save_capture:
         _check_saved_capture(args)
-    _ignored_options(args)
     overlap = DEFAULT_OVERLAP if args.overlap is None else args.overlap
     method = args.method or DEFAULT_METHOD
     options = {}
@@ -512,7 +514,7 @@ def cmd_deblur(args, say) -> None:
                                 args.save_capture)
         if cap.exposure_start_from_exif and not args.refine:
             raise InputError("--refine", "the exposure start is the photo's EXIF time, known "
-                                         "only to tens or hundreds of milliseconds, and the "
+                                         "only to tens of milliseconds or worse, and the "
                                          "PSFs need it to well under one: add --refine (it "
                                          "searches a second either way), calibrate first, or "
                                          "give exposure_start")
@@ -541,21 +543,31 @@ def cmd_deblur(args, say) -> None:
     drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
                if args.save_psf else None)
     new_output = not os.path.lexists(args.output)
-    new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
-    write_photo(args.output, to_photo_layout(join_alpha(restored, alpha), args.photo_rotation),
-                like=given, overwrite=args.overwrite)
-    try:                             # all outputs or none (a photo it replaced is gone)
+
+    def write_pictures() -> None:    # all outputs or none (a photo it replaced is gone)
+        write_photo(args.output, to_photo_layout(join_alpha(restored, alpha),
+                                                 args.photo_rotation),
+                    like=given, overwrite=args.overwrite)
         if args.save_psf:
-            _write_picture(args.save_psf, drawing, args.overwrite)
-        if args.save_capture:
-            from .calibrate_cli import save_captures
-            save_captures([cap], [args.save_capture])
-    except BaseException:
-        if new_output:
-            os.remove(args.output)
-        if new_drawing and os.path.lexists(args.save_psf):
-            os.remove(args.save_psf)
-        raise
+            try:
+                _write_picture(args.save_psf, drawing, args.overwrite)
+            except BaseException:
+                if new_output:
+                    os.remove(args.output)
+                raise
+
+    if args.save_capture:            # its file written first, moved into place last
+        from .calibrate_cli import save_captures
+        new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
+        try:
+            save_captures([cap], [args.save_capture], before_moving=write_pictures)
+        except BaseException:
+            for path, new in ((args.output, new_output), (args.save_psf, new_drawing)):
+                if new and os.path.lexists(path):
+                    os.remove(path)
+            raise
+    else:
+        write_pictures()
     e = field.extents
     gh, gw = given.pixels.shape[:2]
     say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
