@@ -42,6 +42,7 @@ Usage::
     python benchmarks/calibration.py --sessions      # each photo's windows as one session
     python benchmarks/calibration.py --burst         # each case and the next frame of a burst
     python benchmarks/calibration.py --attribute     # + where the PSNR gap comes from
+    python benchmarks/calibration.py --readout-unknown   # descriptions without a readout
 
 With ``--sessions`` the windows of each source photo are one session's photos: one set of
 errors is injected into all their captures (a session's seeds differ from the single-photo
@@ -114,6 +115,7 @@ def corrupt(capture, errors: dict):
     """``capture`` with the ``errors`` of :func:`draw_errors` injected."""
     return capture.replace(time_offset=capture.time_offset + errors["offset_ms"] * 1e-3,
                            readout_time=capture.readout_time * errors["readout_factor"],
+                           readout_time_unknown=bool(errors.get("readout_unknown", False)),
                            camera=capture.camera.with_focal_scale(errors["focal_factor"]),
                            bias=capture.bias + np.asarray(errors["bias"]),
                            axes=parse_axes(errors["axes"]))
@@ -126,14 +128,15 @@ def inject(capture, rng: np.random.Generator):
 
 
 def run_case(case, rng, *, say, method=None, n_patches=None, no_errors=False,
-             attribute=False, offset_range=None) -> dict:
+             attribute=False, offset_range=None, readout_unknown=False) -> dict:
     """Calibrate one case's photo alone, from its capture with errors injected."""
     return run_session([case], rng, say=say, method=method, n_patches=n_patches,
-                       no_errors=no_errors, attribute=attribute, offset_range=offset_range)[0]
+                       no_errors=no_errors, attribute=attribute, offset_range=offset_range,
+                       readout_unknown=readout_unknown)[0]
 
 
 def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False,
-                attribute=False, offset_range=None) -> list[dict]:
+                attribute=False, offset_range=None, readout_unknown=False) -> list[dict]:
     """Calibrate the photos of one session together: every case's capture gets the same
     injected errors (one gyro, one camera; none with ``no_errors``), and ``calibrate`` sees
     all the photos at once. One row per photo (``seconds`` is the whole session's
@@ -141,8 +144,13 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
 
     ``offset_range`` (s): clocks known only roughly. The injected time offset is the
     usual draw scaled from +-30 ms to +-``offset_range`` (the other errors as usual, so
-    the runs pair), and ``calibrate`` searches +-(``offset_range`` + 10 ms)."""
+    the runs pair), and ``calibrate`` searches +-(``offset_range`` + 10 ms).
+
+    ``readout_unknown``: the descriptions give no readout time (a phone user's), so the
+    captures have 0 marked unknown (the other errors as usual)."""
     errors = draw_errors(cases[0].capture, rng, none=no_errors)
+    if readout_unknown:
+        errors.update(readout_factor=0.0, readout_unknown=True)
     search = None                        # calibrate's default range
     if offset_range is not None:
         errors["offset_ms"] *= offset_range / MAX_INJECTED_OFFSET
@@ -554,6 +562,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                     help="clocks known only roughly: inject time offsets of up to +-S s (the "
                          "usual +-30 ms draws scaled) and search +-(S + 0.01) s, each capture "
                          "given 2 S + 0.35 s of the source trace on each side (at least)")
+    ap.add_argument("--readout-unknown", action="store_true",
+                    help="the corrupted descriptions give no readout time (0, marked unknown, "
+                         "as a phone user's without one): calibrate searches 0-50 ms")
     ap.add_argument("--no-errors", action="store_true",
                     help="inject nothing: calibrate the true captures (how far calibration "
                          "moves a right capture; the PSNR gap is what that costs)")
@@ -576,12 +587,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
             stem += f"_offsets{args.offset_range:g}s"
         if args.no_errors:
             stem += "_no_errors"
+        if args.readout_unknown:
+            stem += "_readout_unknown"
         args.out = _common.RESULTS / (stem + ".json")
     if args.log_seconds is not None and args.log_seconds < 0:
         ap.error(f"--log-seconds: must be >= 0, got {args.log_seconds:g}")
     if args.offset_range is not None and not 0 < args.offset_range <= MAX_BENCH_RANGE:
         ap.error(f"--offset-range: must be in (0, {MAX_BENCH_RANGE:g}] s (beyond, the logs "
                  f"reach the 8 s of the bias prior), got {args.offset_range:g}")
+    if args.readout_unknown and args.no_errors:
+        ap.error("--readout-unknown leaves out the readout; --no-errors injects nothing: "
+                 "give one")
     if args.offset_range is not None and args.no_errors:
         ap.error("--offset-range injects offsets; --no-errors injects nothing: give one")
     if args.offset_range is not None and args.attribute:
@@ -617,7 +633,8 @@ def main(argv: list[str] | None = None) -> int:
         cases = with_long_logs(cases, log_seconds, args.gyro or dataset_gyro(args.dataset))
     rows, session_secs = [], []
     injected = ("nothing injected" if args.no_errors
-                else f"errors injected with seed {args.seed}")
+                else f"errors injected with seed {args.seed}"
+                + (", no readout given" if args.readout_unknown else ""))
     if args.sessions or args.burst:
         if args.burst:
             sessions = [[case, burst_partner(case)] for case in cases]
@@ -631,7 +648,8 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng([args.seed, 6 if args.burst else 7, k])
             got = run_session(group, rng, say=say, method=args.method,
                               n_patches=args.patches, no_errors=args.no_errors,
-                              attribute=args.attribute, offset_range=args.offset_range)
+                              attribute=args.attribute, offset_range=args.offset_range,
+                              readout_unknown=args.readout_unknown)
             rows += got
             session_secs.append(got[0]["seconds"])
     else:
@@ -640,7 +658,8 @@ def main(argv: list[str] | None = None) -> int:
             rng = np.random.default_rng([args.seed, 6, k])
             rows.append(run_case(case, rng, say=say, method=args.method,
                                  n_patches=args.patches, no_errors=args.no_errors,
-                                 attribute=args.attribute, offset_range=args.offset_range))
+                                 attribute=args.attribute, offset_range=args.offset_range,
+                                 readout_unknown=args.readout_unknown))
     summary = summarise(rows)
     if args.sessions or args.burst:
         summary["sessions"] = len(sessions)
@@ -658,7 +677,7 @@ def main(argv: list[str] | None = None) -> int:
               "mode": ("sessions" if args.sessions else "bursts" if args.burst
                        else "single photos"),
               "log_seconds": log_seconds, "offset_range": args.offset_range,
-              "no_errors": args.no_errors,
+              "no_errors": args.no_errors, "readout_unknown": args.readout_unknown,
               "targets": TARGETS, "summary": summary, "cases": rows,
               "total_seconds": time.perf_counter() - t_start, "machine": _common.machine_info()}
     _common.write_json(args.out, result)

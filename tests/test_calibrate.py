@@ -1161,3 +1161,27 @@ def test_cli_a_photo_that_needs_turning_is_told_so_whatever_the_others_rotation(
     assert rc == 2 and "portrait1.png" in err and "turned by 90 degrees" in err, err
     assert "leave the option out" not in err
 
+
+def test_a_readout_not_given_is_searched_not_held_at_a_global_shutter(case):
+    """A description without ``readout_time`` (a phone user's) loads as 0 marked unknown;
+    calibrate then searches readouts of 0-50 ms under a weak prior and finds the true 30 ms,
+    with the offset and mapping. The same 0 given as a global shutter is held near 0 by
+    its prior, which is what the mark changes."""
+    _, true, blurred = case
+    bad = _corrupt(true, readout=0.0)
+    lines = []
+    res = calibrate([blurred], bad.replace(readout_time_unknown=True), say=lines.append)
+    got = res.capture
+    assert any("readout time not given: searching 0-50 ms" in line for line in lines)
+    assert axes_to_letters(got.axes) == TRUE_AXES
+    assert abs(got.time_offset - true.time_offset) < 0.003
+    assert abs(got.readout_time - true.readout_time) < 0.008
+    assert not got.readout_time_unknown
+    assert res.estimates["readout"][2] is not None
+    held = calibrate([blurred], bad, fix={"axes", "offset"}).capture
+    assert held.readout_time < 0.01, held.readout_time
+    # a session shares one readout correction: one photo's readout given, another's not
+    later = _true_capture(0.8)
+    with pytest.raises(InputError, match="photo 2 of this session has no readout_time while the others have one"):
+        calibrate([blurred, _blur(_sharp(), later)],
+                  [bad, later.replace(readout_time=0.0, readout_time_unknown=True)])

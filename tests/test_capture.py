@@ -101,7 +101,7 @@ def test_readout_time_from_the_gcsv_header(capture_files):
     del doc["readout_time"]
     (d / "cap.json").write_text(json.dumps(doc))
     cap = load_capture(d / "cap.json", report=said.append)
-    assert cap.readout_time == pytest.approx(0.0152)
+    assert cap.readout_time == pytest.approx(0.0152) and not cap.readout_time_unknown
     assert any("frame_readout_time" in s for s in said)
     assert load_capture(d / "cap.json", overrides={"readout_time": 0.0}).readout_time == 0
     # read bottom to top (or along the rows): not this model's rows; said, not used
@@ -366,15 +366,21 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     said.clear()
     load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"}, report=said.append)
     assert said == []
-    # a readout time left out is a global shutter, and said (a phone's is 10-30 ms)
+    assert not load_capture(tmp_path / "c.json").readout_time_unknown
+    # a readout time left out is 0 marked unknown (calibrate searches it), and said
     del doc["readout_time"]
     (tmp_path / "c.json").write_text(json.dumps(doc))
     cap = load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"},
                        report=said.append)
-    assert cap.readout_time == 0.0
-    assert said == ["readout_time = 0: not given, a global shutter (a phone's rolling "
-                    "shutter reads out in about 10-30 ms: give a guess, which calibrate "
-                    "refines)"]
+    assert cap.readout_time == 0.0 and cap.readout_time_unknown
+    assert said == ["readout_time not given: 0 (a global shutter) unless calibrated; "
+                    "calibrate and deblur --refine search 0-50 ms for it (a phone's "
+                    "rolling shutter reads out in about 10-30 ms; a guess given is refined "
+                    "within +-30 %)"]
+    # the option gives it
+    cap = load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s",
+                                                       "readout_time": 0.02})
+    assert cap.readout_time == 0.02 and not cap.readout_time_unknown
 
 
 def test_a_capture_saved_anywhere_loads_again(capture_files, tmp_path_factory):

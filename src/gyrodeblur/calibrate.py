@@ -165,7 +165,7 @@ from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_N
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .calibration_workers import StepRunner, available_workers
-from .capture import EXIF_START_TOLERANCE, Capture
+from .capture import EXIF_START_TOLERANCE, UNKNOWN_READOUT_MAX, UNKNOWN_READOUT_PRIOR, Capture
 from .errors import InputError
 from .images import check_image
 from .gyrolog import rate_noise
@@ -379,6 +379,14 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                          "session shares one time offset: no offset would fit them all. "
                          "Calibrate such photos one at a time, or give their exposure starts "
                          "on the gyro log's clock")
+    unknown = [cap.readout_time_unknown for cap in captures]
+    if any(unknown) and not all(unknown) and "readout" not in fix:
+        which = ", ".join(str(k + 1) for k, u in enumerate(unknown) if u)
+        many = sum(unknown) > 1
+        raise InputError("--capture", f"{'photos' if many else 'photo'} {which} of this "
+                         f"session {'have' if many else 'has'} no readout_time while the "
+                         "others have one, and a session shares one readout correction: give "
+                         "the same readout_time in every description (or none in any)")
     widened = offset_range is None and "offset" not in fix and any(from_exif)
     if offset_range is None:
         offset_range = EXIF_START_OFFSET_RANGE if widened else DEFAULT_OFFSET_RANGE
@@ -412,6 +420,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
 
     search = SearchSpace(photos, fix, offset_range)
     c0 = photos[0].cap
+    if search.readout_unknown:
+        say_(f"readout time not given: searching 0-{UNKNOWN_READOUT_MAX * 1e3:.0f} ms, "
+             f"under a weak prior of {UNKNOWN_READOUT_PRIOR[0] * 1e3:.0f} +- "
+             f"{UNKNOWN_READOUT_PRIOR[1] * 1e3:.0f} ms (--readout-time fixes it)")
 
     asked = (f"+-{offset_range * 1e3:.0f} ms around an exposure start from EXIF; "
              f"--offset-range sets another range" if widened

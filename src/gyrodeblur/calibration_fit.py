@@ -17,6 +17,7 @@ from .bias_prior import PRIOR_BIAS, BiasPrior
 from .calibration_patches import patch_centres
 from .calibration_search import (X_NAMES, SearchSpace, line_fit, line_fit_minima, lm_refine,
                                  objective, psf_extent_and_path)
+from .capture import UNKNOWN_READOUT_MAX, UNKNOWN_READOUT_PRIOR
 from .errors import InputError
 from .frame_registration import FrameRegistration
 from .spectral_criterion import Corrections, PatchSpectra
@@ -53,6 +54,9 @@ _SCAN_REFINED = 2
 #: Readout corrections (fractions of the given readout time) scanned at the winner's
 #: mid-row time.
 _READOUT_SCAN = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
+#: Readout times (s) scanned there where none was given (see
+#: :data:`~gyrodeblur.capture.UNKNOWN_READOUT_MAX`).
+_UNKNOWN_READOUT_SCAN = (0.0, 0.006, 0.012, 0.018, 0.024, 0.03, 0.036, 0.045)
 #: Another basin of the chosen mapping whose time offset lies more than ``OFFSET_APART``
 #: (s) from the estimate and whose objective is within ``OFFSET_RIVAL_NATS`` of it is
 #: reported: the photo cannot tell the two offsets apart.
@@ -183,7 +187,9 @@ class CalibrationFit:
             self.taus = np.arange(search.tau_lo, search.tau_hi + 1e-9, _COARSE_STEP)
         else:
             self.taus = np.array([search.tau_lo])
-        if "readout" in fix or search.r0 == 0:
+        if search.readout_unknown:          # readouts of 0-40 ms, as corrections
+            self.kappas = np.linspace(0.0, 0.8 * UNKNOWN_READOUT_MAX, 8) - search.r0
+        elif "readout" in fix or search.r0 == 0:
             self.kappas = np.array([0.0])
         else:
             self.kappas = search.r0 * np.linspace(-0.35, 0.35, 8)
@@ -194,6 +200,11 @@ class CalibrationFit:
         self.caps = np.array([0.004, max(0.15 * search.r0, 0.004), 0.08, 0.03, 0.03, 0.03])
         self.prior_sig = np.array([np.inf, max(_PRIOR_READOUT * search.r0, 0.002), _PRIOR_FOCAL,
                                    PRIOR_BIAS, PRIOR_BIAS, PRIOR_BIAS])
+        self.prior_mu = np.zeros(6)
+        if search.readout_unknown:          # no given value: a weak prior over likely ones
+            self.caps[1] = 0.006
+            self.prior_mu[1] = UNKNOWN_READOUT_PRIOR[0] - search.r0
+            self.prior_sig[1] = UNKNOWN_READOUT_PRIOR[1]
 
     # -- pieces -------------------------------------------------------------------------
     def theta_of(self, M):
@@ -202,7 +213,7 @@ class CalibrationFit:
     def prior_for(self, M):
         """(mean, sd, temperature) of the priors for mapping ``M``: the bias's combines
         the given bias with the log's typical rate, when the log is long enough."""
-        mu, sig = np.zeros(6), self.prior_sig.copy()
+        mu, sig = self.prior_mu.copy(), self.prior_sig.copy()
         mu[3:6], sig[3:6] = self.bias_prior.for_mapping(M)
         return mu, sig, _TEMPERATURE
 
@@ -391,8 +402,9 @@ class CalibrationFit:
         if "offset" not in self.fix:
             x = best[0]
             starts, tried = [], {round(float(x[0]), 6)}
+            r_start = x[1] if self.search.readout_unknown else 0.0   # no given value to try
             for dt in np.arange(-_SCAN_REACH, _SCAN_REACH + 1e-9, _SCAN_STEP):
-                xs0 = np.clip(np.r_[x[0] + dt, 0.0, 0.0, b_prior], lo, hi)
+                xs0 = np.clip(np.r_[x[0] + dt, r_start, 0.0, b_prior], lo, hi)
                 if round(float(xs0[0]), 6) in tried:   # the winner's own, or clipped to a bound
                     continue
                 tried.add(round(float(xs0[0]), 6))
@@ -401,13 +413,18 @@ class CalibrationFit:
         # And readout times across the prior's range at the winner's mid-row time: with the
         # rows between well timed, a readout 30-40 % off can sit in a basin of its own
         # (the top and bottom patches then fit other parts of the trace).
-        if "readout" not in self.fix and self.search.r0 > 0:
+        if "readout" not in self.fix and (self.search.r0 > 0 or self.search.readout_unknown):
             x, r0, starts = best[0], self.search.r0, []
-            for fr in _READOUT_SCAN:
-                if abs(fr * r0 - x[1]) < 0.05 * r0:
+            if self.search.readout_unknown:    # readouts across the searched range
+                scan = np.array(_UNKNOWN_READOUT_SCAN) - r0
+                near = 0.4 * (_UNKNOWN_READOUT_SCAN[1] - _UNKNOWN_READOUT_SCAN[0])
+            else:
+                scan, near = np.array(_READOUT_SCAN) * r0, 0.05 * r0
+            for dr in scan:
+                if abs(dr - x[1]) < near:
                     continue
                 xs0 = x.copy()
-                xs0[1] = fr * r0
+                xs0[1] = dr
                 starts.append(np.clip(xs0, lo, hi))
             best = self._scan(M, starts, best, steps)
         return best

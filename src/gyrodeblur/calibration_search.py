@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .calibration_patches import CalibrationPhoto
+from .capture import UNKNOWN_READOUT_MAX
 from .errors import InputError
 from .spectral_criterion import Corrections, PatchSpectra
 
@@ -41,6 +42,8 @@ class SearchSpace:
         self.offset_range = float(offset_range)
         c0 = photos[0].cap
         self.r0 = c0.readout_time
+        #: the given readout is a stand-in (0): searched over 0-UNKNOWN_READOUT_MAX
+        self.readout_unknown = bool(c0.readout_time_unknown) and "readout" not in fix
         self.tau_lo, self.tau_hi = self._coverage()
 
     # -- admissible time shifts -------------------------------------------------------
@@ -50,7 +53,8 @@ class SearchSpace:
         lo, hi = -np.inf, np.inf
         for ph in self.photos:
             c = ph.cap
-            span = c.readout_time * 1.6 + 0.005 + c.exposure_time
+            longest = UNKNOWN_READOUT_MAX if self.readout_unknown else c.readout_time * 1.6
+            span = longest + 0.005 + c.exposure_time
             t0 = c.log.t[0] + c.time_offset
             t1 = c.log.t[-1] + c.time_offset
             hi = min(hi, c.exposure_start - t0)               # window start after log start
@@ -84,7 +88,8 @@ class SearchSpace:
 
     def bounds(self, ubar: float):
         r0 = self.r0
-        rlo, rhi = (-r0, 0.6 * r0 + 0.003) if r0 > 0 else (0.0, 0.05)
+        rlo, rhi = ((-r0, 0.6 * r0 + 0.003) if r0 > 0 and not self.readout_unknown
+                    else (-r0, UNKNOWN_READOUT_MAX - r0))
         lo = np.array([self.tau_lo - 0.01, max(rlo, -0.6 * r0), np.log(0.7), -0.2, -0.2, -0.2])
         hi = np.array([self.tau_hi + 0.01, rhi, np.log(1.4), 0.2, 0.2, 0.2])
         return lo, hi

@@ -41,7 +41,7 @@ from .gyrolog import RATE_UNITS, TIME_UNITS, GyroLog, check_coverage, check_form
 from .orientation import Orientation
 
 __all__ = ["Capture", "check_capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS",
-           "EXIF_START_TOLERANCE"]
+           "EXIF_START_TOLERANCE", "UNKNOWN_READOUT_MAX", "UNKNOWN_READOUT_PRIOR"]
 
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
@@ -49,6 +49,17 @@ BIAS_GUARD = 0.05
 #: Longest rolling-shutter readout accepted (s): sensors read a frame out in 5-100 ms, the
 #: slowest electronic shutters in about 0.3 s; a larger value is milliseconds given as seconds.
 MAX_READOUT_TIME = 1.0
+#: Longest readout time (s) that calibration searches where none was given
+#: (:attr:`Capture.readout_time_unknown`): phones' and most cameras' electronic shutters
+#: read a frame out in 5-40 ms.
+UNKNOWN_READOUT_MAX = 0.05
+#: Mean and standard deviation (s) of the weak Gaussian prior that calibration puts on a
+#: readout time not given: those of readouts spread evenly over 0-40 ms. Where the photo
+#: cannot tell (a blur of a few pixels), it keeps the estimate among likely values rather
+#: than at a bound of the search; on the 24-case benchmark with no readout given (true
+#: 30 ms) it gained 0.8 dB on average over no prior and lost one small blur's mapping
+#: (BENCHMARKS section 4, session 41).
+UNKNOWN_READOUT_PRIOR = (0.020, 0.012)
 #: An automatic bias (rad/s, any axis) above this, or a spread of the samples it comes
 #: from above it, says they were not still: a phone's gyro bias is typically under 0.02.
 _AUTO_BIAS_SUSPECT = 0.05
@@ -100,6 +111,12 @@ class Capture:
         which marks the exposure only to tens or hundreds of milliseconds:
         :func:`gyrodeblur.calibrate.calibrate` then searches a second either way, and
         its corrected capture is no longer so.
+    readout_time_unknown : bool
+        Whether ``readout_time`` was not given (:func:`load_capture`: no
+        ``readout_time`` and no gcsv header stating it), so that its 0 is a stand-in, not
+        a global shutter: :func:`gyrodeblur.calibrate.calibrate` then searches readouts
+        of 0 to :data:`UNKNOWN_READOUT_MAX` under the weak prior
+        :data:`UNKNOWN_READOUT_PRIOR`, and its corrected capture is no longer so.
 
     Notes
     -----
@@ -119,6 +136,7 @@ class Capture:
     source: str | None = None
     max_gap: float = 0.05
     exposure_start_from_exif: bool = False
+    readout_time_unknown: bool = False
 
     def __post_init__(self):
         src = self.source
@@ -680,9 +698,12 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                                     f"{log.meta['frame_readout_time']}; or give readout_time")
         if report:
             report(f"readout_time = {readout:.6g} s (from the gcsv header's frame_readout_time)")
-    if readout is None and report:
-        report("readout_time = 0: not given, a global shutter (a phone's rolling shutter "
-               "reads out in about 10-30 ms: give a guess, which calibrate refines)")
+    unknown = readout is None
+    if unknown and report:
+        report(f"readout_time not given: 0 (a global shutter) unless calibrated; calibrate "
+               f"and deblur --refine search 0-{UNKNOWN_READOUT_MAX * 1e3:.0f} ms for it (a "
+               "phone's rolling shutter reads out in about 10-30 ms; a guess given is refined "
+               "within +-30 %)")
     readout = 0.0 if readout is None else readout
     if from_exif:                # the durations' own checks come later, in Capture
         sane = 0 <= readout <= MAX_READOUT_TIME and exposure_time > 0
@@ -707,7 +728,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     max_gap = _get(gyro_d, "max_gap", src, required=False)
     try:
         return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
-                       spec, src, 0.05 if max_gap is None else max_gap, from_exif)
+                       spec, src, 0.05 if max_gap is None else max_gap, from_exif, unknown)
     except InputError as exc:       # a field an option set: name the option too
         if exc.source != src:
             raise                   # the log's own errors (coverage) name the log

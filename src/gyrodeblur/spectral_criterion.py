@@ -82,7 +82,8 @@ class Corrections:
                            readout_time=max(0.0, cap.readout_time + self.readout),
                            camera=cap.camera.with_focal_scale(self.focal),
                            bias=cap.bias + self.bias, axes=self.axes,
-                           exposure_start_from_exif=False)     # calibrated now
+                           exposure_start_from_exif=False,     # calibrated now
+                           readout_time_unknown=False)
 
 
 class PatchSpectra:
