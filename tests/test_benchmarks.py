@@ -164,6 +164,24 @@ def test_calibration_coverage_counts_errors_within_the_stated_sigmas():
     assert sd["focal_pct"] == pytest.approx(1.0) and sd["bias"] is None
 
 
+def test_calibration_readout_unknown_leaves_the_readout_out(capsys):
+    """--readout-unknown: the corrupted capture has readout 0 marked unknown (the other
+    errors as drawn), its results file its own name; with --no-errors it is refused."""
+    from conftest import constant_rate_capture
+    cal = _load("calibration")
+    cap = constant_rate_capture((0.0, 0.6, 0.0), width=160, height=120, f=300.0,
+                                readout=0.02)
+    errors = cal.draw_errors(cap, np.random.default_rng(0))
+    bad = cal.corrupt(cap, dict(errors, readout_factor=0.0, readout_unknown=True))
+    assert bad.readout_time == 0.0 and bad.readout_time_unknown
+    assert bad.time_offset == pytest.approx(errors["offset_ms"] * 1e-3)
+    assert not cal.corrupt(cap, errors).readout_time_unknown
+    assert cal.parse_args(["--readout-unknown"]).out.name == "calibration_readout_unknown.json"
+    with pytest.raises(SystemExit):
+        cal.parse_args(["--readout-unknown", "--no-errors"])
+    assert "--readout-unknown leaves out the readout" in capsys.readouterr().err
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_calibration_sessions_quick(tmp_path):
     """Two photos of one session share the injected errors and are calibrated together."""
