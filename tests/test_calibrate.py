@@ -797,7 +797,8 @@ def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
 
 def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatch):
     """A capture whose exposure start is its photo's EXIF time is searched +-1 s (the
-    default +-40 ms would miss a phone's EXIF time), and says why; a range given, or the
+    default +-40 ms would miss a phone's EXIF time; +-1.5 s around the middle of a time to
+    the second), and says why; a range given, or the
     offset fixed, rule. A session with such a start is refused unless the offset is
     fixed: no one offset fits photos whose EXIF times are each off by their own amount.
     The corrected capture is no longer marked."""
@@ -818,11 +819,13 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatc
 
     _, true, blurred = case
     exif = true.replace(exposure_start_from_exif=True)
+    to_the_second = exif.replace(exif_time_to_the_second=True)
     later = true.replace(exposure_start=true.exposure_start + 0.5)
     monkeypatch.setattr(cal, "SearchSpace", search_space)
     monkeypatch.setattr(cal, "CalibrationFit", stop)
     said = []
     for captures, kwargs, span in (([exif], {}, cal.EXIF_START_OFFSET_RANGE),
+                                   ([to_the_second], {}, cal.EXIF_WHOLE_SECOND_OFFSET_RANGE),
                                    ([true], {}, cal.DEFAULT_OFFSET_RANGE),
                                    ([exif], {"offset_range": 0.3}, 0.3),
                                    ([exif], {"fix": "offset"}, cal.DEFAULT_OFFSET_RANGE),
@@ -832,15 +835,16 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatc
                       **kwargs)
         assert asked[-1] == span
         why = [m for m in said if "an exposure start from EXIF; --offset-range sets" in m]
-        assert bool(why) == (span == cal.EXIF_START_OFFSET_RANGE), said
+        assert bool(why) == (span in (cal.EXIF_START_OFFSET_RANGE,
+                                      cal.EXIF_WHOLE_SECOND_OFFSET_RANGE)), said
         said.clear()
     # a session: each EXIF time is off by its own amount, which no shared offset fits
     with pytest.raises(InputError, match="--capture: photo 2 of this session starts at the "
                                          "EXIF capture time.*one at a time"):
         calibrate([blurred, blurred[::-1]], [later, exif])
     monkeypatch.undo()
-    corrected = calibrate([blurred], exif, fix="axes,focal,readout,bias").capture
-    assert exif.exposure_start_from_exif and not corrected.exposure_start_from_exif
+    corrected = calibrate([blurred], to_the_second, fix="axes,focal,readout,bias").capture
+    assert not (corrected.exposure_start_from_exif or corrected.exif_time_to_the_second)
 
 
 def test_cli_writes_each_photo_its_corrected_description(cli_dir, capsys, monkeypatch):
@@ -1182,6 +1186,6 @@ def test_a_readout_not_given_is_searched_not_held_at_a_global_shutter(case):
     assert held.readout_time < 0.01, held.readout_time
     # a session shares one readout correction: one photo's readout given, another's not
     later = _true_capture(0.8)
-    with pytest.raises(InputError, match="photo 2 of this session has no readout_time while the others have one"):
+    with pytest.raises(InputError, match="photo 2's capture gives no readout_time while the other descriptions"):
         calibrate([blurred, _blur(_sharp(), later)],
                   [bad, later.replace(readout_time=0.0, readout_time_unknown=True)])

@@ -373,10 +373,9 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     cap = load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"},
                        report=said.append)
     assert cap.readout_time == 0.0 and cap.readout_time_unknown
-    assert said == ["readout_time not given: 0 (a global shutter) unless calibrated; "
-                    "calibrate and deblur --refine search 0-50 ms for it (a phone's "
-                    "rolling shutter reads out in about 10-30 ms; a guess given is refined "
-                    "within +-30 %)"]
+    assert said == ["readout_time not given: 0 (a global shutter) unless calibrated (a "
+                    "phone's rolling shutter reads out in about 10-30 ms: give a guess, or "
+                    "let calibrate or deblur --refine search for it)"]
     # the option gives it
     cap = load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s",
                                                        "readout_time": 0.02})
@@ -547,21 +546,31 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
     assert any("from the photo's EXIF time 2024:12:05 07:27:10.512 +01:00)" in s
                and "calibration searches 1 s either way" in s for s in said), said
     # a time just outside what the log covers (a log stopped right after the shot): the
-    # search starts from the nearest start the log covers, and says so
+    # search starts from the nearest start the log covers (with the longest readout
+    # calibration searches where none is given, 50 ms), and says so
     said.clear()
     late = load_capture(tmp_path / "c.json", exif_hints=dict(hints, capture_time_unix=t[-1]),
                         report=said.append)
-    assert late.exposure_start == pytest.approx(t[-1] - 0.03) and late.exposure_start_from_exif
-    assert any("30 ms after the exposures the log covers" in s for s in said), said
-    # a time to the whole second (no SubSecTimeOriginal) is its middle, and said so
+    assert late.exposure_start == pytest.approx(t[-1] - 0.08) and late.exposure_start_from_exif
+    assert any("80 ms after the exposures the log covers" in s for s in said), said
+    (tmp_path / "c.json").write_text(json.dumps(dict(doc, readout_time=0.02)))
+    late = load_capture(tmp_path / "c.json", exif_hints=dict(hints, capture_time_unix=t[-1]))
+    assert late.exposure_start == pytest.approx(t[-1] - 0.05)     # the readout given
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    # a time to the whole second (no SubSecTimeOriginal) is its middle, searched 1.5 s
+    # either way, and said so; 1.2 s off the log is within that
     said.clear()
-    whole = load_capture(tmp_path / "c.json", report=said.append, exif_hints={
-        "capture_time_unix": 1733380030.5, "capture_time_whole_second": True,
-        "capture_time_text": "2024:12:05 07:27:10 +01:00"})
-    assert whole.exposure_start == 1733380030.5
+    whole_hints = {"capture_time_unix": 1733380030.5, "capture_time_whole_second": True,
+                   "capture_time_text": "2024:12:05 07:27:10 +01:00"}
+    whole = load_capture(tmp_path / "c.json", report=said.append, exif_hints=whole_hints)
+    assert whole.exposure_start == 1733380030.5 and whole.exif_time_to_the_second
+    assert not cap.exif_time_to_the_second
     assert any("EXIF time 2024:12:05 07:27:10 +01:00, the middle of its second): that "
-               "marks the exposure only to half a second either way (no SubSecTimeOriginal)"
-               in s for s in said), said
+               "marks the exposure only to half a second either way (no SubSecTimeOriginal), "
+               "and calibration searches 1.5 s either way" in s for s in said), said
+    early = load_capture(tmp_path / "c.json", exif_hints=dict(
+        whole_hints, capture_time_unix=t[0] - 1.2))
+    assert early.exposure_start == pytest.approx(t[0])
     for gyro, h, problem in (
             ("boot.csv", hints, "the gyro log's clock is not (its times run 1029.000"),
             ("unix.csv", dict(hints, capture_time_unix=1733380130.0),

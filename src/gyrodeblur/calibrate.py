@@ -165,14 +165,15 @@ from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_N
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .calibration_workers import StepRunner, available_workers
-from .capture import EXIF_START_TOLERANCE, UNKNOWN_READOUT_MAX, UNKNOWN_READOUT_PRIOR, Capture
+from .capture import (EXIF_START_TOLERANCE, EXIF_WHOLE_SECOND_TOLERANCE, UNKNOWN_READOUT_MAX,
+                      UNKNOWN_READOUT_PRIOR, Capture)
 from .errors import InputError
 from .images import check_image
 from .gyrolog import rate_noise
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
            "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
-           "EXIF_START_OFFSET_RANGE", "MAX_OFFSET_RANGE"]
+           "EXIF_START_OFFSET_RANGE", "EXIF_WHOLE_SECOND_OFFSET_RANGE", "MAX_OFFSET_RANGE"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
@@ -279,6 +280,9 @@ DEFAULT_OFFSET_RANGE = 0.04
 #: capture time (:attr:`~gyrodeblur.capture.Capture.exposure_start_from_exif`): that
 #: marks the exposure only to tens or hundreds of milliseconds.
 EXIF_START_OFFSET_RANGE = EXIF_START_TOLERANCE
+#: The same for an EXIF time to the second, taken at its middle
+#: (:attr:`~gyrodeblur.capture.Capture.exif_time_to_the_second`).
+EXIF_WHOLE_SECOND_OFFSET_RANGE = EXIF_WHOLE_SECOND_TOLERANCE
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
 #: per second of log searched on one photo, so 5 s either side is about eight minutes
@@ -320,7 +324,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         side, on 2 cores (a 1024 x 764 photo: 118 s for +-1 s against 18 s for the
         default). Refused with the offset fixed. Where a capture's exposure start is its
         photo's EXIF time (``exposure_start_from_exif``), the default is
-        :data:`EXIF_START_OFFSET_RANGE`, 1 s; several photos with such starts, whose
+        :data:`EXIF_START_OFFSET_RANGE`, 1 s (:data:`EXIF_WHOLE_SECOND_OFFSET_RANGE`,
+        1.5 s, for a time to the second); several photos with such starts, whose
         errors differ, are refused as a session unless the offset is fixed.
     transfer : str or TransferCurve, or a list of them
         Transfer curve of the photos' values (``"srgb"``, ``"linear"`` or a
@@ -381,15 +386,20 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                          "on the gyro log's clock")
     unknown = [cap.readout_time_unknown for cap in captures]
     if any(unknown) and not all(unknown) and "readout" not in fix:
-        which = ", ".join(str(k + 1) for k, u in enumerate(unknown) if u)
-        many = sum(unknown) > 1
-        raise InputError("--capture", f"{'photos' if many else 'photo'} {which} of this "
-                         f"session {'have' if many else 'has'} no readout_time while the "
-                         "others have one, and a session shares one readout correction: give "
-                         "the same readout_time in every description (or none in any)")
+        which = ", ".join(cap.source or f"photo {k + 1}'s capture"
+                          for k, cap in enumerate(captures) if cap.readout_time_unknown)
+        raise InputError("--capture", f"{which} give{'s' if sum(unknown) == 1 else ''} no "
+                         "readout_time while the other descriptions of this session do, and "
+                         "a session shares one readout correction: give a readout_time in "
+                         "every description (or in none)")
     widened = offset_range is None and "offset" not in fix and any(from_exif)
     if offset_range is None:
-        offset_range = EXIF_START_OFFSET_RANGE if widened else DEFAULT_OFFSET_RANGE
+        if not widened:
+            offset_range = DEFAULT_OFFSET_RANGE
+        elif any(cap.exif_time_to_the_second for cap in captures):
+            offset_range = EXIF_WHOLE_SECOND_OFFSET_RANGE
+        else:
+            offset_range = EXIF_START_OFFSET_RANGE
     elif "offset" in fix:
         raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
                                            "offset): there is no range to search")

@@ -41,7 +41,8 @@ from .gyrolog import RATE_UNITS, TIME_UNITS, GyroLog, check_coverage, check_form
 from .orientation import Orientation
 
 __all__ = ["Capture", "check_capture", "load_capture", "estimate_bias_outside", "CSV_OPTION_KEYS",
-           "EXIF_START_TOLERANCE", "UNKNOWN_READOUT_MAX", "UNKNOWN_READOUT_PRIOR"]
+           "EXIF_START_TOLERANCE", "EXIF_WHOLE_SECOND_TOLERANCE", "UNKNOWN_READOUT_MAX",
+           "UNKNOWN_READOUT_PRIOR"]
 
 CSV_OPTION_KEYS = ("time_unit", "rate_unit", "time_column", "rate_columns")
 #: Seconds kept clear of the exposure window when estimating bias from the samples outside it.
@@ -117,6 +118,10 @@ class Capture:
         a global shutter: :func:`gyrodeblur.calibrate.calibrate` then searches readouts
         of 0 to :data:`UNKNOWN_READOUT_MAX` under the weak prior
         :data:`UNKNOWN_READOUT_PRIOR`, and its corrected capture is no longer so.
+    exif_time_to_the_second : bool
+        Whether that EXIF time had no SubSecTimeOriginal (``exposure_start`` is then the
+        middle of its second): calibrate searches :data:`EXIF_WHOLE_SECOND_TOLERANCE`
+        either way.
 
     Notes
     -----
@@ -137,6 +142,7 @@ class Capture:
     max_gap: float = 0.05
     exposure_start_from_exif: bool = False
     readout_time_unknown: bool = False
+    exif_time_to_the_second: bool = False
 
     def __post_init__(self):
         src = self.source
@@ -340,6 +346,10 @@ _UNIX_CLOCK = (946_684_800.0, 4_102_444_800.0)
 #: this far either way (:data:`gyrodeblur.calibrate.EXIF_START_OFFSET_RANGE`), and a time
 #: this close to the log is moved to the log's nearest covered start.
 EXIF_START_TOLERANCE = 1.0
+#: The same for an EXIF time to the second (no SubSecTimeOriginal), taken at the middle of
+#: its second: half a second more, so that it covers the same lags of the time behind the
+#: exposure (or ahead of it) as a time with its fraction.
+EXIF_WHOLE_SECOND_TOLERANCE = EXIF_START_TOLERANCE + 0.5
 
 
 def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, src: str,
@@ -360,26 +370,28 @@ def _exposure_start_from_exif(hints: dict, log, offset: float, duration: float, 
                               f"Unix time, but the gyro log's clock is not (its times run "
                               f"{lo:.3f} to {hi:.3f} s); give exposure_start on the log's "
                               "clock")
+    whole = bool(hints.get("capture_time_whole_second"))
+    tolerance = EXIF_WHOLE_SECOND_TOLERANCE if whole else EXIF_START_TOLERANCE
     first, last = lo, hi - duration           # the starts whose exposure the log covers
     start = min(max(unix, first), last)
-    if last < first or abs(start - unix) > EXIF_START_TOLERANCE:
+    if last < first or abs(start - unix) > tolerance:
         raise InputError(src, f"missing 'exposure_start', and the gyro log (Unix {lo:.3f} to "
                               f"{hi:.3f} s, {hi - lo:.1f} s) does not cover an exposure within "
-                              f"{EXIF_START_TOLERANCE:g} s of the photo's EXIF time ({text}, "
+                              f"{tolerance:g} s of the photo's EXIF time ({text}, "
                               f"Unix {unix:.3f} s): is it the log of this photo's session, "
                               "and the phone's clock and time zone right?")
     if report:
         moved = (f"; {abs(start - unix) * 1e3:.0f} ms {'before' if unix < start else 'after'} "
                  f"the exposures the log covers, so the search starts from the nearest one"
                  if start != unix else "")
-        if hints.get("capture_time_whole_second"):
+        if whole:
             which, how_well = (", the middle of its second",
                                "half a second either way (no SubSecTimeOriginal)")
         else:
             which, how_well = "", "tens or hundreds of milliseconds"
         report(f"exposure_start = {start:.3f} s (Unix time, from the photo's EXIF time {text}"
                f"{which}{moved}): that marks the exposure only to {how_well}, and "
-               f"calibration searches {EXIF_START_TOLERANCE:g} s either way")
+               f"calibration searches {tolerance:g} s either way")
     return start
 
 
@@ -700,15 +712,16 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             report(f"readout_time = {readout:.6g} s (from the gcsv header's frame_readout_time)")
     unknown = readout is None
     if unknown and report:
-        report(f"readout_time not given: 0 (a global shutter) unless calibrated; calibrate "
-               f"and deblur --refine search 0-{UNKNOWN_READOUT_MAX * 1e3:.0f} ms for it (a "
-               "phone's rolling shutter reads out in about 10-30 ms; a guess given is refined "
-               "within +-30 %)")
+        report("readout_time not given: 0 (a global shutter) unless calibrated (a phone's "
+               "rolling shutter reads out in about 10-30 ms: give a guess, or let calibrate or "
+               "deblur --refine search for it)")
     readout = 0.0 if readout is None else readout
+    to_the_second = from_exif and bool(hints.get("capture_time_whole_second"))
     if from_exif:                # the durations' own checks come later, in Capture
         sane = 0 <= readout <= MAX_READOUT_TIME and exposure_time > 0
+        longest = UNKNOWN_READOUT_MAX if unknown else readout     # as calibration searches
         data["exposure_start"] = _exposure_start_from_exif(
-            hints, log, offset, readout + exposure_time if sane else 0.0, src, report)
+            hints, log, offset, longest + exposure_time if sane else 0.0, src, report)
     exposure_start = _get(data, "exposure_start", src)
     bias_spec = gyro_d.get("bias")
     if isinstance(bias_spec, str):
@@ -728,7 +741,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     max_gap = _get(gyro_d, "max_gap", src, required=False)
     try:
         return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
-                       spec, src, 0.05 if max_gap is None else max_gap, from_exif, unknown)
+                       spec, src, 0.05 if max_gap is None else max_gap, from_exif, unknown,
+                       to_the_second)
     except InputError as exc:       # a field an option set: name the option too
         if exc.source != src:
             raise                   # the log's own errors (coverage) name the log

@@ -83,7 +83,7 @@ class Corrections:
                            camera=cap.camera.with_focal_scale(self.focal),
                            bias=cap.bias + self.bias, axes=self.axes,
                            exposure_start_from_exif=False,     # calibrated now
-                           readout_time_unknown=False)
+                           readout_time_unknown=False, exif_time_to_the_second=False)
 
 
 class PatchSpectra:
