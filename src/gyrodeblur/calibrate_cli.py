@@ -14,7 +14,8 @@ from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix, repeated_pho
 from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
-__all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures"]
+__all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
+           "refuse_non_json"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -132,9 +133,7 @@ def calibrate_command(args, say, load_capture) -> None:
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=inputs)
     for out in outputs:     # after the inputs' check: "it is an input" says more than "not .json"
-        if not os.fspath(out).lower().endswith(".json"):
-            raise InputError(out, "the corrected capture description is JSON: give an "
-                                  "output ending in .json")
+        refuse_non_json(out)
     from .icc import said_transfer_curve
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
@@ -166,6 +165,13 @@ def _outputs(given, n_photos: int) -> list[str]:
             if os.path.realpath(out) == os.path.realpath(other):
                 raise InputError(out, "is named twice as an output; give each photo its own")
     return outs
+
+
+def refuse_non_json(path) -> None:
+    """A corrected capture description's output must be named ``*.json``."""
+    if not os.fspath(path).lower().endswith(".json"):
+        raise InputError(path, "the corrected capture description is JSON: give an output "
+                               "ending in .json")
 
 
 def save_captures(captures, outputs, before_moving=None) -> None:

@@ -265,9 +265,8 @@ def _check_saved_capture(args) -> None:
             raise InputError(path, f"is also the {option} output; choose another file")
     inputs = [p for p in (args.photo, args.capture, args.gyro) if p]
     _check_output(path, None, args.overwrite, image=False, inputs=inputs)
-    if not os.fspath(path).lower().endswith(".json"):
-        raise InputError(path, "the corrected capture description is JSON: give a file "
-                               "ending in .json")
+    from .calibrate_cli import refuse_non_json
+    refuse_non_json(path)
 
 
 def _check_not_over_capture(cap, overwrite: bool, *outputs) -> None:
@@ -543,31 +542,26 @@ def cmd_deblur(args, say) -> None:
     drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
                if args.save_psf else None)
     new_output = not os.path.lexists(args.output)
+    new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
 
-    def write_pictures() -> None:    # all outputs or none (a photo it replaced is gone)
+    def write_pictures() -> None:
         write_photo(args.output, to_photo_layout(join_alpha(restored, alpha),
                                                  args.photo_rotation),
                     like=given, overwrite=args.overwrite)
         if args.save_psf:
-            try:
-                _write_picture(args.save_psf, drawing, args.overwrite)
-            except BaseException:
-                if new_output:
-                    os.remove(args.output)
-                raise
+            _write_picture(args.save_psf, drawing, args.overwrite)
 
-    if args.save_capture:            # its file written first, moved into place last
-        from .calibrate_cli import save_captures
-        new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
-        try:
+    try:                             # all outputs or none (a photo it replaced is gone)
+        if args.save_capture:        # its file written first, moved into place last
+            from .calibrate_cli import save_captures
             save_captures([cap], [args.save_capture], before_moving=write_pictures)
-        except BaseException:
-            for path, new in ((args.output, new_output), (args.save_psf, new_drawing)):
-                if new and os.path.lexists(path):
-                    os.remove(path)
-            raise
-    else:
-        write_pictures()
+        else:
+            write_pictures()
+    except BaseException:
+        for path, new in ((args.output, new_output), (args.save_psf, new_drawing)):
+            if new and os.path.lexists(path):
+                os.remove(path)
+        raise
     e = field.extents
     gh, gw = given.pixels.shape[:2]
     say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
