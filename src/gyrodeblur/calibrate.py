@@ -435,8 +435,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
              f"under a weak prior of {UNKNOWN_READOUT_PRIOR[0] * 1e3:.0f} +- "
              f"{UNKNOWN_READOUT_PRIOR[1] * 1e3:.0f} ms (--readout-time fixes it)")
 
-    asked = (f"+-{offset_range * 1e3:.0f} ms around an exposure start from EXIF; "
-             f"--offset-range sets another range" if widened
+    asked = (f"+-{offset_range * 1e3:.0f} ms around the exposure start taken from EXIF, "
+             f"or the nearest one the log covers; --offset-range sets another range"
+             if widened
              else f"asked: +-{offset_range * 1e3:.0f} ms")
     if "offset" not in fix and (search.tau_lo > -offset_range + _RANGE_SLACK
                                 or search.tau_hi < offset_range - _RANGE_SLACK):
