@@ -584,6 +584,45 @@ def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
     assert np.array_equal(read_photo(again).pixels, read_photo(out).pixels)
 
 
+def _session_of_two(d, photo: str, capture: str) -> list[str]:
+    """A second photo of ``d/blurred.png``'s session (the same scene, new noise, exposed
+    0.2 ms later) written to ``d/photo``, its description to ``d/capture``: the command
+    line's photos and ``--capture`` for both."""
+    from gyrodeblur.imageio import write_photo
+
+    first = read_photo(d / "blurred.png").pixels
+    noise = np.random.default_rng(9).normal(0, 2 / 255, first.shape).astype(np.float32)
+    write_photo(d / photo, np.clip(first + noise, 0, 1), bit_depth=8)
+    doc = json.loads((d / "cap.json").read_text())
+    doc["exposure_start"] += 2e-4
+    (d / capture).write_text(json.dumps(doc))
+    return [str(d / "blurred.png"), str(d / photo), "--capture",
+            f"{d / 'cap.json'},{d / capture}"]
+
+
+def test_cli_deblur_refine_of_several_photos_calibrates_them_as_one_session(cli_dir, capsys):
+    """``deblur a b --refine`` calibrates the photos together, as ``calibrate a b`` does
+    (the same corrected descriptions, each with its own exposure start), then deblurs each
+    with its own: the same pixels as a deblur with the description calibrate wrote."""
+    d = cli_dir
+    common = _session_of_two(d, "next.png", "next.json") + ["--fix", "bias,readout,focal,axes"]
+    photos = common[:2]
+    o = d / "out"
+    assert main(["calibrate", *common, "-o", str(o / "sa.json"), "-o", str(o / "sb.json")]) == 0
+    capsys.readouterr()
+    assert main(["deblur", *common, "--refine", "--grid", "2x3", "--quiet",
+                 "-o", f"{o / 'sa.png'},{o / 'sb.png'}",
+                 "--save-capture", f"{o / 'da.json'},{o / 'db.json'}"]) == 0
+    said = capsys.readouterr().out
+    assert "calibration of 2 photos" in said and said.count("deblurred ") == 2
+    for name in "ab":
+        assert json.loads((o / f"d{name}.json").read_text()) == \
+            json.loads((o / f"s{name}.json").read_text()), name
+    assert main(["deblur", photos[1], "--capture", str(o / "sb.json"), "--grid", "2x3",
+                 "--quiet", "-o", str(o / "sb_again.png")]) == 0
+    assert np.array_equal(read_photo(o / "sb_again.png").pixels, read_photo(o / "sb.png").pixels)
+
+
 def test_cli_save_capture_needs_refine_and_a_json_file_apart(cli_dir, capsys):
     """``--save-capture`` is refused before any work: without --refine, with --blind, not
     .json, the -o file (also through a link), an input, or a file that exists."""
@@ -854,18 +893,8 @@ def test_cli_writes_each_photo_its_corrected_description(cli_dir, capsys, monkey
     """-o once per photo (like --capture): each output is its own photo's description,
     with its own exposure start, and the shared corrections. Counts that do not pair, and
     one file named twice, are refused before any work; a failed write leaves none."""
-    from gyrodeblur.imageio import read_photo, write_photo
-
     d = cli_dir
-    first = read_photo(d / "blurred.png").pixels
-    noise = np.random.default_rng(9).normal(0, 2 / 255, first.shape).astype(np.float32)
-    write_photo(d / "later.png", np.clip(first + noise, 0, 1), bit_depth=8)
-    doc = json.loads((d / "cap.json").read_text())
-    doc["exposure_start"] += 2e-4
-    (d / "cap2.json").write_text(json.dumps(doc))
-    photos = [str(d / "blurred.png"), str(d / "later.png")]
-    common = [*photos, "--capture", f"{d / 'cap.json'},{d / 'cap2.json'}",
-              "--fix", "bias,readout,focal,axes"]
+    common = _session_of_two(d, "later.png", "cap2.json") + ["--fix", "bias,readout,focal,axes"]
     a, b = d / "out" / "a.json", d / "out" / "b.json"
     assert main(["calibrate", *common, "-o", str(a), "-o", str(b)]) == 0
     out = capsys.readouterr().out

@@ -1104,6 +1104,13 @@ def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, mon
               str(tmp_path / "c.json"), "-o", out])
     assert seen[-1] == [True, True]
     assert "take their exposure start from" not in capsys.readouterr().out
+    # deblur --refine of both: each EXIF time is off by its own amount, so one at a time
+    with pytest.raises(_StopCalibration):
+        main(["deblur", photo, str(tmp_path / "q.png"), "--capture", str(tmp_path / "c.json"),
+              "--refine", "-o", str(tmp_path / "d1.png"), "-o", str(tmp_path / "d2.png")])
+    assert seen[-1] == [True]
+    said = capsys.readouterr().out
+    assert "each photo is calibrated alone" in said and "take their exposure start" not in said
     # deblur without --refine would deblur with a start tens of milliseconds off
     msg = _run_error(["deblur", photo, "--capture", str(tmp_path / "c.json"), "-o",
                       str(tmp_path / "plain.png")], capsys)
@@ -1139,3 +1146,54 @@ def test_a_phone_photo_taller_than_wide_is_said_to_need_its_rotation(tmp_path, m
                   "-o", str(tmp_path / "o.json"), *extra])
         assert (said in capsys.readouterr().out) == told, (name, extra)
     assert len(seen) == 3
+
+
+def test_several_photos_are_deblurred_one_after_another_each_as_alone(capture_dir, capsys):
+    """``deblur a b -o A -o B`` (or ``-o A,B``) gives each photo what deblurring it alone
+    gives, with its own capture (one for all, or one per photo) and its own PSF drawing.
+    Counts that do not pair, a file named twice, and an output that exists are refused
+    before any photo is written."""
+    d = capture_dir
+    cap, cap2 = str(d / "cap.json"), str(d / "cap2.json")
+    doc = json.loads((d / "cap.json").read_text())
+    (d / "cap2.json").write_text(json.dumps(dict(doc, exposure_start=50.5)))
+    for capture, name in ((cap, "b1.png"), (cap2, "b2.jpg")):
+        assert main(["simulate", str(d / "sharp.jpg"), "--capture", capture,
+                     "-o", str(d / name), "--snr-db", "40", "--seed", "1"]) == 0
+    photos = [str(d / "b1.png"), str(d / "b2.jpg")]
+    for k, capture in enumerate((cap, cap2)):
+        assert main(["deblur", photos[k], "--capture", capture, "--grid", "2x2",
+                     "-o", str(d / f"alone{k}.png")]) == 0
+    capsys.readouterr()
+    assert main(["deblur", *photos, "--capture", f"{cap},{cap2}", "--grid", "2x2",
+                 "-o", str(d / "both0.png"), "-o", str(d / "both1.png"),
+                 "--save-psf", f"{d / 'f0.png'},{d / 'f1.png'}"]) == 0
+    out = capsys.readouterr().out
+    assert f"{photos[0]} -> {d / 'both0.png'}" in out and f"{photos[1]} -> " in out
+    assert "take their exposure start from" not in out
+    assert f"{photos[1]}: JPEG: deconvolved for noise" in out       # named among several
+    for k in range(2):
+        assert np.array_equal(read_photo(d / f"both{k}.png").pixels,
+                              read_photo(d / f"alone{k}.png").pixels), k
+        assert (d / f"f{k}.png").exists()
+    # the two photos differ, so each was deblurred with its own capture
+    assert not np.array_equal(read_photo(d / "both0.png").pixels,
+                              read_photo(d / "both1.png").pixels)
+    # one description for both: the same start, said
+    assert main(["deblur", *photos, "--capture", cap, "--grid", "2x2",
+                 "-o", f"{d / 'same0.png'},{d / 'same1.png'}"]) == 0
+    assert "all 2 photos take their exposure start from" in capsys.readouterr().out
+    assert np.array_equal(read_photo(d / "same0.png").pixels,
+                          read_photo(d / "alone0.png").pixels)
+    (d / "taken.png").write_bytes(b"someone's")
+    for outs, said in (([d / "n0.png"], "-o: 1 outputs for 2 photos: give 2"),
+                       ([d / "n0.png", d / "n0.png"], "n0.png: is named twice as an output"),
+                       ([d / "n0.png", d / "taken.png"], "taken.png: exists"),
+                       ([d / "n0.png", d / "b1.png"], "b1.png: is one of the command's inputs")):
+        msg = _run_error(["deblur", *photos, "--capture", cap, "--overwrite" if "inputs" in said
+                          else "--quiet", *[v for o in outs for v in ("-o", str(o))]], capsys)
+        assert said in msg, msg
+    msg = _run_error(["deblur", *photos, "--capture", cap, "-o", str(d / "n0.png"), "-o",
+                      str(d / "n1.png"), "--save-psf", str(d / "f.png")], capsys)
+    assert "--save-psf: 1 PSF drawings for 2 photos: give 2" in msg
+    assert not (d / "n0.png").exists() and (d / "taken.png").read_bytes() == b"someone's"

@@ -15,7 +15,7 @@ from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
-           "refuse_non_json"]
+           "refuse_non_json", "refuse_repeated_photos"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -76,7 +76,7 @@ def fixed_parameters(args) -> set[str]:
     return fix
 
 
-def _refuse_repeats(paths, photos) -> None:
+def refuse_repeated_photos(paths, photos) -> None:
     """One photo given twice would count its evidence twice (:func:`calibrate.calibrate`
     refuses it too); said here with the files' names, whether the same file or a copy."""
     pair = repeated_photo([p.pixels for p in photos])
@@ -117,7 +117,7 @@ def calibrate_command(args, say, load_capture) -> None:
     if len(paths) not in (1, len(photos)):
         raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
                                       "photos: give one, or one per photo (comma-separated)")
-    _refuse_repeats(args.photos, photos)
+    refuse_repeated_photos(args.photos, photos)
     caps = []
     for k, ph in enumerate(photos):
         a = argparse.Namespace(**vars(args))

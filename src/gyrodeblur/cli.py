@@ -263,7 +263,8 @@ def _check_saved_capture(args) -> None:
     for other, option in ((args.output, "-o"), (args.save_psf, "--save-psf")):
         if other and os.path.realpath(path) == os.path.realpath(other):
             raise InputError(path, f"is also the {option} output; choose another file")
-    inputs = [p for p in (args.photo, args.capture, args.gyro) if p]
+    inputs = getattr(args, "inputs", None) or [p for p in (args.photo, args.capture,
+                                                          args.gyro) if p]
     _check_output(path, None, args.overwrite, image=False, inputs=inputs)
     from .calibrate_cli import refuse_non_json
     refuse_non_json(path)
@@ -430,85 +431,182 @@ def cmd_simulate(args, say) -> None:
     say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
 
 
+def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str) -> list:
+    """The values of a repeatable option for ``n`` photos: taken as given for one photo
+    (a file name may hold a comma), else split at commas and counted against
+    ``allowed``."""
+    given = values if isinstance(values, list) else ([] if values is None else [values])
+    if n == 1:
+        if len(given) > 1:
+            raise InputError(option, f"given {len(given)} times for one photo")
+        return given
+    vals = [v for entry in given for v in os.fspath(entry).split(",") if v]
+    if len(vals) not in allowed:
+        spelt = " or ".join(str(k) for k in allowed if k)
+        raise InputError(option, f"{len(vals)} {what} for {n} photos: give {spelt} "
+                                 "(comma-separated, or the option repeated)")
+    return vals
+
+
+def _deblur_jobs(args) -> list[argparse.Namespace]:
+    """One namespace per photo of ``deblur``, with that photo's ``photo``, ``output``,
+    ``capture``, ``save_psf``, ``save_capture`` and ``photo_rotation``, ``inputs`` (every
+    file the command names to read) and ``several`` (whether there are other photos, which
+    its messages then name it apart from). The outputs are checked not to repeat."""
+    photos = list(args.photos)
+    n = len(photos)
+    outputs = _per_photo(args.output, n, "-o", (n,), "outputs")
+    captures = _per_photo(args.capture, n, "--capture", (0, 1, n), "capture descriptions")
+    psfs = _per_photo(args.save_psf, n, "--save-psf", (0, n), "PSF drawings")
+    saved = _per_photo(args.save_capture, n, "--save-capture", (0, 1, n),
+                       "corrected capture descriptions")
+    turns = args.photo_rotation if isinstance(args.photo_rotation, list) else [args.photo_rotation]
+    if len(turns) not in (1, n):
+        raise InputError("--photo-rotation", f"{len(turns)} rotations for {n} photo"
+                                             f"{'s' if n > 1 else ''}: give one"
+                                             f"{', or one per photo' if n > 1 else ''}")
+    named = outputs + psfs + saved if n > 1 else []     # one photo's: said as each is checked
+    for k, out in enumerate(named):
+        for other in named[:k]:
+            if os.path.realpath(out) == os.path.realpath(other):
+                raise InputError(out, "is named twice as an output; give each its own file")
+    inputs = photos + captures + ([args.gyro] if args.gyro else [])
+    jobs = []
+    for k, photo in enumerate(photos):
+        a = argparse.Namespace(**vars(args))
+        a.photo, a.output = photo, outputs[k]
+        a.capture = captures[k] if len(captures) > 1 else (captures or [None])[0]
+        a.save_psf = psfs[k] if psfs else None
+        a.save_capture = saved[k] if k < len(saved) else None
+        a.photo_rotation = turns[k] if len(turns) > 1 else turns[0]
+        a.inputs, a.several = inputs, n > 1
+        jobs.append(a)
+    return jobs
+
+
 def cmd_deblur(args, say) -> None:
-    from .deblur import DEFAULT_METHOD, deblur
-    from .icc import said_transfer_curve
-    from .imageio import read_photo, write_photo
-    from .psfplot import field_image
+    """``gyrodeblur deblur PHOTO... -o OUT...``: each photo deblurred with its own capture
+    (one for all, or one per photo), its outputs all written or none. With ``--refine``
+    several photos are calibrated together first, as one session sharing one correction
+    (``calibrate``'s rule), and each is then deblurred with its own corrected capture;
+    photos whose exposure starts are their EXIF times (each off by its own amount) are
+    calibrated one at a time instead. Without it they are deblurred one after another."""
+    jobs = _deblur_jobs(args)
+    for a in jobs[1:] if len(jobs) > 1 else ():     # the cheap checks of every output first
+        for out in (a.output, a.save_psf):
+            if out:
+                _check_output(out, None, args.overwrite, inputs=a.inputs)
+    first = _PhotoDeblur(jobs[0], say)
+    from_exif = first.cap is not None and first.cap.exposure_start_from_exif
+    if len(jobs) > 1 and first.cap is not None and not from_exif \
+            and len({a.capture for a in jobs}) == 1:
+        say(f"note: all {len(jobs)} photos take their exposure start from "
+            f"{jobs[0].capture or 'the options'}; give one capture per photo (--capture "
+            "a.json,b.json,... or --capture repeated) if they were taken at different times")
+    if args.refine and len(jobs) > 1 and not from_exif:
+        _deblur_session([first] + [_PhotoDeblur(a, say) for a in jobs[1:]], say)
+        return
+    if args.refine and len(jobs) > 1:
+        say("the photos' exposure starts are their EXIF times, each off by its own amount: "
+            "each photo is calibrated alone")
+    run = first
+    for k, a in enumerate(jobs):
+        if k:
+            run = _PhotoDeblur(a, say)
+        if args.refine:
+            run.calibrate_alone()
+        run.finish()
+        run = first = None                          # its pixels freed before the next
 
-    given = read_photo(args.photo)
-    _check_output(args.output, given, args.overwrite)
-    photo = replace(given, pixels=to_sensor_layout(given.stored_channels,
-                                                     args.photo_rotation))
-    if args.save_psf:
-        _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
-                      inputs=[args.photo])
-        if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
-            raise InputError(args.save_psf, "is also the output photo (-o); choose another file")
-    _ignored_options(args)
-    if args.save_capture:
-        _check_saved_capture(args)
-    overlap = DEFAULT_OVERLAP if args.overlap is None else args.overlap
-    method = args.method or DEFAULT_METHOD
-    options = {}
-    if args.phi is not None:
-        if method != "wiener":
-            raise InputError("--phi", "applies to --method wiener only")
-        options["phi"] = args.phi
-    for name, value in (("iterations", args.iterations), ("noise_sigma", args.noise_sigma)):
-        if value is None:
-            continue
-        flag = "--" + name.replace("_", "-")
-        if method != "sparse":
-            raise InputError(flag, "applies to --method sparse only")
-        if name == "iterations" and not 1 <= value <= 100:
-            raise InputError(flag, f"must be 1-100, got {value!r}")
-        if name == "noise_sigma" and not 0 <= value < 1:
-            raise InputError(flag, f"must be in [0, 1) (pixel-value units), got {value!r}")
-        options[name] = value
-    if args.model is not None:
-        if method != "sparse":
-            raise InputError("--model", "applies to --method sparse only")
-        options["model"] = args.model
-    grid = None if args.grid is None else args.grid if args.grid == "auto" else _pair(args.grid, "--grid")
-    progress = _Progress("deblurring", args.quiet)
-    h, w = photo.pixels.shape[:2]
-    if isinstance(grid, tuple):            # refused now, not after a calibration (--refine)
-        from .tiling import patch_grid
-        patch_grid((h, w), grid, overlap)
-    colour, alpha = split_alpha(photo.pixels)
-    curve = said_transfer_curve(given, args.transfer, say)
 
-    def jpeg_noise() -> None:            # said once the inputs are known to be good
-        if method == "sparse" and "noise_sigma" not in options and photo.quantization:
-            from .noise import estimate_noise_sigma, photo_noise_sigma
-            shown = estimate_noise_sigma(colour)
-            options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
-            say(f"JPEG: deconvolved for noise of {255 * options['noise_sigma']:.2f} levels "
-                f"(its pixels show {255 * shown:.2f}; the compression's "
-                "error counts as noise too; --noise-sigma sets it)")
+def _deblur_session(runs, say) -> None:
+    """``deblur --refine`` of several photos: one calibration of them all, as one session
+    (:func:`gyrodeblur.calibrate.calibrate`), then each photo deblurred with its own
+    corrected capture."""
+    from .calibrate import calibrate
+    from .calibrate_cli import format_estimates, refuse_repeated_photos
+    args = runs[0].args
+    refuse_repeated_photos([r.args.photo for r in runs], [r.photo for r in runs])
+    res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
+                    say=say, downscale=args.downscale, workers=args.workers,
+                    transfer=[r.curve for r in runs], offset_range=args.offset_range)
+    say(f"calibration of {len(runs)} photos in {res.seconds:.1f} s (before -> after, "
+        f"one-sigma uncertainty):")
+    for line in format_estimates(res.estimates):
+        say(line)
+    for run, cap in zip(runs, res.captures):
+        run.cap, run.t0 = cap, time.perf_counter()
+        run.finish()
 
-    t0 = time.perf_counter()
-    if args.blind:
-        from .deblur import deblur_blind
-        if grid == "auto":
-            raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
-                                       "--blind give RxC (default 1x1, one kernel)")
-        jpeg_noise()
-        blind_grid = (1, 1) if grid is None else grid
-        kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
-        restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
-                                       overlap=overlap, method=args.method,
-                                       transfer=curve, check_blur=not args.no_blur_check,
-                                       progress=progress, **options)
-        mode_txt = "blind"
-        grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
-    else:
-        fix = None
+
+class _PhotoDeblur:
+    """One photo of ``deblur``: read and checked, with its capture loaded
+    (``__init__``), calibrated alone (:meth:`calibrate_alone`) or given its capture from a
+    session's calibration, then deblurred and written (:meth:`finish`)."""
+
+    def __init__(self, args, say) -> None:
+        from .deblur import DEFAULT_METHOD
+        from .icc import said_transfer_curve
+        from .imageio import read_photo
+
+        self.args, self.say = args, say
+        inputs = getattr(args, "inputs", ())
+        self.given = given = read_photo(args.photo)
+        _check_output(args.output, given, args.overwrite, inputs=inputs)
+        self.photo = photo = replace(given, pixels=to_sensor_layout(given.stored_channels,
+                                                                    args.photo_rotation))
+        if args.save_psf:
+            _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
+                          inputs=inputs or [args.photo])
+            if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
+                raise InputError(args.save_psf, "is also the output photo (-o); choose another "
+                                                "file")
+        _ignored_options(args)
+        if args.save_capture:
+            _check_saved_capture(args)
+        self.overlap = DEFAULT_OVERLAP if args.overlap is None else args.overlap
+        self.method = method = args.method or DEFAULT_METHOD
+        self.options = options = {}
+        if args.phi is not None:
+            if method != "wiener":
+                raise InputError("--phi", "applies to --method wiener only")
+            options["phi"] = args.phi
+        for name, value in (("iterations", args.iterations), ("noise_sigma", args.noise_sigma)):
+            if value is None:
+                continue
+            flag = "--" + name.replace("_", "-")
+            if method != "sparse":
+                raise InputError(flag, "applies to --method sparse only")
+            if name == "iterations" and not 1 <= value <= 100:
+                raise InputError(flag, f"must be 1-100, got {value!r}")
+            if name == "noise_sigma" and not 0 <= value < 1:
+                raise InputError(flag, f"must be in [0, 1) (pixel-value units), got {value!r}")
+            options[name] = value
+        if args.model is not None:
+            if method != "sparse":
+                raise InputError("--model", "applies to --method sparse only")
+            options["model"] = args.model
+        self.grid = grid = (None if args.grid is None else args.grid if args.grid == "auto"
+                            else _pair(args.grid, "--grid"))
+        self.progress = _Progress("deblurring", args.quiet)
+        h, w = photo.pixels.shape[:2]
+        if isinstance(grid, tuple):        # refused now, not after a calibration (--refine)
+            from .tiling import patch_grid
+            patch_grid((h, w), grid, self.overlap)
+        self.colour, self.alpha = split_alpha(photo.pixels)
+        self.curve = said_transfer_curve(given, args.transfer, say)
+        self.t0 = time.perf_counter()
+        self.cap = self.fix = None
+        if args.blind:
+            if grid == "auto":
+                raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
+                                           "--blind give RxC (default 1x1, one kernel)")
+            self._jpeg_noise()
+            return
         if args.refine:
             from .calibrate_cli import fixed_parameters
-            fix = fixed_parameters(args)
-        cap = _load_capture(args, photo, say)
+            self.fix = fixed_parameters(args)
+        self.cap = cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf,
                                 args.save_capture)
         if cap.exposure_start_from_exif and not args.refine:
@@ -517,57 +615,98 @@ def cmd_deblur(args, say) -> None:
                                          "PSFs need it to well under one: add --refine (it "
                                          "searches a second either way), calibrate first, or "
                                          "give exposure_start")
-        jpeg_noise()
-        if args.refine:
-            from .calibrate import calibrate
-            from .calibrate_cli import format_estimates
-            res = calibrate([colour], cap, fix=fix, say=say, downscale=args.downscale,
-                            workers=args.workers, transfer=curve,
-                            offset_range=args.offset_range)
-            for line in format_estimates(res.estimates):
-                say(line)
-            cap = res.capture
-        restored, report = deblur(colour, cap, mode=args.mode, grid=grid,
-                                  overlap=args.overlap, method=args.method,
-                                  transfer=curve, progress=progress,
-                                  return_report=True, **options)
-        if not (args.refine or args.no_blur_check):      # options are all checked by now
-            _warn_if_the_blur_does_not_fit(cap, colour, curve)
-        field = report.field
-        mode_txt = args.mode
-        grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
-        if report.model == "global":
-            grid_txt += " (global model)"
-    progress.close()
-    drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
-               if args.save_psf else None)
-    new_output = not os.path.lexists(args.output)
-    new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
+        self._jpeg_noise()
 
-    def write_pictures() -> None:
-        write_photo(args.output, to_photo_layout(join_alpha(restored, alpha),
-                                                 args.photo_rotation),
-                    like=given, overwrite=args.overwrite)
-        if args.save_psf:
-            _write_picture(args.save_psf, drawing, args.overwrite)
+    def _jpeg_noise(self) -> None:
+        """For a JPEG, the sparse method's noise level raised for its compression error
+        (said once the inputs are known to be good)."""
+        photo, options = self.photo, self.options
+        if self.method == "sparse" and "noise_sigma" not in options and photo.quantization:
+            from .noise import estimate_noise_sigma, photo_noise_sigma
+            shown = estimate_noise_sigma(self.colour)
+            options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
+            which = f"{self.args.photo}: " if getattr(self.args, "several", False) else ""
+            self.say(f"{which}JPEG: deconvolved for noise of "
+                     f"{255 * options['noise_sigma']:.2f} levels (its pixels show "
+                     f"{255 * shown:.2f}; the compression's error counts as noise too; "
+                     "--noise-sigma sets it)")
 
-    try:                             # all outputs or none (a photo it replaced is gone)
-        if args.save_capture:        # its file written first, moved into place last
-            from .calibrate_cli import save_captures
-            save_captures([cap], [args.save_capture], before_moving=write_pictures)
+    def calibrate_alone(self) -> None:
+        """``--refine`` for this photo alone: its capture replaced by the calibrated one."""
+        from .calibrate import calibrate
+        from .calibrate_cli import format_estimates
+        args = self.args
+        res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
+                        downscale=args.downscale, workers=args.workers, transfer=self.curve,
+                        offset_range=args.offset_range)
+        for line in format_estimates(res.estimates):
+            self.say(line)
+        self.cap = res.capture
+
+    def finish(self) -> None:
+        """Deblur the photo and write its outputs: all of them or none."""
+        from .deblur import deblur
+        from .imageio import write_photo
+        from .psfplot import field_image
+
+        args, say, options = self.args, self.say, self.options
+        grid, overlap, curve, progress = self.grid, self.overlap, self.curve, self.progress
+        colour, given = self.colour, self.given
+        if args.blind:
+            from .deblur import deblur_blind
+            blind_grid = (1, 1) if grid is None else grid
+            kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
+            restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
+                                           overlap=overlap, method=args.method,
+                                           transfer=curve, check_blur=not args.no_blur_check,
+                                           progress=progress, **options)
+            mode_txt = "blind"
+            grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
         else:
-            write_pictures()
-    except BaseException:
-        for path, new in ((args.output, new_output), (args.save_psf, new_drawing)):
-            if new and os.path.lexists(path):
-                os.remove(path)
-        raise
-    e = field.extents
-    gh, gw = given.pixels.shape[:2]
-    say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
-        f"method {method}, PSF extent {e.min()}-{e.max()} px, {time.perf_counter() - t0:.2f} s")
-    if args.save_capture:
-        say(f"wrote the corrected capture description {args.save_capture}")
+            cap = self.cap
+            restored, report = deblur(colour, cap, mode=args.mode, grid=grid,
+                                      overlap=args.overlap, method=args.method,
+                                      transfer=curve, progress=progress,
+                                      return_report=True, **options)
+            if not (args.refine or args.no_blur_check):  # options are all checked by now
+                _warn_if_the_blur_does_not_fit(cap, colour, curve)
+            field = report.field
+            mode_txt = args.mode
+            grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
+            if report.model == "global":
+                grid_txt += " (global model)"
+        progress.close()
+        h, w = self.photo.pixels.shape[:2]
+        drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
+                   if args.save_psf else None)
+        new_output = not os.path.lexists(args.output)
+        new_drawing = bool(args.save_psf) and not os.path.lexists(args.save_psf)
+
+        def write_pictures() -> None:
+            write_photo(args.output, to_photo_layout(join_alpha(restored, self.alpha),
+                                                     args.photo_rotation),
+                        like=given, overwrite=args.overwrite)
+            if args.save_psf:
+                _write_picture(args.save_psf, drawing, args.overwrite)
+
+        try:                         # all outputs or none (a photo it replaced is gone)
+            if args.save_capture:    # its file written first, moved into place last
+                from .calibrate_cli import save_captures
+                save_captures([self.cap], [args.save_capture], before_moving=write_pictures)
+            else:
+                write_pictures()
+        except BaseException:
+            for path, new in ((args.output, new_output), (args.save_psf, new_drawing)):
+                if new and os.path.lexists(path):
+                    os.remove(path)
+            raise
+        e = field.extents
+        gh, gw = given.pixels.shape[:2]
+        say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
+            f"method {self.method}, PSF extent {e.min()}-{e.max()} px, "
+            f"{time.perf_counter() - self.t0:.2f} s")
+        if args.save_capture:
+            say(f"wrote the corrected capture description {args.save_capture}")
 
 
 def cmd_demo(args, say) -> None:
@@ -655,8 +794,13 @@ def build_parser() -> argparse.ArgumentParser:
                        "(space-variant patches by default), or blindly (--blind). The result is "
                        "referenced to the camera's orientation at exposure start (a blind one "
                        "keeps the blurred photo's geometry). " + FRAMES_HELP)
-    s.add_argument("photo", metavar="PHOTO")
-    s.add_argument("-o", "--output", required=True, metavar="OUT")
+    s.add_argument("photos", nargs="+", metavar="PHOTO",
+                   help="the photo, or several: with --refine, calibrated together as one "
+                        "session (photos started at their EXIF times: one at a time), "
+                        "otherwise deblurred one after another")
+    s.add_argument("-o", "--output", required=True, metavar="OUT", action="append",
+                   help="the deblurred photo; for several photos one per photo, in their "
+                        "order: comma-separated or the option repeated")
     s.add_argument("--mode", choices=("variant", "invariant"), default="variant")
     s.add_argument("--grid", default=None, metavar="RxC|auto",
                    help="patch grid; default: 6x8 (the chapter's) for --method wiener, 'auto' "
@@ -704,15 +848,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --refine: " + WORKERS_HELP)
     s.add_argument("--offset-range", type=float, default=None, metavar="S",
                    help="with --refine: " + OFFSET_RANGE_HELP)
-    s.add_argument("--save-psf", metavar="FIELD.png", help="also draw the PSF field used")
-    s.add_argument("--save-capture", metavar="CORRECTED.json",
+    s.add_argument("--save-psf", metavar="FIELD.png", action="append",
+                   help="also draw the PSF field used (several photos: one per photo)")
+    s.add_argument("--save-capture", metavar="CORRECTED.json", action="append",
                    help="with --refine: also write the corrected capture description, as "
                         "calibrate -o does, so that deblurring the photo again needs no "
-                        "second calibration")
-    _add_rotation_option(s)
+                        "second calibration (several photos: the first photo's, or one per "
+                        "photo)")
+    _add_rotation_option(s, per_photo=True)
     s.add_argument("--overwrite", action="store_true")
     s.add_argument("--quiet", action="store_true", help="no progress bar (none is drawn where stderr is not a terminal)")
-    _add_capture_options(s)
+    _add_capture_options(s, per_photo=True)
     s.set_defaults(func=cmd_deblur)
 
     s = sub.add_parser("demo", help="run the bundled demo",
