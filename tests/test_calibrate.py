@@ -1221,3 +1221,15 @@ def test_a_readout_not_given_is_searched_not_held_at_a_global_shutter(case):
     with pytest.raises(InputError, match="photo 2's capture gives no readout_time while the other descriptions"):
         calibrate([blurred, _blur(_sharp(), later)],
                   [bad, later.replace(readout_time=0.0, readout_time_unknown=True)])
+
+
+def test_cli_one_exposure_start_for_several_photos_is_refused(cli_dir, capsys):
+    """Each photo's start is its own: ``--exposure-start`` with several photos would give
+    them all one, so calibrate refuses it (as deblur does) before any work."""
+    d = cli_dir
+    out = d / "out" / "one_start.json"
+    rc = main(["calibrate", *_session_of_two(d, "start2.png", "start2.json"),
+               "--exposure-start", "1.0", "-o", str(out)])
+    assert rc == 2 and "--exposure-start: would give every photo the same start" in \
+        capsys.readouterr().err
+    assert not out.exists()

@@ -1186,7 +1186,7 @@ def test_several_photos_are_deblurred_one_after_another_each_as_alone(capture_di
     assert np.array_equal(read_photo(d / "same0.png").pixels,
                           read_photo(d / "alone0.png").pixels)
     (d / "taken.png").write_bytes(b"someone's")
-    for outs, said in (([d / "n0.png"], "-o: 1 outputs for 2 photos: give 2"),
+    for outs, said in (([d / "n0.png"], "-o: 1 output for 2 photos: give 2"),
                        ([d / "n0.png", d / "n0.png"], "n0.png: is named twice as an output"),
                        ([d / "n0.png", d / "taken.png"], "taken.png: exists"),
                        ([d / "n0.png", d / "b1.png"], "b1.png: is one of the command's inputs")):
@@ -1195,5 +1195,74 @@ def test_several_photos_are_deblurred_one_after_another_each_as_alone(capture_di
         assert said in msg, msg
     msg = _run_error(["deblur", *photos, "--capture", cap, "-o", str(d / "n0.png"), "-o",
                       str(d / "n1.png"), "--save-psf", str(d / "f.png")], capsys)
-    assert "--save-psf: 1 PSF drawings for 2 photos: give 2" in msg
+    assert "--save-psf: 1 PSF drawing for 2 photos: give 2" in msg
     assert not (d / "n0.png").exists() and (d / "taken.png").read_bytes() == b"someone's"
+
+
+def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_dir, capsys,
+                                                                        monkeypatch):
+    """Every photo of ``deblur a b`` is read and checked before the first is deblurred: a
+    bad second photo or capture leaves nothing written, an error of the photo itself names
+    that photo alone, and an output may be no photo's capture or log. A repeated
+    --photo-rotation gives each photo its own; --exposure-start, one start for all, is
+    refused. A stop after the first photo says what it wrote."""
+    import gyrodeblur.deblur as deblur_mod
+    from PIL import Image as PILImage
+
+    d = capture_dir
+    cap = str(d / "cap.json")
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "b1.png"),
+                 "--seed", "1", "--snr-db", "40"]) == 0
+    PILImage.open(d / "b1.png").rotate(180).save(d / "b1_turned.png")
+    assert main(["deblur", str(d / "b1_turned.png"), "--capture", cap, "--grid", "2x2",
+                 "--photo-rotation", "180", "-o", str(d / "turned_alone.png")]) == 0
+    assert main(["deblur", str(d / "b1.png"), str(d / "b1_turned.png"), "--capture", cap,
+                 "--grid", "2x2", "--photo-rotation", "0", "--photo-rotation", "180",
+                 "-o", str(d / "r0.png"), "-o", str(d / "r1.png")]) == 0
+    assert np.array_equal(read_photo(d / "r1.png").pixels,
+                          read_photo(d / "turned_alone.png").pixels)
+    capsys.readouterr()
+    # a tiny second photo, a missing second capture, a second photo's log as an output
+    write_photo(d / "tiny.png", np.full((6, 8, 3), 0.5, np.float32), bit_depth=8)
+    (d / "glog.json").write_bytes((d / "gyro.gcsv").read_bytes())
+    doc = json.loads((d / "cap.json").read_text())
+    doc["gyro"]["path"] = "glog.json"
+    (d / "cap_glog.json").write_text(json.dumps(doc))
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("deblurred or calibrated before every photo was checked")
+
+    monkeypatch.setattr(deblur_mod, "deblur", no_work)
+    import gyrodeblur.calibrate
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", no_work)
+    outs = ["-o", str(d / "n0.png"), "-o", str(d / "n1.png")]
+    for argv, said in (
+            ([str(d / "b1.png"), str(d / "tiny.png"), "--capture", cap],
+             f"error: {d / 'tiny.png'}: the image has only 6 rows"),
+            ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture",
+              f"{cap},{d / 'missing.json'}"], "missing.json"),
+            ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture",
+              f"{cap},{d / 'cap_glog.json'}", "--refine", "--save-capture",
+              str(d / "glog.json"), "--overwrite"], "glog.json: is one of the command's inputs"),
+            ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture", cap,
+              "--exposure-start", "50.3"], "--exposure-start: would give every photo")):
+        msg = _run_error(["deblur", *argv, *outs], capsys)
+        assert said in msg and "written before" not in msg, msg
+        assert not (d / "n0.png").exists()
+    assert (d / "glog.json").read_bytes() == (d / "gyro.gcsv").read_bytes()
+    # stopped while deblurring the second: what the first wrote is said
+    monkeypatch.undo()
+    real, calls = deblur_mod.deblur, []
+
+    def stop_at_the_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(deblur_mod, "deblur", stop_at_the_second)
+    assert main(["deblur", str(d / "b1.png"), str(d / "b1_turned.png"), "--capture", cap,
+                 "--grid", "2x2", *outs]) == 130
+    err = capsys.readouterr().err
+    assert f"interrupted; written before it stopped: {d / 'n0.png'}; nothing else" in err
+    assert (d / "n0.png").exists() and not (d / "n1.png").exists()

@@ -15,7 +15,7 @@ from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
-           "refuse_non_json", "refuse_repeated_photos"]
+           "refuse_non_json", "refuse_repeated_photos", "refuse_one_start_for_several"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -101,7 +101,8 @@ def calibrate_command(args, say, load_capture) -> None:
     fix = fixed_parameters(args)
     outputs = _outputs(args.output, len(args.photos))
 
-    turns = args.photo_rotation if isinstance(args.photo_rotation, list) else [args.photo_rotation]
+    refuse_one_start_for_several(args, len(args.photos))
+    turns = [t for entry in args.photo_rotation or [[0]] for t in entry]   # appended lists
     if len(turns) not in (1, len(args.photos)):
         raise InputError("--photo-rotation", f"{len(turns)} rotations for {len(args.photos)} "
                                              "photos: give one, or one per photo")
@@ -148,6 +149,15 @@ def calibrate_command(args, say, load_capture) -> None:
     if len(outputs) < len(photos):
         say("(the first photo's description: the others keep their own exposure start, "
             "exposure time and log; give one -o per photo to write each)")
+
+
+def refuse_one_start_for_several(args, n_photos: int) -> None:
+    """``--exposure-start`` with several photos would start them all at once: each
+    photo's start belongs in its own capture description."""
+    if n_photos > 1 and args.exposure_start is not None:
+        raise InputError("--exposure-start", "would give every photo the same start: give "
+                                             "each its own in its capture description "
+                                             "(--capture a.json,b.json)")
 
 
 def _outputs(given, n_photos: int) -> list[str]:

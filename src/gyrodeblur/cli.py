@@ -1,12 +1,14 @@
 """Command-line interface: thin wrappers that parse, call the library and print.
 
 Exit status: 0 on success, 2 for bad input (a one-line message naming the file and the
-problem; nothing written), 1 for anything unexpected.
+problem; nothing written, but for the photos that ``deblur`` of several photos finished
+before, which it names), 1 for anything unexpected.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import sys
@@ -288,10 +290,11 @@ def _add_transfer_option(p: argparse.ArgumentParser) -> None:
 
 def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
     what = ("degrees clockwise the photos' pixels were turned from the sensor's layout, one "
-            "for all or one per photo, comma-separated" if per_photo else
+            "for all or one per photo, comma-separated or the option repeated" if per_photo else
             "degrees clockwise the photo's pixels were turned from the sensor's layout")
-    p.add_argument("--photo-rotation", type=_rotations if per_photo else _rotation, default=0,
-                   metavar="DEG",
+    p.add_argument("--photo-rotation", type=_rotations if per_photo else _rotation,
+                   default=None if per_photo else 0, metavar="DEG",
+                   action="append" if per_photo else "store",
                    help=what + " (an export that applied a portrait orientation; 0, 90, 180 "
                         "or 270): the photo is turned back for the work, so that its rows are "
                         "the sensor's readout rows and the capture's camera fits, and the "
@@ -431,19 +434,26 @@ def cmd_simulate(args, say) -> None:
     say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
 
 
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str) -> list:
-    """The values of a repeatable option for ``n`` photos: taken as given for one photo
-    (a file name may hold a comma), else split at commas and counted against
-    ``allowed``."""
+    """The values of a repeatable option for ``n`` photos. One photo's are taken as given
+    (a file name may hold a comma); for several, an option given once is a list split at
+    its commas (unless it names an existing file), one repeated gives a value each time.
+    The count must be one of ``allowed``."""
     given = values if isinstance(values, list) else ([] if values is None else [values])
     if n == 1:
         if len(given) > 1:
             raise InputError(option, f"given {len(given)} times for one photo")
         return given
-    vals = [v for entry in given for v in os.fspath(entry).split(",") if v]
+    vals = given
+    if len(given) == 1 and not os.path.isfile(os.fspath(given[0])):
+        vals = [v for v in os.fspath(given[0]).split(",") if v]
     if len(vals) not in allowed:
         spelt = " or ".join(str(k) for k in allowed if k)
-        raise InputError(option, f"{len(vals)} {what} for {n} photos: give {spelt} "
+        raise InputError(option, f"{_plural(len(vals), what)} for {n} photos: give {spelt} "
                                  "(comma-separated, or the option repeated)")
     return vals
 
@@ -451,26 +461,30 @@ def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str)
 def _deblur_jobs(args) -> list[argparse.Namespace]:
     """One namespace per photo of ``deblur``, with that photo's ``photo``, ``output``,
     ``capture``, ``save_psf``, ``save_capture`` and ``photo_rotation``, ``inputs`` (every
-    file the command names to read) and ``several`` (whether there are other photos, which
-    its messages then name it apart from). The outputs are checked not to repeat."""
+    file the command names to read), ``several`` (whether there are other photos, which
+    its messages then name it apart from) and ``written`` (the outputs of the photos
+    finished, one list shared with ``args``). The outputs are checked not to repeat."""
     photos = list(args.photos)
     n = len(photos)
-    outputs = _per_photo(args.output, n, "-o", (n,), "outputs")
-    captures = _per_photo(args.capture, n, "--capture", (0, 1, n), "capture descriptions")
-    psfs = _per_photo(args.save_psf, n, "--save-psf", (0, n), "PSF drawings")
+    outputs = _per_photo(args.output, n, "-o", (n,), "output")
+    captures = _per_photo(args.capture, n, "--capture", (0, 1, n), "capture description")
+    psfs = _per_photo(args.save_psf, n, "--save-psf", (0, n), "PSF drawing")
     saved = _per_photo(args.save_capture, n, "--save-capture", (0, 1, n),
-                       "corrected capture descriptions")
-    turns = args.photo_rotation if isinstance(args.photo_rotation, list) else [args.photo_rotation]
+                       "corrected capture description")
+    turns = [t for entry in args.photo_rotation or [[0]] for t in entry]   # appended lists
     if len(turns) not in (1, n):
-        raise InputError("--photo-rotation", f"{len(turns)} rotations for {n} photo"
-                                             f"{'s' if n > 1 else ''}: give one"
+        raise InputError("--photo-rotation", f"{_plural(len(turns), 'rotation')} for "
+                                             f"{_plural(n, 'photo')}: give one"
                                              f"{', or one per photo' if n > 1 else ''}")
+    from .calibrate_cli import refuse_one_start_for_several
+    refuse_one_start_for_several(args, n)
     named = outputs + psfs + saved if n > 1 else []     # one photo's: said as each is checked
     for k, out in enumerate(named):
         for other in named[:k]:
             if os.path.realpath(out) == os.path.realpath(other):
                 raise InputError(out, "is named twice as an output; give each its own file")
     inputs = photos + captures + ([args.gyro] if args.gyro else [])
+    args.written = []
     jobs = []
     for k, photo in enumerate(photos):
         a = argparse.Namespace(**vars(args))
@@ -479,44 +493,89 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
         a.save_psf = psfs[k] if psfs else None
         a.save_capture = saved[k] if k < len(saved) else None
         a.photo_rotation = turns[k] if len(turns) > 1 else turns[0]
-        a.inputs, a.several = inputs, n > 1
+        a.inputs, a.several, a.written = inputs, n > 1, args.written
+        a.save_capture_once = n > 1 and len(saved) == 1
         jobs.append(a)
     return jobs
 
 
 def cmd_deblur(args, say) -> None:
     """``gyrodeblur deblur PHOTO... -o OUT...``: each photo deblurred with its own capture
-    (one for all, or one per photo), its outputs all written or none. With ``--refine``
-    several photos are calibrated together first, as one session sharing one correction
-    (``calibrate``'s rule), and each is then deblurred with its own corrected capture;
-    photos whose exposure starts are their EXIF times (each off by its own amount) are
-    calibrated one at a time instead. Without it they are deblurred one after another."""
+    (one for all, or one per photo), its outputs all written or none.
+
+    Several photos are all read and checked first (their pixels then let go until their
+    turn), so that a bad input stops the command before any work. With ``--refine`` they
+    are calibrated together, as one session sharing one correction (``calibrate``'s
+    rule), and each is deblurred with its own corrected capture; where any photo's
+    exposure start is its EXIF time (each off by its own amount) every photo is
+    calibrated alone instead. Without it they are deblurred one after another."""
     jobs = _deblur_jobs(args)
-    for a in jobs[1:] if len(jobs) > 1 else ():     # the cheap checks of every output first
-        for out in (a.output, a.save_psf):
-            if out:
-                _check_output(out, None, args.overwrite, inputs=a.inputs)
-    first = _PhotoDeblur(jobs[0], say)
-    from_exif = first.cap is not None and first.cap.exposure_start_from_exif
-    if len(jobs) > 1 and first.cap is not None and not from_exif \
-            and len({a.capture for a in jobs}) == 1:
-        say(f"note: all {len(jobs)} photos take their exposure start from "
-            f"{jobs[0].capture or 'the options'}; give one capture per photo (--capture "
-            "a.json,b.json,... or --capture repeated) if they were taken at different times")
-    if args.refine and len(jobs) > 1 and not from_exif:
-        _deblur_session([first] + [_PhotoDeblur(a, say) for a in jobs[1:]], say)
-        return
-    if args.refine and len(jobs) > 1:
-        say("the photos' exposure starts are their EXIF times, each off by its own amount: "
-            "each photo is calibrated alone")
-    run = first
-    for k, a in enumerate(jobs):
-        if k:
-            run = _PhotoDeblur(a, say)
+    if len(jobs) == 1:
+        run = _PhotoDeblur(jobs[0], say)
         if args.refine:
             run.calibrate_alone()
         run.finish()
-        run = first = None                          # its pixels freed before the next
+        return
+    runs = []
+    for a in jobs:
+        with _this_photo(a):
+            runs.append(_PhotoDeblur(a, _naming(a.photo, say)))
+        runs[-1].release()
+    if all(r.cap is not None for r in runs):
+        outputs = [o for r in runs for o in (r.args.output, r.args.save_psf,
+                                             r.args.save_capture)]
+        for r in runs:         # no output is another photo's capture or log either
+            _check_not_over_capture(r.cap, args.overwrite, *outputs)
+        if len({a.capture for a in jobs}) == 1 \
+                and not any(r.cap.exposure_start_from_exif for r in runs):
+            say(f"note: all {len(jobs)} photos take their exposure start from "
+                f"{jobs[0].capture or 'the options'}; give one capture per photo (--capture "
+                "a.json,b.json,... or --capture repeated) if they were taken at different "
+                "times")
+    from_exif = [r.args.photo for r in runs if r.cap is not None
+                 and r.cap.exposure_start_from_exif]
+    if args.refine and not from_exif:
+        _deblur_session(runs, say)
+        return
+    if args.refine:
+        say(f"{', '.join(from_exif)}: the exposure start is the photo's EXIF time, off by "
+            "an amount of its own, which no other photo shares: each photo is calibrated "
+            "alone")
+    for run in runs:
+        run.t0 = time.perf_counter()           # its own time, not the others' before it
+        run.load()
+        if args.refine:
+            run.calibrate_alone()
+        run.finish()
+        run.release()
+
+
+@contextlib.contextmanager
+def _this_photo(args):
+    """Among several photos, what goes wrong with one (``args.photo``) names it: its
+    warnings, and an error of no file of its own (which :func:`main` would say of every
+    photo)."""
+    if not getattr(args, "several", False):
+        yield
+        return
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            yield
+    except InputError as exc:
+        if exc.source is None:
+            raise InputError(args.photo, exc.problem) from None
+        raise
+    finally:
+        for w in caught:
+            warnings.warn(f"{args.photo}: {w.message}", w.category, stacklevel=3)
+
+
+def _naming(photo: str, say):
+    """``say`` for one photo among several: a message that does not name it is prefixed
+    with its name."""
+    return lambda msg: say(msg if photo in msg else f"{photo}: {msg}")
 
 
 def _deblur_session(runs, say) -> None:
@@ -526,6 +585,8 @@ def _deblur_session(runs, say) -> None:
     from .calibrate import calibrate
     from .calibrate_cli import format_estimates, refuse_repeated_photos
     args = runs[0].args
+    for run in runs:
+        run.load()
     refuse_repeated_photos([r.args.photo for r in runs], [r.photo for r in runs])
     res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
                     say=say, downscale=args.downscale, workers=args.workers,
@@ -537,6 +598,7 @@ def _deblur_session(runs, say) -> None:
     for run, cap in zip(runs, res.captures):
         run.cap, run.t0 = cap, time.perf_counter()
         run.finish()
+        run.release()
 
 
 class _PhotoDeblur:
@@ -547,14 +609,13 @@ class _PhotoDeblur:
     def __init__(self, args, say) -> None:
         from .deblur import DEFAULT_METHOD
         from .icc import said_transfer_curve
-        from .imageio import read_photo
 
         self.args, self.say = args, say
         inputs = getattr(args, "inputs", ())
-        self.given = given = read_photo(args.photo)
+        self.given = self.photo = None
+        self.load()
+        given, photo = self.given, self.photo
         _check_output(args.output, given, args.overwrite, inputs=inputs)
-        self.photo = photo = replace(given, pixels=to_sensor_layout(given.stored_channels,
-                                                                    args.photo_rotation))
         if args.save_psf:
             _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
                           inputs=inputs or [args.photo])
@@ -590,10 +651,11 @@ class _PhotoDeblur:
                             else _pair(args.grid, "--grid"))
         self.progress = _Progress("deblurring", args.quiet)
         h, w = photo.pixels.shape[:2]
-        if isinstance(grid, tuple):        # refused now, not after a calibration (--refine)
-            from .tiling import patch_grid
+        from .tiling import patch_grid     # refused now, not after a calibration (--refine)
+        if isinstance(grid, tuple):        # or another photo's deblur
             patch_grid((h, w), grid, self.overlap)
-        self.colour, self.alpha = split_alpha(photo.pixels)
+        else:                              # smaller than one window in any mode
+            patch_grid((h, w), (1, 1), 0.0)
         self.curve = said_transfer_curve(given, args.transfer, say)
         self.t0 = time.perf_counter()
         self.cap = self.fix = None
@@ -617,6 +679,23 @@ class _PhotoDeblur:
                                          "give exposure_start")
         self._jpeg_noise()
 
+    def load(self) -> None:
+        """Read the photo (again, after :meth:`release`): ``given`` as stored, ``photo``
+        turned to the sensor's layout, and its ``colour`` and ``alpha``."""
+        if self.given is not None:
+            return
+        from .imageio import read_photo
+        args = self.args
+        given = read_photo(args.photo)
+        self.given, self.photo = given, replace(
+            given, pixels=to_sensor_layout(given.stored_channels, args.photo_rotation))
+        self.colour, self.alpha = split_alpha(self.photo.pixels)
+
+    def release(self) -> None:
+        """Let the photo's pixels go until :meth:`load` (one photo of many, between its
+        checks and its turn)."""
+        self.given = self.photo = self.colour = self.alpha = None
+
     def _jpeg_noise(self) -> None:
         """For a JPEG, the sparse method's noise level raised for its compression error
         (said once the inputs are known to be good)."""
@@ -625,8 +704,7 @@ class _PhotoDeblur:
             from .noise import estimate_noise_sigma, photo_noise_sigma
             shown = estimate_noise_sigma(self.colour)
             options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
-            which = f"{self.args.photo}: " if getattr(self.args, "several", False) else ""
-            self.say(f"{which}JPEG: deconvolved for noise of "
+            self.say(f"JPEG: deconvolved for noise of "
                      f"{255 * options['noise_sigma']:.2f} levels (its pixels show "
                      f"{255 * shown:.2f}; the compression's error counts as noise too; "
                      "--noise-sigma sets it)")
@@ -636,15 +714,22 @@ class _PhotoDeblur:
         from .calibrate import calibrate
         from .calibrate_cli import format_estimates
         args = self.args
-        res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
-                        downscale=args.downscale, workers=args.workers, transfer=self.curve,
-                        offset_range=args.offset_range)
+        with _this_photo(self.args):
+            res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
+                            downscale=args.downscale, workers=args.workers,
+                            transfer=self.curve, offset_range=args.offset_range)
         for line in format_estimates(res.estimates):
             self.say(line)
         self.cap = res.capture
 
     def finish(self) -> None:
         """Deblur the photo and write its outputs: all of them or none."""
+        with _this_photo(self.args):
+            self._finish()
+        args = self.args
+        args.written.extend(o for o in (args.output, args.save_psf, args.save_capture) if o)
+
+    def _finish(self) -> None:
         from .deblur import deblur
         from .imageio import write_photo
         from .psfplot import field_image
@@ -706,7 +791,10 @@ class _PhotoDeblur:
             f"method {self.method}, PSF extent {e.min()}-{e.max()} px, "
             f"{time.perf_counter() - self.t0:.2f} s")
         if args.save_capture:
-            say(f"wrote the corrected capture description {args.save_capture}")
+            first = (" (the first photo's: the others keep their own exposure start; give "
+                     "one --save-capture per photo to write each)"
+                     if getattr(args, "save_capture_once", False) else "")
+            say(f"wrote the corrected capture description {args.save_capture}{first}")
 
 
 def cmd_demo(args, say) -> None:
@@ -951,17 +1039,27 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         if exc.source is None and _photos(args):     # a problem of the photo(s) themselves
             exc = InputError(_photos(args), exc.problem)
-        _write(sys.stderr, f"gyrodeblur: error: {exc}\n")
+        _write(sys.stderr, f"gyrodeblur: error: {exc}{_written_before(args)}\n")
         return 2
     except KeyboardInterrupt:
-        _write(sys.stderr, "gyrodeblur: interrupted; nothing written\n")
+        _write(sys.stderr, f"gyrodeblur: interrupted; {_written_before(args, 'nothing')}\n")
         return 130
     except _Terminated:
-        _write(sys.stderr, "gyrodeblur: terminated; nothing written\n")
+        _write(sys.stderr, f"gyrodeblur: terminated; {_written_before(args, 'nothing')}\n")
         return 143
     finally:
         _on_sigterm(previous)
     return 0
+
+
+def _written_before(args, none: str = "") -> str:
+    """What a command of several photos (``deblur``) wrote before it stopped: the files
+    of the photos it finished (``args.written``); ``none`` where it wrote nothing."""
+    done = getattr(args, "written", None)
+    if not done:
+        return f"{none} written" if none else ""
+    return (f"{'' if none else ' ('}written before it stopped: {', '.join(done)}; nothing "
+            f"else{'' if none else ')'}")
 
 
 def _write(stream, text: str) -> None:
