@@ -110,3 +110,35 @@ def test_the_log_decides_how_likely_the_given_bias_is_off():
     steps = [bias_from_log(np.array([x, 0.0, 0.0]), var) for x in (0.005, 0.01, 0.015, 0.02)]
     assert all(a[2] < b[2] and a[0][0] < b[0][0] for a, b in zip(steps, steps[1:]))
     assert np.all(steps[1][1] >= sd)          # the sd covers the doubt between the two
+
+
+def test_a_given_bias_in_doubt_widens_the_prior_to_cover_both_cases():
+    """Where the log leaves the given bias's fate in doubt (probability off near one
+    half), the prior is the mixture of "right" (no correction) and "off" (nearly the
+    log's rate), moment-matched: its sd must span the distance between the two, far wider
+    than either case's own sd (the log's error combined with the given bias's)."""
+    var = np.full(3, 0.005 ** 2)
+    either = bias_from_log(np.zeros(3), var)[1][0]          # one case's own sd
+    mu, sd, p_off = bias_from_log(np.array([0.0185, 0.0, 0.0]), var)
+    assert 0.3 < p_off < 0.7, p_off
+    mu_off = mu[0] / p_off                                  # the "off" case's centre
+    assert sd[0] > 1.5 * either, (sd, either)
+    assert sd[0] >= 0.45 * mu_off, (sd, mu_off)             # half the distance at even odds
+    assert sd[1] == pytest.approx(either) and sd[2] == pytest.approx(either)
+
+
+def test_the_log_near_the_photos_is_found_on_the_logs_own_clock():
+    """The log's clock is the camera's minus the capture's time offset. A 100 s log whose
+    typical rate changes at 45 s, a photo at 20 s of it (camera clock 60 s, offset 40 s):
+    the samples within 30 s of the exposure are the log's first 50 s, whose typical rate
+    is the first one's. (Read on the camera's clock, the window would hold mostly the
+    second rate; with the offset's sign turned, no sample at all.)"""
+    t = np.arange(0.0, 100.0, 1 / 200)
+    first, second = np.array([0.02, -0.01, 0.0]), np.array([-0.03, 0.04, 0.01])
+    w = np.where((t < 45.0)[:, None], first, second)
+    w = w + 0.2 * np.sin(2 * np.pi * 3 * t)[:, None]          # a shake in whole cycles
+    cap = Capture(60.0, 0.03, 0.03, Camera.centred(640, 480, 600.0), GyroLog(t, w),
+                  time_offset=40.0)
+    rate, se, secs = log_typical_rate([cap])
+    np.testing.assert_allclose(rate, first, atol=1e-3)
+    assert secs == pytest.approx(50.0, abs=1.5), secs

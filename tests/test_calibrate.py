@@ -127,6 +127,34 @@ def test_recovers_injected_offset_axes_focal(case, recovered):
     assert res.blur_gain > 10 and not any("little of the blur" in n for n in res.notes)
 
 
+def test_the_estimates_report_the_corrected_capture(recovered):
+    """Each estimate's "before" is the given capture's value and its "after" the
+    corrected capture's (what ``calibrate`` prints and what it writes must agree)."""
+    res, bad, _ = recovered
+    got, est = res.capture, res.estimates
+    assert est["offset"][:2] == (bad.time_offset, got.time_offset)
+    assert est["readout"][:2] == (bad.readout_time, got.readout_time)
+    assert est["readout"][1] != est["readout"][0]           # it was corrected here
+    assert est["focal"][0] == 1.0
+    assert est["focal"][1] == pytest.approx(got.camera.fx / bad.camera.fx, rel=1e-12)
+    np.testing.assert_array_equal(est["bias"][0], bad.bias)
+    np.testing.assert_array_equal(est["bias"][1], got.bias)
+    assert est["axes"][:2] == (axes_to_letters(bad.axes), axes_to_letters(got.axes))
+
+
+def test_the_blur_gain_is_the_blur_evidence_of_the_capture_kept(case):
+    """With every parameter fixed, the calibrated capture is the given one, and the gain
+    that calibrate checks (tempered nats per 9 patches) is the one
+    :func:`gyrodeblur.blur_evidence.capture_gain_over_no_blur` measures for it: the same
+    windows, the same units."""
+    from gyrodeblur.blur_evidence import capture_gain_over_no_blur
+    _, true, blurred = case
+    res = calibrate([blurred], true, fix=set(PARAMETERS))
+    alone = capture_gain_over_no_blur(blurred, true)
+    assert alone > 10
+    assert res.blur_gain == pytest.approx(alone, rel=1e-3), (res.blur_gain, alone)
+
+
 def test_a_sharp_photo_given_a_shaken_log_is_said_to_show_no_blur(case):
     """The sharp original with the capture that blurred it: whatever the search finds,
     no blur at all explains the patches better, and the user is told."""
@@ -760,6 +788,57 @@ def test_keep_margin_grows_with_gyro_noise():
     from gyrodeblur.calibrate import _KEEP_MARGIN, _keep_margin
     assert _keep_margin(float("nan")) == _keep_margin(0.002) == _KEEP_MARGIN
     assert _keep_margin(0.021) == pytest.approx(3 * _KEEP_MARGIN)
+
+
+def test_the_uncertainties_are_the_laplace_posteriors_marginals():
+    """One-sigma figures are the marginals of the posterior ``N(x, F^-1)`` (``F`` the
+    tempered Hessian, priors included) of the reported quantities: draws of ``x`` mapped
+    by the search's own parametrisation (:meth:`SearchSpace.theta_of`) to a time offset
+    (the time shift at the pivot row plus ``ubar`` times the readout correction, strongly
+    anti-correlated here), a readout, a focal scale and a bias have those sds. Neither
+    the Hessian's own diagonal nor the offset's variance without the readout's share
+    gives them."""
+    from gyrodeblur.calibrate import _uncertainties
+    from gyrodeblur.calibration_search import SearchSpace
+
+    sd = np.array([0.001, 0.002, 0.03, 0.01, 0.02, 0.005])
+    corr = np.eye(6)
+    corr[0, 1] = corr[1, 0] = -0.6              # time shift against readout
+    corr[2, 3] = corr[3, 2] = 0.5               # focal length against a bias
+    x = np.array([0.002, 0.003, 0.2, 0.01, -0.02, 0.0])      # focal x1.22
+    ubar = 0.4
+    rng = np.random.default_rng(0)
+    for idx in ([0, 1, 2, 3, 4, 5], [0, 2, 3, 4, 5], [1, 2, 3]):
+        cov = (corr * np.outer(sd, sd))[np.ix_(idx, idx)]
+        unc = _uncertainties(x, idx, np.linalg.inv(cov), None, ubar)
+        v = np.tile(x, (40000, 1))
+        v[:, idx] = rng.multivariate_normal(x[idx], cov, 40000)
+        th = [SearchSpace.theta_of(None, row, np.eye(3), ubar) for row in v]
+        want = {"offset": np.std([t.offset for t in th]),
+                "readout": np.std([t.readout for t in th]),
+                "focal": np.std([t.focal for t in th])}
+        want.update({f"bias{k}": np.std([t.bias[k] for t in th]) for k in range(3)})
+        names = ("offset", "readout", "focal", "bias0", "bias1", "bias2")
+        assert set(unc) == {names[j] for j in idx}
+        for name, got in unc.items():
+            assert got == pytest.approx(want[name], rel=0.03), (idx, name, got, want[name])
+
+
+def test_the_prior_distance_is_measured_from_the_priors_centre():
+    """How far the estimates lie from the given values is counted in prior sds from the
+    priors' centres, which are not always zero corrections (an unknown readout's 20 ms
+    under a given 0, a long log's bias): at the centre it is 0, a sd off on each of the
+    readout, focal length and one bias axis it is 3 (the time offset has no prior and
+    does not count)."""
+    from types import SimpleNamespace
+
+    from gyrodeblur.calibrate import _prior_distance
+    mu = np.array([0.0, 0.02, 0.0, 0.03, -0.01, 0.0])
+    sig = np.array([np.inf, 0.012, 0.1, 0.005, 0.005, 0.05])
+    fit = SimpleNamespace(idx=[0, 1, 2, 3, 4, 5], prior_for=lambda M: (mu, sig, 100.0))
+    assert _prior_distance(fit, np.eye(3), mu) == pytest.approx(0.0, abs=1e-12)
+    off = mu + np.array([0.01, 0.012, -0.1, 0.0, 0.005, 0.0])
+    assert _prior_distance(fit, np.eye(3), off) == pytest.approx(3.0)
 
 
 def test_gyro_noise_is_measured_per_sample_at_200_hz():

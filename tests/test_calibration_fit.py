@@ -164,3 +164,27 @@ def test_the_line_fit_finds_distinct_minima_best_first():
     one = C[:1]
     assert line_fit_minima(one, taus[:1], u, kappas, 3, 0.02) == [line_fit(one, taus[:1], u,
                                                                             kappas)]
+
+
+def test_the_time_shift_is_the_pivot_rows_whatever_the_readout():
+    """The search's first coordinate is the time shift at the pivot row ``ubar`` (the mean
+    patch row), so that it and the readout correction are nearly uncorrelated: in the
+    corrected capture the pivot row is read against the log exactly ``x[0]`` earlier
+    than in the given one, whatever the readout correction, while other rows move with
+    the readout."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.calibration_search import SearchSpace
+
+    cap = _capture()
+    photos = [CalibrationPhoto(np.full((256, 384), 0.5, np.float32), cap, "linear", 0)]
+    search = SearchSpace(photos, set(), 0.04)
+
+    def log_time(c, u):               # where on the log the row at fraction u starts
+        return c.exposure_start + c.readout_time * u - c.time_offset
+
+    for ubar in (0.2, 0.5, 0.8):
+        for kappa in (-0.01, 0.0, 0.012):
+            x = np.array([0.004, kappa, 0.03, 0.0, 0.0, 0.0])
+            got = search.theta_of(x, cap.axes, ubar).apply(cap)
+            assert log_time(got, ubar) == pytest.approx(log_time(cap, ubar) - 0.004, abs=1e-12)
+            assert log_time(got, 1.0) - log_time(got, 0.0) == pytest.approx(0.03 + kappa)

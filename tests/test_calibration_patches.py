@@ -141,3 +141,21 @@ def test_blockiness_tells_a_jpeg_from_the_same_photo_uncompressed():
     assert photo(u8).blockiness() < 1.05
     assert photo(jpeg).blockiness() > BLOCKY
     assert photo(jpeg[3:, 5:]).blockiness() > BLOCKY                  # the grid shifted
+
+
+@pytest.mark.parametrize("seed", [1, 3, 5])
+def test_a_partly_clipped_window_pays_for_its_clipped_share(seed):
+    """Clipped highlights break the linear model, so a window under 30 % clipped is
+    penalised for its share. The right half's texture is 1.5 times the left's in
+    contrast but about a quarter of its pixels are clipped: the one window asked for lies
+    on the unclipped left half (the right's, unpenalised, has more texture and won)."""
+    rng = np.random.default_rng(seed)
+    tex = ndimage.gaussian_filter(rng.normal(size=(400, 600)), 1.5)
+    tex /= tex.std()
+    img = 0.5 + 0.1 * tex
+    img[:, 300:] = 0.88 + 0.15 * tex[:, 300:]
+    img = np.clip(img, 0, 1).astype(np.float32)
+    assert 0.2 < (img[:, 300:] >= 0.98).mean() < 0.3
+    photo = CalibrationPhoto(img, _capture(), "srgb", 0)
+    (x, y), = select_patch_centres(photo, 1, 64)
+    assert x < 300 - 16, (x, y)

@@ -938,7 +938,6 @@ def test_each_command_shows_its_own_warnings_and_leaves_the_hook(capture_dir, ca
     assert warnings.showwarning is hook
 
 
-
 def test_the_demo_runs_to_the_end(tmp_path, capsys):
     """The README's first command: every file written, the deblurred photo sharper."""
     import json as _json
@@ -1266,3 +1265,25 @@ def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_d
     err = capsys.readouterr().err
     assert f"interrupted; written before it stopped: {d / 'n0.png'}; nothing else" in err
     assert (d / "n0.png").exists() and not (d / "n1.png").exists()
+
+
+def test_each_capture_value_given_on_the_command_line_fixes_its_parameter():
+    """``calibrate`` (and ``deblur --refine``) take a value stated with an option as
+    known: ``--time-offset`` fixes the offset, ``--bias`` the bias, ``--readout-time`` the
+    readout, ``--fx`` or ``--fy`` the focal length, ``--orientation`` the mapping, on top
+    of ``--fix``; parsed by the real parser, so an option whose value went unseen (a
+    renamed destination) fails here too."""
+    from gyrodeblur.calibrate_cli import fixed_parameters
+    from gyrodeblur.cli import build_parser
+
+    base = ["calibrate", "p.png", "--capture", "c.json", "-o", "o.json"]
+    parse = build_parser().parse_args
+    assert fixed_parameters(parse(base)) == set()
+    for option, value, name in (("--time-offset", "0.01", "offset"),
+                                ("--bias", "0.01,0,0", "bias"),
+                                ("--readout-time", "0.02", "readout"),
+                                ("--fx", "1000", "focal"), ("--fy", "1000", "focal"),
+                                ("--orientation", "Xyz", "axes")):
+        assert fixed_parameters(parse(base + [option, value])) == {name}, option
+    both = parse(base + ["--fix", "bias,focal", "--readout-time", "0.02"])
+    assert fixed_parameters(both) == {"bias", "focal", "readout"}

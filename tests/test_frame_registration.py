@@ -139,3 +139,35 @@ def test_the_predicted_motion_is_timed_by_the_rows_the_light_lands_on():
                          for x, y in zip(px, py)], axis=0)
     assert abs(own_row_a[1]) > 1.0                     # the test can tell the two apart
     assert np.allclose(pred, expected, atol=0.25), (pred, expected)
+
+
+def test_the_predicted_motion_moves_with_the_time_offset_as_the_capture_does():
+    """A time-offset correction means what the corrected capture's offset means (the log
+    read that much earlier): on a log whose rate changes (a steady rate would hide it), the
+    motion predicted under ``Corrections(offset=d, readout=r)`` is that predicted for the
+    captures corrected by ``d`` and ``r`` (:meth:`Corrections.apply`), and differs from the
+    prediction at no correction."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.frame_registration import FrameRegistration
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import Corrections
+
+    t = np.arange(0.0, 2.0, 0.002)
+    w = np.stack([0.6 * np.sin(2 * np.pi * 1.3 * t), 0.8 * np.cos(2 * np.pi * 1.1 * t),
+                  0.2 * np.sin(2 * np.pi * 0.7 * t)], 1)
+    cam = Camera.centred(600, 400, 500.0)
+    caps = [Capture(s, 0.02, 0.03, cam, GyroLog(t, w)) for s in (0.8, 1.1)]
+    img = np.full((400, 600), 0.5)
+
+    def predicted(captures, theta):
+        photos = [CalibrationPhoto(img, c, "linear", i) for i, c in enumerate(captures)]
+        return FrameRegistration(photos, extent=10.0).predict(theta, 0, 1)
+
+    eye = Corrections(axes=np.eye(3))
+    shifted = eye.copy(offset=0.03, readout=0.01)
+    moved = predicted(caps, shifted)
+    np.testing.assert_allclose(moved, predicted([shifted.apply(c) for c in caps], eye),
+                               atol=0.05)
+    assert np.abs(moved - predicted(caps, eye)).max() > 2.0

@@ -170,3 +170,31 @@ def test_the_focal_length_alone_is_found_on_a_rolling_shutter_photo(shared_data)
     res = calibrate([case.blurred], given, fix=set(PARAMETERS) - {"focal"})
     scale = res.capture.camera.fx / case.capture.camera.fx
     assert abs(scale - 1) < 0.01, (scale, res.notes)
+
+
+def test_a_camera_that_did_not_move_gains_nothing_over_no_blur():
+    """The baseline of :meth:`PatchSpectra.gain_over_no_blur` is a point splatted as the
+    traces are: a camera that did not move at all has traces that are that point, so
+    its PSFs explain every patch exactly as well as no blur (a bare delta as the
+    baseline would credit them with the splat's own softening). Asked twice, so that the
+    noise ratio starts warm for both spectra (a cold start leaves up to a nat per patch
+    between them)."""
+    from scipy import ndimage
+
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import Corrections, PatchSpectra
+
+    rng = np.random.default_rng(3)
+    img = 0.5 + 0.1 * ndimage.gaussian_filter(rng.normal(size=(300, 400)), 1.0)
+    t = np.arange(0.0, 1.0, 0.005)
+    still = Capture(0.5, 0.03, 0.02, Camera.centred(400, 300, 400.0),
+                    GyroLog(t, np.zeros((t.size, 3))))
+    photo = CalibrationPhoto(np.clip(img, 0, 1), still, "linear", 0)
+    p = PatchSpectra([photo], [(0, 120.0, 150.0), (0, 280.0, 150.0)], 1.0, 64,
+                     rows=(-0.15, 0.0, 0.15))
+    th = Corrections(axes=np.eye(3))
+    p.gain_over_no_blur(th)
+    np.testing.assert_allclose(p.gain_over_no_blur(th), 0.0, atol=0.01)
