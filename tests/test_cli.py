@@ -1110,6 +1110,17 @@ def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, mon
     assert seen[-1] == [True]
     said = capsys.readouterr().out
     assert "each photo is calibrated alone" in said and "take their exposure start" not in said
+    # refused before any calibration: the same photo twice, and one --save-capture for
+    # photos calibrated each alone (it would hold the first's calibration only)
+    calls = len(seen)
+    for extra, what in (([photo], f"{photo}: is {photo}, given already"),
+                        ([str(tmp_path / "q.png"), "--save-capture", str(tmp_path / "s1.json")],
+                         "--save-capture: one file for several photos calibrated each alone")):
+        msg = _run_error(["deblur", photo, *extra, "--capture", str(tmp_path / "c.json"),
+                          "--refine", "-o", str(tmp_path / "d1.png"), "-o",
+                          str(tmp_path / "d2.png")], capsys)
+        assert what in msg, msg
+    assert len(seen) == calls
     # deblur without --refine would deblur with a start tens of milliseconds off
     msg = _run_error(["deblur", photo, "--capture", str(tmp_path / "c.json"), "-o",
                       str(tmp_path / "plain.png")], capsys)

@@ -76,10 +76,12 @@ def fixed_parameters(args) -> set[str]:
     return fix
 
 
-def refuse_repeated_photos(paths, photos) -> None:
+def refuse_repeated_photos(paths, images) -> None:
     """One photo given twice would count its evidence twice (:func:`calibrate.calibrate`
-    refuses it too); said here with the files' names, whether the same file or a copy."""
-    pair = repeated_photo([p.pixels for p in photos])
+    refuses it too); said here with the files' names, whether the same file or a copy.
+    ``images``: the photos' pixels (or any arrays equal where the pixels are, e.g. their
+    digests)."""
+    pair = repeated_photo(images)
     if pair is not None:
         first, path = paths[pair[0]], paths[pair[1]]
         same = os.path.exists(path) and os.path.samefile(path, first)
@@ -118,7 +120,7 @@ def calibrate_command(args, say, load_capture) -> None:
     if len(paths) not in (1, len(photos)):
         raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
                                       "photos: give one, or one per photo (comma-separated)")
-    refuse_repeated_photos(args.photos, photos)
+    refuse_repeated_photos(args.photos, [p.pixels for p in photos])
     caps = []
     for k, ph in enumerate(photos):
         a = argparse.Namespace(**vars(args))

@@ -516,11 +516,16 @@ def cmd_deblur(args, say) -> None:
             run.calibrate_alone()
         run.finish()
         return
-    runs = []
+    runs, digests = [], []
     for a in jobs:
         with _this_photo(a):
             runs.append(_PhotoDeblur(a, _naming(a.photo, say)))
+        if args.refine:                  # a photo calibrated twice: refused, as calibrate does
+            digests.append(_pixel_digest(runs[-1].photo.pixels))
         runs[-1].release()
+    if args.refine:
+        from .calibrate_cli import refuse_repeated_photos
+        refuse_repeated_photos(args.photos, digests)
     if all(r.cap is not None for r in runs):
         outputs = [o for r in runs for o in (r.args.output, r.args.save_psf,
                                              r.args.save_capture)]
@@ -538,9 +543,15 @@ def cmd_deblur(args, say) -> None:
         _deblur_session(runs, say)
         return
     if args.refine:
-        say(f"{', '.join(from_exif)}: the exposure start is the photo's EXIF time, off by "
-            "an amount of its own, which no other photo shares: each photo is calibrated "
-            "alone")
+        if runs[0].args.save_capture_once:
+            raise InputError("--save-capture", "one file for several photos calibrated "
+                                               "each alone would hold only the first's "
+                                               "calibration: give one per photo")
+        which = (f"the exposure starts of {', '.join(from_exif)} are their EXIF times"
+                 if len(from_exif) > 1 else
+                 f"the exposure start of {from_exif[0]} is its EXIF time")
+        say(f"{which}, each off by an amount of its own, which no other photo shares: "
+            "each photo is calibrated alone")
     for run in runs:
         run.t0 = time.perf_counter()           # its own time, not the others' before it
         run.load()
@@ -548,6 +559,15 @@ def cmd_deblur(args, say) -> None:
             run.calibrate_alone()
         run.finish()
         run.release()
+
+
+def _pixel_digest(pixels: np.ndarray) -> np.ndarray:
+    """A photo's pixels, shape and type as a 20-byte array: equal only where they are."""
+    import hashlib
+    a = np.ascontiguousarray(pixels)
+    h = hashlib.sha1(f"{a.shape}{a.dtype.str}".encode())
+    h.update(a.tobytes())
+    return np.frombuffer(h.digest(), np.uint8)
 
 
 @contextlib.contextmanager
@@ -583,11 +603,10 @@ def _deblur_session(runs, say) -> None:
     (:func:`gyrodeblur.calibrate.calibrate`), then each photo deblurred with its own
     corrected capture."""
     from .calibrate import calibrate
-    from .calibrate_cli import format_estimates, refuse_repeated_photos
+    from .calibrate_cli import format_estimates
     args = runs[0].args
     for run in runs:
         run.load()
-    refuse_repeated_photos([r.args.photo for r in runs], [r.photo for r in runs])
     res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
                     say=say, downscale=args.downscale, workers=args.workers,
                     transfer=[r.curve for r in runs], offset_range=args.offset_range)
