@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import numpy as np
 import pytest
@@ -602,6 +603,7 @@ def test_cli_deblur_refine_runs_the_calibration(cli_dir, capsys):
                  "--save-capture", str(saved)]) == 0
     text = capsys.readouterr().out
     assert "coarse ranking" in text and "deblurred" in text
+    assert re.search(r"deblurred .* [0-9.]+ s \(the calibration's [0-9.]+ s included\)", text)
     assert f"wrote the corrected capture description {saved}" in text
     given, refined = load_capture(d / "cap.json"), load_capture(saved)
     assert axes_to_letters(refined.axes) == TRUE_AXES != axes_to_letters(given.axes)

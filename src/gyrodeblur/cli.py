@@ -678,6 +678,7 @@ class _PhotoDeblur:
         self.curve = said_transfer_curve(given, args.transfer, say)
         self.t0 = time.perf_counter()
         self.cap = self.fix = None
+        self.calibrated_here = ""          # said after the time: what it includes
         if args.blind:
             if grid == "auto":
                 raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
@@ -740,6 +741,7 @@ class _PhotoDeblur:
         for line in format_estimates(res.estimates):
             self.say(line)
         self.cap = res.capture
+        self.calibrated_here = f" (the calibration's {res.seconds:.1f} s included)"
 
     def finish(self) -> None:
         """Deblur the photo and write its outputs: all of them or none."""
@@ -808,7 +810,7 @@ class _PhotoDeblur:
         gh, gw = given.pixels.shape[:2]
         say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
             f"method {self.method}, PSF extent {e.min()}-{e.max()} px, "
-            f"{time.perf_counter() - self.t0:.2f} s")
+            f"{time.perf_counter() - self.t0:.2f} s{self.calibrated_here}")
         if args.save_capture:
             first = (" (the first photo's: the others keep their own exposure start; give "
                      "one --save-capture per photo to write each)"
