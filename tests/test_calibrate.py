@@ -695,7 +695,7 @@ def test_cli_save_capture_failing_leaves_the_other_outputs_as_they_were(cli_dir,
 
     d = cli_dir
     given = load_capture(d / "cap.json")
-    fake = types.SimpleNamespace(capture=given, estimates=None)
+    fake = types.SimpleNamespace(capture=given, estimates=None, seconds=0.0)
     monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", lambda *a, **k: fake)
     monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est: [])
 
