@@ -46,6 +46,20 @@ def test_load_and_round_trip(capture_files):
     assert back.to_dict() == varied.to_dict()
 
 
+def test_captures_naming_one_log_share_it_when_given_a_cache(capture_files):
+    """With ``logs``, captures that name the same file (by another relative path too)
+    share one log, read once; without it each capture reads its own."""
+    d, doc = capture_files
+    (d / "sub").mkdir()
+    (d / "sub" / "cap2.json").write_text(json.dumps(dict(doc, exposure_start=1001.5, gyro=dict(
+        doc["gyro"], path="../gyro.gcsv"))))
+    logs = {}
+    a = load_capture(d / "cap.json", logs=logs)
+    b = load_capture(d / "sub" / "cap2.json", logs=logs)
+    assert a.log is b.log and len(logs) == 1 and b.exposure_start == 1001.5
+    assert load_capture(d / "cap.json").log is not a.log
+
+
 def test_overrides_and_offset(capture_files):
     d, _ = capture_files
     cap = load_capture(d / "cap.json", overrides={"time_offset": 0.5, "readout_time": 0.0,

@@ -1238,6 +1238,9 @@ def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_d
     doc = json.loads((d / "cap.json").read_text())
     doc["gyro"]["path"] = "glog.json"
     (d / "cap_glog.json").write_text(json.dumps(doc))
+    doc = json.loads((d / "cap.json").read_text())          # a focal length 100x too long
+    doc["camera"].update(fx=2e4, fy=2e4)
+    (d / "cap_mm.json").write_text(json.dumps(doc))
 
     def no_work(*args, **kwargs):
         raise AssertionError("deblurred or calibrated before every photo was checked")
@@ -1255,9 +1258,14 @@ def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_d
               f"{cap},{d / 'cap_glog.json'}", "--refine", "--save-capture",
               str(d / "glog.json"), "--overwrite"], "glog.json: is one of the command's inputs"),
             ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture", cap,
-              "--exposure-start", "50.3"], "--exposure-start: would give every photo")):
+              "--exposure-start", "50.3"], "--exposure-start: would give every photo"),
+            ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture",
+              f"{cap},{d / 'cap_mm.json'}"],
+             f"cap_mm.json: the blur at (0, 0) would span")):
         msg = _run_error(["deblur", *argv, *outs], capsys)
         assert said in msg and "written before" not in msg, msg
+        if "cap_mm" in said:                         # the photo it concerns is named
+            assert msg.endswith(f"(for {d / 'b1_turned.png'})"), msg
         assert not (d / "n0.png").exists()
     assert (d / "glog.json").read_bytes() == (d / "gyro.gcsv").read_bytes()
     # stopped while deblurring the second: what the first wrote is said

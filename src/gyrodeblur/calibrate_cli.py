@@ -106,8 +106,10 @@ def calibrate_command(args, say, load_capture) -> None:
     refuse_one_start_for_several(args, len(args.photos))
     turns = [t for entry in args.photo_rotation or [[0]] for t in entry]   # appended lists
     if len(turns) not in (1, len(args.photos)):
-        raise InputError("--photo-rotation", f"{len(turns)} rotations for {len(args.photos)} "
-                                             "photos: give one, or one per photo")
+        n = len(args.photos)
+        raise InputError("--photo-rotation", f"{len(turns)} rotation{'s' * (len(turns) != 1)} "
+                                             f"for {n} photo{'s' * (n != 1)}: give one"
+                                             f"{', or one per photo' * (n > 1)}")
     turns = turns * len(args.photos) if len(turns) == 1 else turns
     # before reading anything; the inputs are checked once the captures name their logs
     for out in outputs:
@@ -121,7 +123,7 @@ def calibrate_command(args, say, load_capture) -> None:
         raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
                                       "photos: give one, or one per photo (comma-separated)")
     refuse_repeated_photos(args.photos, [p.pixels for p in photos])
-    caps = []
+    caps, args.logs = [], {}            # one long log named by every capture: read once
     for k, ph in enumerate(photos):
         a = argparse.Namespace(**vars(args))
         a.capture = paths[k] if len(paths) > 1 else paths[0]

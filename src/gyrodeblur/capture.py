@@ -516,7 +516,8 @@ def check_capture(capture, what: str = "capture") -> "Capture":
 
 def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | None = None,
                  image_size: tuple[int, int] | None = None,
-                 exif_hints: dict | None = None, report=None) -> Capture:
+                 exif_hints: dict | None = None, report=None,
+                 logs: dict | None = None) -> Capture:
     """Build a :class:`Capture` from a JSON file, options and EXIF hints.
 
     Parameters
@@ -543,6 +544,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         ``exposure_start_from_exif`` then says so).
     report : callable(str), optional
         Told which values came from EXIF.
+    logs : dict, optional
+        Gyro logs already read, by file and reading options: a log found there is shared,
+        not read again, and one read is added (several photos' captures naming one long
+        log then hold one copy).
     """
     data: dict = {}
     base = "."
@@ -671,7 +676,12 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         if isinstance(rc, str) or not isinstance(rc, (list, tuple)) or len(rc) != 3:
             raise InputError(src, f"gyro.rate_columns must list three columns, got {rc!r}")
         csv_opts["rate_columns"] = tuple(rc)
-    log = read_gyro_log(gpath, fmt, **csv_opts)
+    key = (os.path.realpath(gpath), fmt, repr(sorted(csv_opts.items())))
+    log = None if logs is None else logs.get(key)
+    if log is None:
+        log = read_gyro_log(gpath, fmt, **csv_opts)
+        if logs is not None:
+            logs[key] = log
     if "time_unit_from" in log.meta and report:
         report(f"gyro log times read in {log.meta['time_unit']} (from "
                f"{log.meta['time_unit_from']}; give --time-unit if that is wrong)")

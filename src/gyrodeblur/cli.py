@@ -175,7 +175,7 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
         if not exif_start:
             hints = {k: v for k, v in hints.items() if not k.startswith("capture_time")}
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
-                       report=say)
+                       report=say, logs=getattr(args, "logs", None))
     if photo is not None:
         if size[1] > size[0] and not getattr(args, "photo_rotation", 0) \
                 and cap.log.in_device_axes:
@@ -438,18 +438,19 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
-def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str) -> list:
+def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str,
+               read: bool = False) -> list:
     """The values of a repeatable option for ``n`` photos. One photo's are taken as given
     (a file name may hold a comma); for several, an option given once is a list split at
-    its commas (unless it names an existing file), one repeated gives a value each time.
-    The count must be one of ``allowed``."""
+    its commas (unless ``read``, files the command reads, and it names an existing file),
+    one repeated gives a value each time. The count must be one of ``allowed``."""
     given = values if isinstance(values, list) else ([] if values is None else [values])
     if n == 1:
         if len(given) > 1:
             raise InputError(option, f"given {len(given)} times for one photo")
         return given
     vals = given
-    if len(given) == 1 and not os.path.isfile(os.fspath(given[0])):
+    if len(given) == 1 and not (read and os.path.isfile(os.fspath(given[0]))):
         vals = [v for v in os.fspath(given[0]).split(",") if v]
     if len(vals) not in allowed:
         spelt = " or ".join(str(k) for k in allowed if k)
@@ -467,7 +468,8 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
     photos = list(args.photos)
     n = len(photos)
     outputs = _per_photo(args.output, n, "-o", (n,), "output")
-    captures = _per_photo(args.capture, n, "--capture", (0, 1, n), "capture description")
+    captures = _per_photo(args.capture, n, "--capture", (0, 1, n), "capture description",
+                          read=True)
     psfs = _per_photo(args.save_psf, n, "--save-psf", (0, n), "PSF drawing")
     saved = _per_photo(args.save_capture, n, "--save-capture", (0, 1, n),
                        "corrected capture description")
@@ -484,7 +486,7 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
             if os.path.realpath(out) == os.path.realpath(other):
                 raise InputError(out, "is named twice as an output; give each its own file")
     inputs = photos + captures + ([args.gyro] if args.gyro else [])
-    args.written = []
+    args.written, args.logs = [], {}
     jobs = []
     for k, photo in enumerate(photos):
         a = argparse.Namespace(**vars(args))
@@ -493,7 +495,7 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
         a.save_psf = psfs[k] if psfs else None
         a.save_capture = saved[k] if k < len(saved) else None
         a.photo_rotation = turns[k] if len(turns) > 1 else turns[0]
-        a.inputs, a.several, a.written = inputs, n > 1, args.written
+        a.inputs, a.several, a.written, a.logs = inputs, n > 1, args.written, args.logs
         a.save_capture_once = n > 1 and len(saved) == 1
         jobs.append(a)
     return jobs
@@ -573,23 +575,28 @@ def _pixel_digest(pixels: np.ndarray) -> np.ndarray:
 @contextlib.contextmanager
 def _this_photo(args):
     """Among several photos, what goes wrong with one (``args.photo``) names it: its
-    warnings, and an error of no file of its own (which :func:`main` would say of every
-    photo)."""
+    warnings, as they come, and its errors (one of no file of its own, which :func:`main`
+    would say of every photo, is the photo's)."""
     if not getattr(args, "several", False):
         yield
         return
-    caught = []
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with warnings.catch_warnings():
+            # a filter added makes Python forget the warnings shown for the photos before
+            warnings.simplefilter("default", append=True)
+            shown = warnings.showwarning
+
+            def named(message, category, filename, lineno, file=None, line=None):
+                shown(f"{args.photo}: {message}", category, filename, lineno, file, line)
+
+            warnings.showwarning = named
             yield
     except InputError as exc:
         if exc.source is None:
             raise InputError(args.photo, exc.problem) from None
+        if exc.source != args.photo and args.photo not in exc.problem:
+            raise InputError(exc.source, f"{exc.problem} (for {args.photo})") from None
         raise
-    finally:
-        for w in caught:
-            warnings.warn(f"{args.photo}: {w.message}", w.category, stacklevel=3)
 
 
 def _naming(photo: str, say):
@@ -618,6 +625,18 @@ def _deblur_session(runs, say) -> None:
         run.cap, run.t0 = cap, time.perf_counter()
         run.finish()
         run.release()
+
+
+def _check_blur_fits_the_frame(cap) -> None:
+    """Refuse, before any work, a blur longer than the frame at the frame's corners or
+    centre (:func:`gyrodeblur.psf.check_blur_span`, which the deblur applies to every
+    PSF): wrong units in a capture, said before another photo is deblurred."""
+    from .psf import check_blur_span, trace
+    cam = cap.camera
+    for x, y in ((0, 0), (cam.width - 1, 0), (cam.cx, cam.cy), (0, cam.height - 1),
+                 (cam.width - 1, cam.height - 1)):
+        offsets = trace(cap, x, y, 64) - [x, y]      # the PSF's reach, as render_psf's
+        check_blur_span(cap, 2 * float(np.abs(offsets).max()), f"at ({x:.0f}, {y:.0f})")
 
 
 class _PhotoDeblur:
@@ -691,6 +710,7 @@ class _PhotoDeblur:
         self.cap = cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf,
                                 args.save_capture)
+        _check_blur_fits_the_frame(cap)
         if cap.exposure_start_from_exif and not args.refine:
             raise InputError("--refine", "the exposure start is the photo's EXIF time, known "
                                          "only to tens of milliseconds or worse, and the "
@@ -1068,6 +1088,10 @@ def main(argv: list[str] | None = None) -> int:
     except _Terminated:
         _write(sys.stderr, f"gyrodeblur: terminated; {_written_before(args, 'nothing')}\n")
         return 143
+    except Exception:                   # unexpected (exit 1, a traceback): what is written
+        if getattr(args, "written", None):
+            _write(sys.stderr, f"gyrodeblur: {_written_before(args, 'nothing')}\n")
+        raise
     finally:
         _on_sigterm(previous)
     return 0
