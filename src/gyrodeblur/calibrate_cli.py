@@ -15,7 +15,8 @@ from .errors import InputError
 from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
-           "refuse_non_json", "refuse_repeated_photos", "refuse_one_start_for_several"]
+           "refuse_non_json", "refuse_repeated_photos", "refuse_one_start_for_several",
+           "refuse_repeated_outputs", "photo_rotations"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -104,13 +105,7 @@ def calibrate_command(args, say, load_capture) -> None:
     outputs = _outputs(args.output, len(args.photos))
 
     refuse_one_start_for_several(args, len(args.photos))
-    turns = [t for entry in args.photo_rotation or [[0]] for t in entry]   # appended lists
-    if len(turns) not in (1, len(args.photos)):
-        n = len(args.photos)
-        raise InputError("--photo-rotation", f"{len(turns)} rotation{'s' * (len(turns) != 1)} "
-                                             f"for {n} photo{'s' * (n != 1)}: give one"
-                                             f"{', or one per photo' * (n > 1)}")
-    turns = turns * len(args.photos) if len(turns) == 1 else turns
+    turns = photo_rotations(args.photo_rotation, len(args.photos))
     # before reading anything; the inputs are checked once the captures name their logs
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=args.photos)
@@ -174,11 +169,27 @@ def _outputs(given, n_photos: int) -> list[str]:
                                f"{'' if n_photos == 1 else 's'}: give one (the "
                                "first photo's corrected description), or one per photo "
                                "(comma-separated)")
-    for k, out in enumerate(outs):
-        for other in outs[:k]:
-            if os.path.realpath(out) == os.path.realpath(other):
-                raise InputError(out, "is named twice as an output; give each photo its own")
+    refuse_repeated_outputs(outs)
     return outs
+
+
+def refuse_repeated_outputs(paths) -> None:
+    """No file may be named twice among a command's outputs (also through a link)."""
+    for k, out in enumerate(paths):
+        for other in paths[:k]:
+            if os.path.realpath(out) == os.path.realpath(other):
+                raise InputError(out, "is named twice as an output; give each its own file")
+
+
+def photo_rotations(given, n_photos: int) -> list[int]:
+    """``--photo-rotation`` for ``n_photos`` photos: its values (the option appended, each
+    time a list) as one per photo, one given serving all."""
+    turns = [t for entry in given or [[0]] for t in entry]
+    if len(turns) not in (1, n_photos):
+        raise InputError("--photo-rotation", f"{len(turns)} rotation{'s' * (len(turns) != 1)} "
+                                             f"for {n_photos} photo{'s' * (n_photos != 1)}: "
+                                             f"give one{', or one per photo' * (n_photos > 1)}")
+    return turns * n_photos if len(turns) == 1 else turns
 
 
 def refuse_non_json(path) -> None:

@@ -265,9 +265,7 @@ def _check_saved_capture(args) -> None:
     for other, option in ((args.output, "-o"), (args.save_psf, "--save-psf")):
         if other and os.path.realpath(path) == os.path.realpath(other):
             raise InputError(path, f"is also the {option} output; choose another file")
-    inputs = getattr(args, "inputs", None) or [p for p in (args.photo, args.capture,
-                                                          args.gyro) if p]
-    _check_output(path, None, args.overwrite, image=False, inputs=inputs)
+    _check_output(path, None, args.overwrite, image=False, inputs=args.inputs)
     from .calibrate_cli import refuse_non_json
     refuse_non_json(path)
 
@@ -434,10 +432,6 @@ def cmd_simulate(args, say) -> None:
     say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
 
 
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word}{'' if n == 1 else 's'}"
-
-
 def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str,
                read: bool = False) -> list:
     """The values of a repeatable option for ``n`` photos. One photo's are taken as given
@@ -454,7 +448,7 @@ def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str,
         vals = [v for v in os.fspath(given[0]).split(",") if v]
     if len(vals) not in allowed:
         spelt = " or ".join(str(k) for k in allowed if k)
-        raise InputError(option, f"{_plural(len(vals), what)} for {n} photos: give {spelt} "
+        raise InputError(option, f"{len(vals)} {what}{'s' * (len(vals) != 1)} for {n} photos: give {spelt} "
                                  "(comma-separated, or the option repeated)")
     return vals
 
@@ -473,18 +467,12 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
     psfs = _per_photo(args.save_psf, n, "--save-psf", (0, n), "PSF drawing")
     saved = _per_photo(args.save_capture, n, "--save-capture", (0, 1, n),
                        "corrected capture description")
-    turns = [t for entry in args.photo_rotation or [[0]] for t in entry]   # appended lists
-    if len(turns) not in (1, n):
-        raise InputError("--photo-rotation", f"{_plural(len(turns), 'rotation')} for "
-                                             f"{_plural(n, 'photo')}: give one"
-                                             f"{', or one per photo' if n > 1 else ''}")
-    from .calibrate_cli import refuse_one_start_for_several
+    from .calibrate_cli import (photo_rotations, refuse_one_start_for_several,
+                                refuse_repeated_outputs)
+    turns = photo_rotations(args.photo_rotation, n)
     refuse_one_start_for_several(args, n)
-    named = outputs + psfs + saved if n > 1 else []     # one photo's: said as each is checked
-    for k, out in enumerate(named):
-        for other in named[:k]:
-            if os.path.realpath(out) == os.path.realpath(other):
-                raise InputError(out, "is named twice as an output; give each its own file")
+    if n > 1:                              # one photo's: said as each is checked
+        refuse_repeated_outputs(outputs + psfs + saved)
     inputs = photos + captures + ([args.gyro] if args.gyro else [])
     args.written, args.logs = [], {}
     jobs = []
@@ -494,7 +482,7 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
         a.capture = captures[k] if len(captures) > 1 else (captures or [None])[0]
         a.save_psf = psfs[k] if psfs else None
         a.save_capture = saved[k] if k < len(saved) else None
-        a.photo_rotation = turns[k] if len(turns) > 1 else turns[0]
+        a.photo_rotation = turns[k]
         a.inputs, a.several, a.written, a.logs = inputs, n > 1, args.written, args.logs
         a.save_capture_once = n > 1 and len(saved) == 1
         jobs.append(a)
@@ -577,7 +565,7 @@ def _this_photo(args):
     """Among several photos, what goes wrong with one (``args.photo``) names it: its
     warnings, as they come, and its errors (one of no file of its own, which :func:`main`
     would say of every photo, is the photo's)."""
-    if not getattr(args, "several", False):
+    if not args.several:
         yield
         return
     try:
@@ -628,9 +616,9 @@ def _deblur_session(runs, say) -> None:
 
 
 def _check_blur_fits_the_frame(cap) -> None:
-    """Refuse, before any work, a blur longer than the frame at the frame's corners or
-    centre (:func:`gyrodeblur.psf.check_blur_span`, which the deblur applies to every
-    PSF): wrong units in a capture, said before another photo is deblurred."""
+    """Refuse a blur longer than the frame at the frame's corners or centre
+    (:func:`gyrodeblur.psf.check_blur_span`, which the deblur applies to every PSF): wrong
+    units in one photo's capture, said before another photo is deblurred."""
     from .psf import check_blur_span, trace
     cam = cap.camera
     for x, y in ((0, 0), (cam.width - 1, 0), (cam.cx, cam.cy), (0, cam.height - 1),
@@ -649,14 +637,14 @@ class _PhotoDeblur:
         from .icc import said_transfer_curve
 
         self.args, self.say = args, say
-        inputs = getattr(args, "inputs", ())
+        inputs = args.inputs
         self.given = self.photo = None
         self.load()
         given, photo = self.given, self.photo
         _check_output(args.output, given, args.overwrite, inputs=inputs)
         if args.save_psf:
             _check_output(args.save_psf, None, args.overwrite,      # a drawing: no alpha
-                          inputs=inputs or [args.photo])
+                          inputs=inputs)
             if os.path.realpath(args.save_psf) == os.path.realpath(args.output):
                 raise InputError(args.save_psf, "is also the output photo (-o); choose another "
                                                 "file")
@@ -710,7 +698,8 @@ class _PhotoDeblur:
         self.cap = cap = _load_capture(args, photo, say)
         _check_not_over_capture(cap, args.overwrite, args.output, args.save_psf,
                                 args.save_capture)
-        _check_blur_fits_the_frame(cap)
+        if args.several:        # one photo alone: the deblur's own check, before any output
+            _check_blur_fits_the_frame(cap)
         if cap.exposure_start_from_exif and not args.refine:
             raise InputError("--refine", "the exposure start is the photo's EXIF time, known "
                                          "only to tens of milliseconds or worse, and the "
@@ -834,7 +823,7 @@ class _PhotoDeblur:
         if args.save_capture:
             first = (" (the first photo's: the others keep their own exposure start; give "
                      "one --save-capture per photo to write each)"
-                     if getattr(args, "save_capture_once", False) else "")
+                     if args.save_capture_once else "")
             say(f"wrote the corrected capture description {args.save_capture}{first}")
 
 
