@@ -573,7 +573,45 @@ def test_cli_capture_per_photo_count_must_match(cli_dir, capsys):
                f"{d / 'cap.json'},{d / 'cap.json'},{d / 'cap.json'}", "-o",
                str(d / "out" / "y.json")])
     assert rc == 2
-    assert "one per photo" in capsys.readouterr().err
+    assert "3 capture descriptions for 2 photos: give 1 or 2" in capsys.readouterr().err
+
+
+def test_cli_calibrate_reads_per_photo_options_as_deblur_does(cli_dir, capsys, monkeypatch):
+    """calibrate reads --capture and -o as deblur does (one reading,
+    calibrate_cli.per_photo_values): one photo's value as written, commas and all; a file
+    given once for several photos that exists is that file, not a list; an option repeated
+    for one photo is refused before any calibration."""
+    import shutil
+    import gyrodeblur.calibrate_cli as cc
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stand_in(images, caps, **kwargs):
+        seen.append([c.source for c in caps])
+        raise Stop
+
+    monkeypatch.setattr(cc, "calibrate", stand_in)
+    d = cli_dir
+    comma = d / "cap,1.json"
+    shutil.copy(d / "cap.json", comma)
+    photo = str(d / "blurred.png")
+    for photos in ([photo], [photo, str(d / "again_for_commas.png")]):
+        if len(photos) == 2:
+            from gyrodeblur.imageio import read_photo, write_photo
+            px = read_photo(photo).pixels
+            write_photo(photos[1], np.clip(px[::-1] * 0.9 + 0.05, 0, 1), bit_depth=8)
+        out = d / "out" / ("c,1.json" if len(photos) == 1 else "c1.json")  # outputs: split
+        with pytest.raises(Stop):
+            main(["calibrate", *photos, "--capture", str(comma), "-o", str(out)])
+        assert [os.path.basename(s) for s in seen.pop()] == ["cap,1.json"] * len(photos)
+    capsys.readouterr()
+    assert main(["calibrate", photo, "--capture", str(d / "cap.json"), "-o",
+                 str(d / "out" / "a.json"), "-o", str(d / "out" / "b.json")]) == 2
+    assert "-o: given 2 times for one photo" in capsys.readouterr().err
+    assert not seen and not (d / "out" / "a.json").exists()
 
 
 def test_cli_a_photo_without_texture_is_named_in_the_error(cli_dir, capsys):

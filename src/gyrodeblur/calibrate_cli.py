@@ -16,7 +16,7 @@ from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
            "refuse_non_json", "refuse_repeated_photos", "refuse_one_start_for_several",
-           "refuse_repeated_outputs", "photo_rotations"]
+           "refuse_repeated_outputs", "photo_rotations", "per_photo_values"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -112,11 +112,8 @@ def calibrate_command(args, say, load_capture) -> None:
     photos = [read_photo(p) for p in args.photos]
     photos = [replace(ph, pixels=to_sensor_layout(ph.stored_channels, deg))
               for ph, deg in zip(photos, turns)]
-    given = args.capture if isinstance(args.capture, list) else [args.capture or ""]
-    paths = [c for entry in given for c in entry.split(",") if c] or given[:1]
-    if len(paths) not in (1, len(photos)):
-        raise InputError("--capture", f"{len(paths)} capture descriptions for {len(photos)} "
-                                      "photos: give one, or one per photo (comma-separated)")
+    paths = per_photo_values(args.capture, len(photos), "--capture", (0, 1, len(photos)),
+                             "capture description", read=True)
     refuse_repeated_photos(args.photos, [p.pixels for p in photos])
     caps, args.logs = [], {}            # one long log named by every capture: read once
     for k, ph in enumerate(photos):
@@ -160,17 +157,35 @@ def refuse_one_start_for_several(args, n_photos: int) -> None:
 
 
 def _outputs(given, n_photos: int) -> list[str]:
-    """The output paths of ``-o`` (repeated or comma-separated): one, or one per photo,
-    no two the same file."""
-    given = given if isinstance(given, list) else [given]
-    outs = [o for entry in given for o in os.fspath(entry).split(",") if o]
-    if len(outs) not in (1, n_photos):
-        raise InputError("-o", f"{len(outs)} outputs for {n_photos} photo"
-                               f"{'' if n_photos == 1 else 's'}: give one (the "
-                               "first photo's corrected description), or one per photo "
-                               "(comma-separated)")
+    """The output paths of ``-o`` (as :func:`per_photo_values` reads them): one, or one per
+    photo, no two the same file."""
+    outs = per_photo_values(given, n_photos, "-o", (1, n_photos), "output",
+                            hint="one is the first photo's corrected description")
     refuse_repeated_outputs(outs)
     return outs
+
+
+def per_photo_values(values, n: int, option: str, allowed: tuple[int, ...], what: str,
+                     read: bool = False, hint: str = "") -> list:
+    """The values of a repeatable option for ``n`` photos, as ``calibrate`` and ``deblur``
+    read them. One photo's are taken as given (a file name may hold a comma); for
+    several, an option given once is a list split at its commas (unless ``read``, files
+    the command reads, and it names an existing file), one repeated gives a value each
+    time. The count must be one of ``allowed``; ``hint`` ends the message when not."""
+    given = values if isinstance(values, list) else ([] if values is None else [values])
+    if n == 1:
+        if len(given) > 1:
+            raise InputError(option, f"given {len(given)} times for one photo")
+        return given
+    vals = given
+    if len(given) == 1 and not (read and os.path.isfile(os.fspath(given[0]))):
+        vals = [v for v in os.fspath(given[0]).split(",") if v]
+    if len(vals) not in allowed:
+        spelt = " or ".join(str(k) for k in allowed if k)
+        raise InputError(option, f"{len(vals)} {what}{'s' * (len(vals) != 1)} for {n} photos: "
+                                 f"give {spelt} (comma-separated, or the option repeated)"
+                                 + (f"; {hint}" if hint else ""))
+    return vals
 
 
 def refuse_repeated_outputs(paths) -> None:

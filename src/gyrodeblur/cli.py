@@ -432,43 +432,22 @@ def cmd_simulate(args, say) -> None:
     say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
 
 
-def _per_photo(values, n: int, option: str, allowed: tuple[int, ...], what: str,
-               read: bool = False) -> list:
-    """The values of a repeatable option for ``n`` photos. One photo's are taken as given
-    (a file name may hold a comma); for several, an option given once is a list split at
-    its commas (unless ``read``, files the command reads, and it names an existing file),
-    one repeated gives a value each time. The count must be one of ``allowed``."""
-    given = values if isinstance(values, list) else ([] if values is None else [values])
-    if n == 1:
-        if len(given) > 1:
-            raise InputError(option, f"given {len(given)} times for one photo")
-        return given
-    vals = given
-    if len(given) == 1 and not (read and os.path.isfile(os.fspath(given[0]))):
-        vals = [v for v in os.fspath(given[0]).split(",") if v]
-    if len(vals) not in allowed:
-        spelt = " or ".join(str(k) for k in allowed if k)
-        raise InputError(option, f"{len(vals)} {what}{'s' * (len(vals) != 1)} for {n} photos: give {spelt} "
-                                 "(comma-separated, or the option repeated)")
-    return vals
-
-
 def _deblur_jobs(args) -> list[argparse.Namespace]:
     """One namespace per photo of ``deblur``, with that photo's ``photo``, ``output``,
     ``capture``, ``save_psf``, ``save_capture`` and ``photo_rotation``, ``inputs`` (every
     file the command names to read), ``several`` (whether there are other photos, which
     its messages then name it apart from) and ``written`` (the outputs of the photos
     finished, one list shared with ``args``). The outputs are checked not to repeat."""
+    from .calibrate_cli import (per_photo_values, photo_rotations,
+                                refuse_one_start_for_several, refuse_repeated_outputs)
     photos = list(args.photos)
     n = len(photos)
-    outputs = _per_photo(args.output, n, "-o", (n,), "output")
-    captures = _per_photo(args.capture, n, "--capture", (0, 1, n), "capture description",
+    outputs = per_photo_values(args.output, n, "-o", (n,), "output")
+    captures = per_photo_values(args.capture, n, "--capture", (0, 1, n), "capture description",
                           read=True)
-    psfs = _per_photo(args.save_psf, n, "--save-psf", (0, n), "PSF drawing")
-    saved = _per_photo(args.save_capture, n, "--save-capture", (0, 1, n),
+    psfs = per_photo_values(args.save_psf, n, "--save-psf", (0, n), "PSF drawing")
+    saved = per_photo_values(args.save_capture, n, "--save-capture", (0, 1, n),
                        "corrected capture description")
-    from .calibrate_cli import (photo_rotations, refuse_one_start_for_several,
-                                refuse_repeated_outputs)
     turns = photo_rotations(args.photo_rotation, n)
     refuse_one_start_for_several(args, n)
     if n > 1:                              # one photo's: said as each is checked
