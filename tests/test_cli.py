@@ -1246,9 +1246,11 @@ def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_d
         raise AssertionError("deblurred or calibrated before every photo was checked")
 
     monkeypatch.setattr(deblur_mod, "deblur", no_work)
+    monkeypatch.setattr(deblur_mod, "deblur_blind", no_work)
     import gyrodeblur.calibrate
     monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", no_work)
     outs = ["-o", str(d / "n0.png"), "-o", str(d / "n1.png")]
+    write_photo(d / "small.png", read_photo(d / "b1.png").pixels[:60, :80], bit_depth=8)
     for argv, said in (
             ([str(d / "b1.png"), str(d / "tiny.png"), "--capture", cap],
              f"error: {d / 'tiny.png'}: the image has only 6 rows"),
@@ -1261,11 +1263,17 @@ def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_d
               "--exposure-start", "50.3"], "--exposure-start: would give every photo"),
             ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture",
               f"{cap},{d / 'cap_mm.json'}"],
-             f"cap_mm.json: the blur at (0, 0) would span")):
+             f"cap_mm.json: the blur at (0, 0) would span"),
+            ([str(d / "b1.png"), str(d / "small.png"), "--blind", "--kernel-size", "31"],
+             f"--kernel-size: 31 px is too large for a 80x60 image"),
+            ([str(d / "b1.png"), str(d / "small.png"), "--blind", "--kernel-size", "19",
+              "--grid", "2x2"], "--grid: 4 patches of")):
         msg = _run_error(["deblur", *argv, *outs], capsys)
         assert said in msg and "written before" not in msg, msg
         if "cap_mm" in said:                         # the photo it concerns is named
             assert msg.endswith(f"(for {d / 'b1_turned.png'})"), msg
+        if "--blind" in argv:
+            assert msg.endswith(f"(for {d / 'small.png'})"), msg
         assert not (d / "n0.png").exists()
     assert (d / "glog.json").read_bytes() == (d / "gyro.gcsv").read_bytes()
     # stopped while deblurring the second: what the first wrote is said

@@ -669,6 +669,10 @@ class _PhotoDeblur:
             if grid == "auto":
                 raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
                                            "--blind give RxC (default 1x1, one kernel)")
+            from .deblur import check_blind_sizes     # now, not at the photo's turn
+            check_blind_sizes((h, w), BLIND_KERNEL_SIZE if args.kernel_size is None
+                              else args.kernel_size, (1, 1) if grid is None else grid,
+                              self.overlap)
             self._jpeg_noise()
             return
         if args.refine:

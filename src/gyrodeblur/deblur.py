@@ -32,7 +32,7 @@ from .wiener import DEFAULT_PHI, check_phi, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
            "DEFAULT_METHOD", "register_method", "plan_psf_field", "MODELS",
-           "GLOBAL_DEFAULT_MAX_PIXELS"]
+           "GLOBAL_DEFAULT_MAX_PIXELS", "check_blind_sizes"]
 
 Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -908,12 +908,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     H, W = image.shape[:2]
     lin = get_transfer_curve(transfer).decode(split_alpha(image)[0])     # not the mask
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
-    patches = patch_grid((H, W), grid, overlap)
-    if len(patches) > 1 and kernel_size >= min(patches[0].shape) // 2:
-        raise InputError("--grid", f"{len(patches)} patches of {patches[0].shape[1]}x"
-                                   f"{patches[0].shape[0]} px are too small for a "
-                                   f"{kernel_size} px kernel (it must be under half a "
-                                   f"patch's shorter side): use a coarser grid")
+    patches = check_blind_sizes((H, W), kernel_size, grid, overlap, max_pixels)
     psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
     if check_blur and _shows_no_blur(image, psfs[0], transfer):
         delta = np.zeros_like(psfs[0])
@@ -928,6 +923,35 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     out = deblur_with_psfs(image, patches, psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, **options)
     return out, PSFField(_centres_xy(patches), psfs, tuple(int(g) for g in grid))
+
+
+def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
+                      overlap: float = DEFAULT_OVERLAP, max_pixels: int = 1_000_000) -> list:
+    """Refuse a kernel that :func:`deblur_blind` could not estimate on a photo of ``shape``
+    (rows, columns): one not under half the shorter side of the part it is estimated on
+    (the central ``max_pixels``, and each patch's share of them), or a ``grid`` whose
+    patches it does not fit. Cheap (no pixels): for checking every photo of a command
+    before any is deblurred. Returns the patches.
+
+    Raises
+    ------
+    InputError
+        Sources ``"--kernel-size"`` (a size not odd, or too large for the photo),
+        ``"--grid"`` (patches too small for the kernel) or ``"--overlap"``.
+    """
+    from .blind import _check_kernel_size
+    patches = patch_grid(shape, grid, overlap)
+    _check_kernel_size(kernel_size, _central_shape(shape, max_pixels))
+    if len(patches) > 1:
+        if kernel_size >= min(patches[0].shape) // 2:
+            raise InputError("--grid", f"{len(patches)} patches of {patches[0].shape[1]}x"
+                                       f"{patches[0].shape[0]} px are too small for a "
+                                       f"{kernel_size} px kernel (it must be under half a "
+                                       f"patch's shorter side): use a coarser grid")
+        share = max_pixels / len(patches)
+        for p in patches:
+            _check_kernel_size(kernel_size, _central_shape(p.shape, share))
+    return patches
 
 
 def _shows_no_blur(image, psf, transfer) -> bool:
@@ -959,9 +983,15 @@ def _centres_xy(patches) -> np.ndarray:
 def _central(a: np.ndarray, max_pixels: float) -> np.ndarray:
     """The central part of ``a`` with at most ``max_pixels`` pixels (same aspect ratio)."""
     h, w = a.shape[:2]
-    if h * w <= max_pixels:
-        return a
-    s = np.sqrt(max_pixels / (h * w))
-    hh, ww = int(h * s), int(w * s)
+    hh, ww = _central_shape((h, w), max_pixels)
     y0, x0 = (h - hh) // 2, (w - ww) // 2
     return a[y0:y0 + hh, x0:x0 + ww]
+
+
+def _central_shape(shape: tuple[int, int], max_pixels: float) -> tuple[int, int]:
+    """(rows, columns) of :func:`_central`'s part of an array of ``shape``."""
+    h, w = shape
+    if h * w <= max_pixels:
+        return h, w
+    s = np.sqrt(max_pixels / (h * w))
+    return int(h * s), int(w * s)
