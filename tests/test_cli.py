@@ -1181,7 +1181,8 @@ def test_several_photos_are_deblurred_one_after_another_each_as_alone(capture_di
     out = capsys.readouterr().out
     assert f"{photos[0]} -> {d / 'both0.png'}" in out and f"{photos[1]} -> " in out
     assert "take their exposure start from" not in out
-    assert f"{photos[1]}: JPEG: deconvolved for noise" in out       # named among several
+    assert f"{photos[1]}: JPEG: deconvolved for noise" in out       # named among several,
+    assert out.index(f"{photos[0]} -> ") < out.index(f"{photos[1]}: JPEG")     # at its turn
     for k in range(2):
         assert np.array_equal(read_photo(d / f"both{k}.png").pixels,
                               read_photo(d / f"alone{k}.png").pixels), k
@@ -1207,6 +1208,12 @@ def test_several_photos_are_deblurred_one_after_another_each_as_alone(capture_di
                       str(d / "n1.png"), "--save-psf", str(d / "f.png")], capsys)
     assert "--save-psf: 1 PSF drawing for 2 photos: give 2" in msg
     assert not (d / "n0.png").exists() and (d / "taken.png").read_bytes() == b"someone's"
+    # a JPEG's noise level is said at its turn: not for a command a later photo stops
+    write_photo(d / "tiny.png", np.full((6, 8, 3), 0.5, np.float32), bit_depth=8)
+    assert main(["deblur", photos[1], str(d / "tiny.png"), "--capture", cap, "-o",
+                 f"{d / 'n0.png'},{d / 'n1.png'}"]) == 2
+    said = capsys.readouterr()
+    assert "the image has only 6 rows" in said.err and "JPEG" not in said.out
 
 
 def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_dir, capsys,

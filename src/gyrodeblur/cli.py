@@ -710,16 +710,17 @@ class _PhotoDeblur:
 
     def _jpeg_noise(self) -> None:
         """For a JPEG, the sparse method's noise level raised for its compression error
-        (said once the inputs are known to be good)."""
+        (said at the photo's turn, once every photo's inputs are known to be good)."""
         photo, options = self.photo, self.options
+        self.noise_note = ""
         if self.method == "sparse" and "noise_sigma" not in options and photo.quantization:
             from .noise import estimate_noise_sigma, photo_noise_sigma
             shown = estimate_noise_sigma(self.colour)
             options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
-            self.say(f"JPEG: deconvolved for noise of "
-                     f"{255 * options['noise_sigma']:.2f} levels (its pixels show "
-                     f"{255 * shown:.2f}; the compression's error counts as noise too; "
-                     "--noise-sigma sets it)")
+            self.noise_note = (f"JPEG: deconvolved for noise of "
+                               f"{255 * options['noise_sigma']:.2f} levels (its pixels show "
+                               f"{255 * shown:.2f}; the compression's error counts as noise "
+                               "too; --noise-sigma sets it)")
 
     def calibrate_alone(self) -> None:
         """``--refine`` for this photo alone: its capture replaced by the calibrated one."""
@@ -750,6 +751,8 @@ class _PhotoDeblur:
         args, say, options = self.args, self.say, self.options
         grid, overlap, curve, progress = self.grid, self.overlap, self.curve, self.progress
         colour, given = self.colour, self.given
+        if self.noise_note:
+            say(self.noise_note)
         if args.blind:
             from .deblur import deblur_blind
             blind_grid = (1, 1) if grid is None else grid
