@@ -13,7 +13,7 @@ import zlib
 import numpy as np
 import pytest
 import tifffile
-from PIL import Image, ImageCms, TiffImagePlugin
+from PIL import Image, ImageCms, PngImagePlugin, TiffImagePlugin
 
 from gyrodeblur import imageio
 from gyrodeblur.errors import InputError
@@ -388,6 +388,64 @@ def test_exif_and_icc_survive_read_write_read(tmp_path, src_ext, out_ext, bits):
     ifd0, sub, gps = exif_values(out.exif)
     assert (ifd0[271], ifd0[272], ifd0[274]) == ("Canon", "EOS R5", 6)   # make, model, turn
     assert sub[0x829A] == R(1, 60) and sub[0x920A] == 50 and gps[1] == "N"
+
+
+XMP = b'<x:xmpmeta xmlns:x="adobe:ns:meta/"><rdf:RDF>rated 4</rdf:RDF></x:xmpmeta>'
+
+
+@pytest.mark.parametrize("src_ext", [".jpg", ".png", ".tif"])
+@pytest.mark.parametrize("out_ext,bits", [(".jpg", 8), (".png", 8), (".png", 16),
+                                          (".tif", 8), (".tif", 16)])
+def test_print_resolution_and_xmp_survive_read_write_read(tmp_path, src_ext, out_ext, bits):
+    """dpi and the XMP packet are carried as EXIF is (a PNG's XMP is its iTXt chunk), beside
+    an EXIF block (a TIFF's sub-IFDs are appended after the resolution tags)."""
+    im = Image.fromarray(np.full((8, 12, 3), 90, np.uint8))
+    if src_ext == ".png":
+        info = PngImagePlugin.PngInfo()
+        info.add_itxt("XML:com.adobe.xmp", XMP.decode())
+        im.save(tmp_path / "in.png", exif=exif_block(), dpi=(300, 150), pnginfo=info)
+    elif src_ext == ".tif":                          # XMP is tag 700 of IFD0
+        exif = Image.Exif()
+        exif.load(exif_block())
+        exif[700] = XMP
+        im.save(tmp_path / "in.tif", exif=exif, dpi=(300, 150))
+    else:
+        im.save(tmp_path / "in.jpg", exif=exif_block(), dpi=(300, 150), xmp=XMP)
+    src = read_photo(tmp_path / f"in{src_ext}")
+    assert src.dpi == pytest.approx((300, 150), abs=0.01)
+    out = read_photo(write_photo(tmp_path / f"out{out_ext}", src.pixels, like=src,
+                                 bit_depth=None if out_ext == ".jpg" else bits))
+    assert out.dpi == pytest.approx((300, 150), abs=0.01)
+    got = out.png_text["XML:com.adobe.xmp"].encode() if out_ext == ".png" else out.xmp
+    assert got == XMP
+    assert exif_values(out.exif)[0][271] == "Canon"
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_png_text_chunks_are_carried_but_not_a_second_exif(tmp_path, bits):
+    """A PNG's text (Latin-1 and not) survives; ImageMagick's raw EXIF profile, read as the
+    EXIF block and written as eXIf, is not also written as text."""
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Copyright", "Ann Onym\u00e9")
+    info.add_itxt("Title", "\u65e5\u306e\u51fa")
+    info.add_text("Raw profile type exif", "stale")
+    Image.fromarray(np.full((4, 5, 3), 90, np.uint8)).save(tmp_path / "in.png", pnginfo=info)
+    src = read_photo(tmp_path / "in.png")
+    assert src.png_text == {"Copyright": "Ann Onym\u00e9", "Title": "\u65e5\u306e\u51fa"}
+    out = write_photo(tmp_path / "out.png", src.pixels, like=src, bit_depth=bits)
+    with Image.open(out) as im:
+        im.load()
+        assert im.text == src.png_text
+    assert read_photo(write_photo(tmp_path / "no.png", src.pixels)).png_text is None
+
+
+def test_an_xmp_packet_too_long_for_a_jpeg_is_left_out_with_a_warning(tmp_path):
+    src = like()
+    src = Photo(pixels=src.pixels, bit_depth=8, format="TIFF", xmp=b"x" * 70_000)
+    with pytest.warns(UserWarning, match="XMP .70000 bytes. is longer than one JPEG"):
+        out = write_photo(tmp_path / "a.jpg", src.pixels, like=src)
+    assert read_photo(out).xmp is None
+    assert read_photo(write_photo(tmp_path / "a.tif", src.pixels, like=src)).xmp == src.xmp
 
 
 def test_jpeg_and_png_exif_blocks_pass_through_byte_for_byte(tmp_path):

@@ -25,14 +25,19 @@ Conventions
   followed by a TIFF-structured directory. From JPEG and PNG it is the file's own block,
   byte for byte. TIFF files keep EXIF in their own tags, so for TIFF the block is
   rebuilt from the descriptive IFD0 tags (Make, Model, Orientation, ...) and the Exif and
-  GPS sub-directories. XMP, IPTC and PNG text chunks are not carried.
+  GPS sub-directories.
+* The print resolution (``Photo.dpi``: a JPEG's JFIF density, a PNG's ``pHYs``, a TIFF's
+  X/YResolution, where given in inches or centimetres), XMP (``Photo.xmp``: a JPEG's APP1
+  XMP packet, a TIFF's tag 700) and a PNG's text chunks (``Photo.png_text``: title,
+  author, copyright, a PNG's XMP ...) are carried too. IPTC is not.
 * A PNG's ``gAMA`` chunk (the file gamma, how the values were encoded) is kept in
   ``Photo.png_gamma`` unless an ``sRGB`` chunk says the file is sRGB; the transfer curve
   is read from it where no ICC profile says otherwise (:mod:`gyrodeblur.icc`).
 
-Writing: JPEG stores EXIF (APP1) and ICC (APP2); PNG stores ``eXIf``, ``iCCP`` and the
-input's ``gAMA``; TIFF
-stores the ICC profile (tag 34675) and EXIF as IFD0 tags plus Exif/GPS sub-IFDs. Values
+Writing: JPEG stores EXIF (APP1), XMP (APP1) and ICC (APP2); PNG stores ``eXIf``,
+``iCCP``, the input's ``gAMA`` and text chunks (XMP as ``XML:com.adobe.xmp``); TIFF
+stores the ICC profile (tag 34675), XMP (tag 700) and EXIF as IFD0 tags plus Exif/GPS
+sub-IFDs; each stores the print resolution. Values
 are clipped to ``[0, 1]`` and rounded to the nearest integer. Files are written to a
 temporary file in the destination folder and moved into place
 (:mod:`gyrodeblur.atomicfile`).
@@ -130,6 +135,13 @@ class Photo:
     grey_alpha : bool
         The file holds grey and alpha: ``pixels`` are RGBA with R = G = B, and
         :func:`write_photo` with ``like`` this photo writes grey and alpha again.
+    dpi : (float, float) or None
+        Print resolution, pixels per inch (x, y), where the file states one in inches or
+        centimetres; else ``None``.
+    xmp : bytes or None
+        A JPEG's or TIFF's XMP packet, unchanged (a PNG's is one of ``png_text``).
+    png_text : dict or None
+        A PNG's text chunks (``tEXt``, ``zTXt``, ``iTXt``), keyword -> text.
 
     Notes
     -----
@@ -146,6 +158,9 @@ class Photo:
     quantization: dict | None = None
     png_gamma: float | None = None
     grey_alpha: bool = False
+    dpi: tuple[float, float] | None = None
+    xmp: bytes | None = None
+    png_text: dict | None = None
 
     @property
     def stored_channels(self) -> np.ndarray:
@@ -197,7 +212,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
         raise InputError(p, "is a folder, not an image file")
     _refuse_other_kinds(p)
     try:
-        fmt, ints, exif, icc, tables, gamma = _decode(p)
+        fmt, ints, exif, icc, tables, gamma, carried = _decode(p)
     except InputError:
         raise
     except PermissionError:
@@ -214,7 +229,7 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     pixels, bit_depth = _to_float(p, ints, keep_bright=scene)
     return Photo(pixels=pixels, bit_depth=bit_depth, format=fmt, path=p,
                  exif=_normalise_exif(exif), icc_profile=icc or None, quantization=tables,
-                 png_gamma=gamma, grey_alpha=grey_alpha)
+                 png_gamma=gamma, grey_alpha=grey_alpha, **carried)
 
 
 #: Most pixels a photo may have (Pillow's own guard, 89 MP with a warning and 179 MP
@@ -248,16 +263,17 @@ def _refuse_too_many_pixels(p: str, width: int, height: int) -> None:
 
 
 def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict | None,
-                             float | None]:
+                             float | None, dict]:
     """(format, samples, EXIF block, ICC profile, JPEG quantisation tables, PNG file
-    gamma) of a file; decoder errors propagate."""
+    gamma, the other metadata carried: :class:`Photo`'s ``dpi``, ``xmp`` and
+    ``png_text``) of a file; decoder errors propagate."""
     try:
         im = _open_within_size_limit(p)
     except UnidentifiedImageError:
         if not _is_tiff(p):
             raise
         ints, icc = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot open
-        return "TIFF", ints, None, icc, None, None
+        return "TIFF", ints, None, icc, None, None, {}
     with im:
         fmt = {"MPO": "JPEG"}.get(im.format, im.format)
         if fmt not in ("JPEG", "PNG", "TIFF"):
@@ -273,6 +289,7 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
                               "is read", stacklevel=2)
             ints = _read_pillow_pixels(p, im)
             exif, icc = _pillow_exif(im), im.info.get("icc_profile")
+        carried = _carried_metadata(im, fmt)
     tables = None
     if fmt == "JPEG" and getattr(im, "quantization", None):
         tables = {int(k): [int(q) for q in v] for k, v in im.quantization.items()}
@@ -280,7 +297,40 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
     if fmt == "PNG" and "srgb" not in im.info:
         g = im.info.get("gamma")
         gamma = float(g) if isinstance(g, (int, float)) and 0 < g < 10 else None
-    return fmt, ints, exif, icc, tables, gamma
+    return fmt, ints, exif, icc, tables, gamma, carried
+
+
+#: ImageMagick's PNG text chunks for what :func:`write_photo` writes in their own chunks
+#: (``eXIf``, ``iCCP``): not carried as text, where they could contradict them.
+_RAW_PROFILES_WRITTEN = ("raw profile type exif", "raw profile type app1",
+                         "raw profile type icc", "raw profile type icm")
+
+
+def _carried_metadata(im: Image.Image, fmt: str) -> dict:
+    """The metadata :func:`write_photo` carries beside EXIF and ICC, as :class:`Photo`'s
+    ``dpi``, ``xmp`` and ``png_text`` (after the pixels are read: a PNG's text chunks
+    may follow them). What is malformed is left out."""
+    carried = {}
+    dpi = im.info.get("dpi")
+    try:
+        x, y = (float(v) for v in dpi)
+        if all(math.isfinite(v) and 0 < v < 1e6 for v in (x, y)):   # a PNG's 300 dpi, in
+            carried["dpi"] = tuple(float(round(v)) if abs(v - round(v)) < 0.02 else v
+                                   for v in (x, y))                # whole px/m: 299.9994
+    except (TypeError, ValueError):
+        pass
+    if fmt == "PNG":
+        text = {str(k): v for k, v in dict(getattr(im, "text", None) or {}).items()
+                if isinstance(v, str) and str(k).lower() not in _RAW_PROFILES_WRITTEN}
+        if text:
+            carried["png_text"] = text
+        return carried
+    xmp = im.tag_v2.get(700) if fmt == "TIFF" else im.info.get("xmp")
+    if isinstance(xmp, str):
+        xmp = xmp.encode("utf-8")
+    if isinstance(xmp, bytes) and xmp:
+        carried["xmp"] = xmp
+    return carried
 
 
 #: ISO base media file brands (bytes 8-12 after ``ftyp``) of formats read elsewhere, and
@@ -648,6 +698,8 @@ def _normalise_exif(block: bytes | None) -> bytes | None:
 
 #: The largest EXIF block (``Exif\0\0`` header included) a JPEG's APP1 segment holds.
 _JPEG_MAX_EXIF = 65533
+#: Longest XMP packet one JPEG APP1 segment holds (after its 29-byte namespace header).
+_JPEG_MAX_XMP = 65504
 #: Exif tags a JPEG's EXIF may lose when the block is too long: MakerNote, UserComment.
 _BULKY_EXIF_TAGS = (0x927C, 0x9286)
 
@@ -931,12 +983,25 @@ def write_photo(
         icc = None
     if fmt == "JPEG" and exif and len(exif) > _JPEG_MAX_EXIF:
         exif = _exif_for_jpeg(exif, p)
+    dpi = like.dpi if like is not None else None
+    xmp = like.xmp if like is not None else None
     if fmt == "PNG":
         gamma = like.png_gamma if like is not None else None
-        atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma))
+        text = dict(like.png_text or {}) if like is not None else {}
+        if xmp and _PNG_XMP_KEY not in text:                    # a JPEG's or TIFF's
+            text[_PNG_XMP_KEY] = xmp.decode("utf-8", "replace")
+        atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma,
+                                             dpi=dpi, text=text))
         return p
+    if xmp is None and like is not None and like.png_text:      # a PNG's, for JPEG / TIFF
+        xmp = (like.png_text.get(_PNG_XMP_KEY) or "").encode("utf-8") or None
+    if fmt == "JPEG" and xmp and len(xmp) > _JPEG_MAX_XMP:
+        warnings.warn(f"{p}: the photo's XMP ({len(xmp)} bytes) is longer than one JPEG "
+                      "segment holds: left out (.png or .tif keep it)", stacklevel=2)
+        xmp = None
     writer = {"JPEG": _write_jpeg, "TIFF": _write_tiff}[fmt]
-    atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality)))
+    atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality),
+                                     dpi=dpi, xmp=xmp))
     return p
 
 
@@ -1061,29 +1126,50 @@ def _refuse_too_big_for_jpeg(path: str, pixels: np.ndarray) -> None:
                                f"{pixels.shape[1]}x{pixels.shape[0]}: write .png or .tif")
 
 
-def _write_jpeg(f, ints, *, exif, icc, quality) -> None:
+#: The keyword of a PNG's XMP text chunk (``iTXt``).
+_PNG_XMP_KEY = "XML:com.adobe.xmp"
+
+
+def _write_jpeg(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
     options = {"quality": quality, "subsampling": 0 if ints.ndim == 3 else -1}
     if exif:
         options["exif"] = exif
     if icc:
         options["icc_profile"] = icc
+    if dpi:                                # JFIF's density: whole dots per inch
+        options["dpi"] = tuple(max(1, min(65535, round(v))) for v in dpi)
+    if xmp:
+        options["xmp"] = xmp
     Image.fromarray(ints).save(f, format="JPEG", **options)
 
 
-def _write_png(f, ints, *, exif, icc, gamma=None) -> None:
+def _write_png(f, ints, *, exif, icc, gamma=None, dpi=None, text=None) -> None:
     if ints.dtype == np.uint16:
-        _write_png16(f, ints, exif=exif, icc=icc, gamma=gamma)
+        _write_png16(f, ints, exif=exif, icc=icc, gamma=gamma, dpi=dpi, text=text)
         return
     options = {"compress_level": 6}
     if exif:
         options["exif"] = exif
     if icc:
         options["icc_profile"] = icc
+    if dpi:
+        options["dpi"] = dpi
+    info = PngImagePlugin.PngInfo()
     if gamma:
-        info = PngImagePlugin.PngInfo()
         info.add(b"gAMA", _png_gamma_bytes(gamma))
-        options["pnginfo"] = info
+    for key, value in (text or {}).items():
+        info.add_text(key, value)
+    options["pnginfo"] = info
     Image.fromarray(ints).save(f, format="PNG", **options)
+
+
+def _png_text_chunk(key: str, value: str) -> bytes:
+    """A ``tEXt`` chunk, or ``iTXt`` where keyword or text is not Latin-1 (as Pillow
+    writes them)."""
+    try:
+        return _png_chunk(b"tEXt", key.encode("latin-1") + b"\0" + value.encode("latin-1"))
+    except UnicodeEncodeError:
+        return _png_chunk(b"iTXt", key.encode("utf-8") + b"\0\0\0\0\0" + value.encode("utf-8"))
 
 
 def _png_gamma_bytes(gamma: float) -> bytes:
@@ -1128,7 +1214,7 @@ def _png_filter(rows: np.ndarray, prior: np.ndarray, bpp: int) -> np.ndarray:
     return np.concatenate([best.astype(np.uint8)[:, None], chosen], axis=1)
 
 
-def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None) -> None:
+def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None, dpi=None, text=None) -> None:
     """16-bit grey, grey + alpha, RGB or RGBA PNG with numpy + zlib (Pillow cannot write
     16-bit colour)."""
     height, width = ints.shape[:2]
@@ -1143,6 +1229,11 @@ def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None) -> None:
         f.write(_png_chunk(b"iCCP", b"ICC Profile\x00\x00" + zlib.compress(icc)))
     if exif:
         f.write(_png_chunk(b"eXIf", exif[len(_EXIF_HEADER):]))
+    if dpi:                                          # pixels per metre
+        f.write(_png_chunk(b"pHYs", struct.pack(">IIB", *(int(v / 0.0254 + 0.5) for v in dpi),
+                                                1)))
+    for key, value in (text or {}).items():
+        f.write(_png_text_chunk(key, value))
     compressor = zlib.compressobj(6)
     block = max(1, (1 << 20) // raw.shape[1])  # about 1 MiB of scanlines at a time
     pending = []
@@ -1159,7 +1250,7 @@ def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None) -> None:
     f.write(_png_chunk(b"IEND", b""))
 
 
-def _write_tiff(f, ints, *, exif, icc, quality) -> None:
+def _write_tiff(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
     """Deflate-compressed TIFF via tifffile; EXIF added afterwards (tifffile cannot)."""
     channels = 1 if ints.ndim == 2 else ints.shape[2]
     extratags = []
@@ -1176,12 +1267,15 @@ def _write_tiff(f, ints, *, exif, icc, quality) -> None:
                 extratags.append((_ORIENTATION, 3, 1, orientation, True))
         except _DECODE_ERRORS:
             exif_obj, extratags = None, []  # damaged EXIF: write the pixels without it
+    if xmp:
+        extratags.append((700, 1, len(xmp), xmp, True))
     tifffile.imwrite(
         f, ints,
         photometric="minisblack" if channels <= 2 else "rgb",
         extrasamples=("unassalpha",) if channels in (2, 4) else None,
         compression="zlib", predictor=True, iccprofile=icc or None,
         metadata=None, software=False, byteorder="<", bigtiff=False, extratags=extratags,
+        resolution=tuple(dpi) if dpi else None, resolutionunit="INCH" if dpi else None,
     )
     if exif_obj is not None:
         try:
