@@ -1,5 +1,7 @@
 """The deblurring pipeline on photos blurred by warping with real hand-held gyro data."""
 
+import warnings
+
 import numpy as np
 import pytest
 from skimage.transform import rescale
@@ -99,6 +101,11 @@ def test_grid_coarsens_for_huge_psfs():
     with pytest.warns(UserWarning, match="grid coarsened"):
         patches, field, notes = plan_psf_field(cap, (240, 320), grid=(6, 8))
     assert field.grid != (6, 8) and notes
+    # the automatic grid's own coarsening is noted, not warned of: nothing given changes it
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, auto, auto_notes = plan_psf_field(cap, (240, 320), grid="auto")
+    assert auto.grid[0] * auto.grid[1] < 48 and "grid coarsened" in auto_notes[-1]
 
 
 def test_coarsening_takes_off_only_what_each_axis_needs(monkeypatch):

@@ -239,7 +239,8 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     (``"auto"``: :func:`auto_grid`) with ``overlap``, each with the PSF of its centre
     (and its row's timing). If a PSF's
     extent exceeds ``max_fraction`` of its window's height (width), the grid gets fewer
-    rows (columns), each axis only as far as its windows need, and a warning says so.
+    rows (columns), each axis only as far as its windows need, and a warning says so
+    (a note only, for ``"auto"``: its sizing, which nothing the caller gave can change).
 
     ``align=True``: the PSFs are rendered centred (their shape only) and the field keeps
     the mean-displacement field; :func:`deblur_with_psfs` then warps the photo by it
@@ -265,7 +266,8 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
                 notes)
     if mode != "variant":
         raise InputError("--mode", f"unknown mode {mode!r} (variant or invariant)")
-    if isinstance(grid, str) and grid.strip().lower() == "auto":
+    automatic = isinstance(grid, str) and grid.strip().lower() == "auto"
+    if automatic:
         grid = auto_grid(cap, (H, W), overlap, centred=align)
     rows, cols = check_grid(grid)
     if disp is not None:
@@ -292,7 +294,8 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     if (rows, cols) != first:
         msg = (f"grid coarsened from {first[0]}x{first[1]} to {rows}x{cols}: PSFs up to "
                f"{worst} px do not fit patches of the finer grid")
-        warnings.warn(msg, stacklevel=3)
+        if not automatic:              # the grid asked for is not the one used: said
+            warnings.warn(msg, stacklevel=3)
         notes.append(msg)
     return patches, PSFField(pts, psfs, (rows, cols), disp), notes
 
