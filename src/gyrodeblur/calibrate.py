@@ -571,9 +571,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                    + (f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g})" if gap >= 0
                       else f" scores {-gap:.1f} better, by less than the margin kept for the "
                            "given one"))
-        note("warning: the axis mapping is uncertain:" + why + "; the blur says little about "
-             "its direction. Give the mapping (--orientation) if it is known, or calibrate on "
-             "several photos of the session", "  ")
+        note("warning: the axis mapping is uncertain:" + why + "; this photo's blur does not "
+             "tell the mappings apart surely. Give the mapping (--orientation) if it is known, or "
+             "calibrate on several photos of the session", "  ")
 
     far = 0.0 if kept else _prior_distance(fit, M, x)
     if far > 0 and far > chi2.ppf(_FAR_QUANTILE, len(_prior_bound(fit))):
