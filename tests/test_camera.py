@@ -35,3 +35,31 @@ def test_an_absurd_image_size_is_refused_not_overflowed(width, problem):
     with pytest.raises(InputError, match=problem):
         Camera(100.0, 100.0, 50.0, 40.0, width, 80)
     assert Camera(100.0, 100.0, 50.0, 40.0, MAX_SIDE, 80).width == MAX_SIDE
+
+
+# ------------------------------------------------ from a mutation audit (session 43)
+
+def test_centred_puts_the_principal_point_at_the_exact_image_centre():
+    """Kills C2 (``Camera.centred`` with ``c = size / 2``, half a pixel off the centre of
+    the OpenCV pixel grid). The exact centre of a W x H image is ((W-1)/2, (H-1)/2), and
+    a centred camera stays centred when the photo is resized (``scaled_to``)."""
+    from gyrodeblur.camera import Camera
+
+    cam = Camera.centred(640, 480, 500.0)
+    assert (cam.cx, cam.cy) == (319.5, 239.5)
+    np.testing.assert_array_equal(cam.rays(319.5, 239.5), [0.0, 0.0, 1.0])
+    big = cam.scaled_to(1280, 960)
+    ref = Camera.centred(1280, 960, 1000.0)
+    assert (big.cx, big.cy, big.fx, big.fy) == pytest.approx((ref.cx, ref.cy, ref.fx, ref.fy))
+
+
+def test_focal_scale_scales_the_image_of_every_direction_about_the_principal_point():
+    """Kills C4 (``with_focal_scale`` scaling fx only). A longer focal length magnifies
+    about the principal point, by the same factor along x and y."""
+    from gyrodeblur.camera import Camera
+
+    cam = Camera(800.0, 760.0, 319.5, 251.0, 640, 480)
+    ray = np.array([0.1, -0.2, 1.0])
+    d0 = cam.project(ray) - (cam.cx, cam.cy)
+    d1 = cam.with_focal_scale(1.5).project(ray) - (cam.cx, cam.cy)
+    np.testing.assert_allclose(d1, 1.5 * d0, rtol=1e-12)

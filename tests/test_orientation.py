@@ -107,3 +107,25 @@ def test_bad_samples_are_refused_not_turned_into_nan_rotations():
     with pytest.raises(ValueError, match="t_ref must be a finite"):
         Orientation(t, w, np.nan)
     assert np.allclose(Orientation(t, w, 0.0).matrices(0.0), np.eye(3))
+
+
+# ------------------------------------------------ from a mutation audit (session 43)
+
+def test_rates_are_held_beyond_the_log_at_each_end():
+    """Kills O6 (extrapolation before the first sample turned the wrong way:
+    ``self.t[0] - times``) and O10 (the first and last samples' rates swapped).
+
+    Before the first sample the orientation follows the first sample's rate backwards
+    in time, after the last one the last sample's rate, as the docstring says. The rate
+    keeps its axis here (so the integral is exact) but doubles from first to last."""
+    from gyrodeblur.orientation import Orientation
+
+    axis = np.array([0.3, -0.8, 0.5])
+    axis /= np.linalg.norm(axis)
+    t = 0.1 + np.arange(21) / 200.0                      # 0.1 .. 0.2 s
+    w = axis * (1.0 + 10.0 * (t - 0.1))[:, None]         # 1 rad/s -> 2 rad/s
+    o = Orientation(t, w, t_ref=0.1)
+    before = Rotation.from_rotvec(axis * 1.0 * (0.07 - 0.1)).as_matrix()
+    np.testing.assert_allclose(o.matrices(0.07), before, atol=1e-12)
+    after = o.matrices(0.2) @ Rotation.from_rotvec(axis * 2.0 * 0.03).as_matrix()
+    np.testing.assert_allclose(o.matrices(0.23), after, atol=1e-12)

@@ -316,3 +316,87 @@ def test_psf_pictures_draw_the_sinc_lobes_below_zero_black():
                             canvas_width=100)
     assert one.dtype == np.uint8 and np.all(one[..., 1][p < 0] == 0)
     assert one[..., 1].max() == 255 and field.max() == 255
+
+
+# ------------------------------------------------ from a mutation audit (session 43)
+
+def test_a_long_streak_is_sampled_finely_enough_to_render_smoothly():
+    """Kills P6 (``_adaptive_trace`` keeping its first 64 samples whatever their spacing).
+    A 100 px yaw streak at a steady rate deposits nearly equal light on every pixel
+    along it (the rate of ``f tan(w t)`` changes by 1 % over 0.1 rad); with 64 samples
+    ~1.6 px apart the windowed sincs ripple by a third from pixel to pixel."""
+    from conftest import constant_rate_capture
+    from gyrodeblur.psf import render_psf
+
+    cap = constant_rate_capture([0, 1.0, 0], f=1000.0, exposure=0.1, duration=0.3)
+    p = render_psf(cap, cap.camera.cx, cap.camera.cy).astype(np.float64)
+    row = p[p.shape[0] // 2]
+    along = np.nonzero(row > 0.5 * row.max())[0]
+    assert len(along) >= 99                                    # 100.3 px long
+    inner = row[along[0] + 4:along[-1] - 3]                    # clear of the ends' lobes
+    assert np.abs(np.diff(inner)).max() < 0.01 * inner.mean()  # measured 9e-5 (P6: 0.33)
+
+
+def test_every_splatted_point_carries_its_weight_whatever_its_subpixel_position():
+    """Kills P7 (the per-point normalisation of the Lanczos taps dropped). The raw taps
+    of a point between pixels sum to less than 1 (0.994 per axis half-way), so without
+    the normalisation a trace's points would count more or less by their sub-pixel
+    phase. A splat of several points is the weighted mean of their single splats."""
+    from gyrodeblur.psf import lanczos_splat
+
+    pts = np.array([[0.0, 0.0], [0.5, 0.25], [-1.3, 2.7]])
+    wts = np.array([1.0, 3.0, 2.0])
+    both = lanczos_splat(pts, wts, radius=7).astype(np.float64)
+    each = sum(w * lanczos_splat(p[None], radius=7).astype(np.float64)
+               for p, w in zip(pts, wts)) / wts.sum()
+    np.testing.assert_allclose(both, each, atol=1e-6)
+
+
+def test_psf_variation_of_a_pure_roll_is_the_same_down_and_across():
+    """Kills P12 (the across-columns finite difference divided by the row spacing). Under
+    a roll about the principal point (fx = fy, global shutter) every trace is linear in
+    its point, ``d(x0) = A_t (x0 - c)`` with ``A_t`` a scaled rotation, so the change per
+    pixel is the same along x and y, and about the roll angle (0.06 rad). Probes 3 x 9
+    make the row and column spacings differ threefold."""
+    from conftest import constant_rate_capture
+    from gyrodeblur.psf import psf_variation
+
+    cap = constant_rate_capture([0.0, 0.0, 2.0], exposure=0.03)
+    down, across = psf_variation(cap, probes=(3, 9), per_axis=True)
+    assert across == pytest.approx(down, rel=1e-2)
+    assert down == pytest.approx(np.sin(2.0 * 0.03), rel=0.05)
+
+
+def test_landing_pixel_never_returns_a_root_where_the_map_folds():
+    """Kills P4 (the fold test ``fold < 1`` dropped from ``_landing_by_newton``). A pitch
+    whose rate ramps from -7 to +1.5 rad/s over the readout (telephoto, 3 ms exposure):
+    below row ~180 content moves along the sweep faster than the shutter, so the map
+    ``p -> p - g(p)`` folds there and a point can have two roots (row 208: 176.8, where
+    it does not fold, and 235.4, where it does). A landing pixel is either a root where
+    ``dg_y/dp_y < 1`` or, failing that, the point itself (documented fallback); checked
+    with the gather offsets computed here from the capture's rotations."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.psf import landing_pixel, offsets_under_rotation
+
+    t = np.arange(0.0, 0.2, 1 / 400)
+    w = np.zeros((t.size, 3))
+    w[:, 0] = -7.0 + 500.0 * np.clip(t - 0.05, 0, None)
+    cap = Capture(0.05, 0.003, 0.03, Camera.centred(320, 240, 1200.0), GyroLog(t, w))
+
+    def mean_offset_y(px, py):                  # g_y at pixel p, timed by p's own row
+        times = cap.row_start(py) + cap.exposure_time * (np.arange(32) + 0.5) / 32
+        R = cap.orientation.matrices(times)
+        return offsets_under_rotation(cap.camera, R, px, py)[..., 1].mean()
+
+    ys = np.arange(150.0, 236.0, 2.0)
+    p = landing_pixel(cap, np.full(ys.shape, 160.0), ys)
+    moved = np.abs(p[:, 1] - ys) > 1e-9
+    assert moved.any() and (~moved).any()       # both cases occur here
+    for (px, py), y0, m in zip(p, ys, moved):
+        if not m:
+            continue
+        assert abs(y0 + mean_offset_y(px, py) - py) < 1e-2, (y0, py)       # a root
+        slope = (mean_offset_y(px, py + 0.05) - mean_offset_y(px, py - 0.05)) / 0.1
+        assert slope < 1.0, (y0, py, slope)

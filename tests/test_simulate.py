@@ -157,3 +157,22 @@ def test_simulate_is_the_mean_of_map_coordinates_warps(make_capture, order):
         assert out.shape == img.shape and out.dtype == np.float32
         np.testing.assert_allclose(out, ref, rtol=0, atol=1e-5)
         assert np.abs(out - img).max() > 0.05                   # and it did blur
+
+
+# ------------------------------------------------ from a mutation audit (session 43)
+
+def test_sample_count_sees_the_motion_of_the_lower_rows():
+    """Kills M6 (``warp_samples`` timing every probe by row 0's exposure). The camera is
+    still while the top rows are exposed and yaws at 2 rad/s from just after; with a
+    30 ms readout the bottom rows move 6 px during their 10 ms exposure, so the samples
+    must be at least 6 / 0.5 = 12 to keep every pixel's step under 0.5 px."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.simulate import warp_samples
+
+    t = np.arange(0.0, 0.2, 1 / 1000)
+    w = np.zeros((t.size, 3))
+    w[t >= 0.065, 1] = 2.0
+    cap = Capture(0.05, 0.01, 0.03, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    assert warp_samples(cap) >= 12

@@ -553,3 +553,81 @@ def test_resolved_settings_deconvolve_as_the_keywords_they_came_from():
         SparseSettings.resolve()
     with pytest.raises(ValueError, match="exponent"):
         SparseSettings.resolve(noise_sigma=0.01, exponent=2.0)
+
+
+# ------------------------------------------------ from a mutation audit (session 43)
+
+def test_a_white_area_under_a_one_sided_blur_is_not_taken_for_a_light():
+    """Kills S6 (``_inconsistency`` correlating with the PSF instead of convolving:
+    ``h`` for ``h[::-1, ::-1]``). A rolling shutter makes PSFs one-sided; a white area
+    blurred by one (content moved 1-6 px right) is consistent data: its clipped blob must
+    score ~0 and keep its data term. Correlating puts the bound L on the wrong side of
+    the blob, where the blurred edge is dark (score 0.59), and the sign loses its data."""
+    import gyrodeblur.sparse as sparse_mod
+
+    psf = np.zeros((15, 15), np.float32)
+    psf[7, 8:14] = 1 / 6
+    scene = np.full((60, 90), 0.05, np.float32)
+    scene[15:45, 30:60] = 1.0
+    blurred = np.clip(ndi.convolve(scene, psf, mode="nearest"), 0, 1)
+    sat = blurred >= 0.98
+    lab, n = ndi.label(sat)
+    assert n == 1
+    score = sparse_mod._inconsistency(blurred, sat, lab, n, psf)
+    assert score[1] < 0.5 * sparse_mod._INCONSISTENT, score     # measured 0.0
+    clipping = sparse_mod._clipping(blurred[None], 0.98, 1, psf)
+    assert clipping.lights is None and not clipping.ignore.any()
+
+
+def test_a_partly_clipped_light_is_caught_by_the_wiener_overshoot():
+    """Kills S13 (the Wiener overshoot test disabled: threshold x10). A light at 4x the
+    clip level on mid-grey, blurred by a PSF with a heavy centre: only the centre pixel
+    clips; the data beside it are bright enough that ``_inconsistency`` does not flag it
+    (0.07), so only the Wiener estimate's overshoot (~2) marks it over-exposed."""
+    import gyrodeblur.sparse as sparse_mod
+
+    h = np.zeros((15, 15), np.float32)
+    h[7, 2:13] = 1.0
+    h[7, 7] = 5.0
+    h /= h.sum()
+    scene = np.full((60, 80), 0.5, np.float32)
+    scene[30, 40] = 4.0
+    blurred = np.clip(ndi.convolve(scene, h, mode="nearest"), 0, 1)
+    sat = blurred >= 0.98
+    lab, n = ndi.label(sat)
+    assert n == 1 and sat.sum() == 1
+    assert sparse_mod._inconsistency(blurred, sat, lab, n, h)[1] < sparse_mod._INCONSISTENT
+    clipping = sparse_mod._clipping(blurred[None], 0.98, 1, h)
+    assert clipping.lights is not None and clipping.lights[30, 40]
+
+
+def test_a_clipped_point_light_starts_gathered_at_its_core():
+    """Kills S12 (``_small_lights`` comparing blob areas with 2 px instead of 2 PSF
+    boxes, so no light counts as small). ``iterations=0`` returns the start: for a light
+    whose 3 x 13 streak is fully clipped (39 px, well under 2 x 15 x 15), the start holds
+    the streak's energy in the light's 3 x 3 core (4.17: 0.05 + the clipped excess / 9),
+    not a Tikhonov solution of the clipped data (2.1 there under S12)."""
+    from gyrodeblur.sparse import sparse_deconvolve
+
+    psf = np.zeros((15, 15), np.float32)
+    psf[7, 2:13] = 1.0 / 11
+    scene = np.full((60, 80), 0.05, np.float32)
+    scene[29:32, 39:42] = 40.0
+    blurred = np.clip(ndi.convolve(scene, psf, mode="nearest"), 0, 1)
+    start = sparse_deconvolve(blurred, psf, noise_sigma=0.01, iterations=0, clip=False)
+    energy = (blurred[blurred >= 0.999] - 0.05).sum()
+    assert start[29:32, 39:42].mean() == pytest.approx(0.05 + energy / 9, rel=0.05)
+
+
+def test_default_iterations_round_in_proportion_to_the_extent():
+    """Kills S9 (``//`` for ``round``: 6 * extent / 32 floored). Between the rule's points
+    the count is the nearest whole number: 37 px -> 6.94 -> 7, 42 -> 7.9 -> 8, 58 -> 10.9
+    -> 11 (floored: 6, 7, 10)."""
+    from gyrodeblur.sparse import default_iterations
+
+    def streak(n):
+        k = np.zeros((n + 6 | 1, n + 6 | 1), np.float32)
+        k[k.shape[0] // 2, 3:3 + n] = 1.0
+        return k
+
+    assert [default_iterations(streak(n)) for n in (37, 42, 58)] == [7, 8, 11]

@@ -321,3 +321,29 @@ def test_argument_checks():
         deconvolve_patchwise(img, [Patch(0, 65, 0, 64)], [psf], wiener_deconvolve)
     with pytest.raises(ValueError, match="workers"):
         deconvolve_patchwise(img, patches, [psf] * 4, wiener_deconvolve, workers=0)
+
+
+# ------------------------------------------------ from a mutation audit (session 43)
+
+def test_psf_radius_of_a_non_square_psf():
+    """Kills T8 (``_radius`` taking the centre row from the column count and vice versa).
+    ``check_psf`` accepts any odd sizes (a 1 x 9 streak), and the radius is measured from
+    the centre sample (kh // 2, kw // 2)."""
+    from gyrodeblur.tiling import patch_margin, psf_radius
+
+    assert psf_radius(np.ones((1, 9)) / 9) == 4
+    offset = np.zeros((3, 61), np.float32)
+    offset[1, 50:] = 1 / 11                     # 11 px, 20-30 px right of the centre
+    assert psf_radius(offset) == 30
+    assert patch_margin(offset) == 30 + 8
+
+
+def test_patch_grid_ties_go_to_the_smaller_window():
+    """Kills T4 (``err <= best[0]``: ties to the larger window). 63 rows in 4 windows at
+    25 %: 18 px windows overlapping by 3 (1/6) and 21 px ones overlapping by 7 (1/3) are
+    equally far from 1/4; the docstring picks the smaller window."""
+    from gyrodeblur.tiling import patch_grid
+
+    patches = patch_grid((63, 64), (4, 1), 0.25)
+    assert patches[0].shape[0] == 18
+    assert [p.y0 for p in patches] == [0, 15, 30, 45]
