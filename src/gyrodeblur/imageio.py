@@ -289,7 +289,10 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
                               "is read", stacklevel=2)
             ints = _read_pillow_pixels(p, im)
             exif, icc = _pillow_exif(im), im.info.get("icc_profile")
-        carried = _carried_metadata(im, fmt)
+        try:
+            carried = _carried_metadata(im, fmt)
+        except _DECODE_ERRORS:          # e.g. a damaged text chunk: the photo without it
+            carried = {}
     tables = None
     if fmt == "JPEG" and getattr(im, "quantization", None):
         tables = {int(k): [int(q) for q in v] for k, v in im.quantization.items()}
