@@ -194,12 +194,12 @@ def test_the_u_step_solves_the_normal_equations():
     of ``_add_grad_t_grad`` dropped). From a flat start the first w-step gives w = 0, so
     one outer iteration's u-step solves ``(P^T P + rho grad^T grad) u = P^T g`` (delta
     PSFs: ``A`` is the crop ``P`` of the padded unknown to the photo; periodic
-    differences; ``rho = 8 weight``). Against a sparse direct solve: CG reaches it to
+    differences; ``rho = beta0 weight``, the first penalty). Against a sparse direct solve: CG reaches it to
     3e-7 in 40 steps (steepest descent 5e-4; without the wrap 0.13)."""
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    from gyrodeblur.spacevariant import refine_globally
+    from gyrodeblur.spacevariant import _BETA0, refine_globally
 
     rng = np.random.default_rng(0)
     blur = _delta_model()
@@ -218,7 +218,7 @@ def test_the_u_step_solves_the_normal_equations():
     inside[p:p + shape[0], p:p + shape[1]] = 1.0
     gp = inside.copy()
     gp[p:p + shape[0], p:p + shape[1]] = g
-    ref = spsolve((sp.diags(inside.ravel()) + 8.0 * weight * lap).tocsc(), gp.ravel())
+    ref = spsolve((sp.diags(inside.ravel()) + _BETA0 * weight * lap).tocsc(), gp.ravel())
     ref = ref.reshape(Hp, Wp)[p:p + shape[0], p:p + shape[1]]
     out = refine_globally(g, np.full(shape, 0.5, np.float32), blur, weight=weight,
                           outer=1, cg_steps=40)
