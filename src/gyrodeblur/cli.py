@@ -443,11 +443,11 @@ def _deblur_jobs(args) -> list[argparse.Namespace]:
     photos = list(args.photos)
     n = len(photos)
     outputs = per_photo_values(args.output, n, "-o", (n,), "output")
-    captures = per_photo_values(args.capture, n, "--capture", (0, 1, n), "capture description",
-                          read=True)
+    captures = per_photo_values(args.capture, n, "--capture", (0, 1, n),
+                                "capture description", read=True)
     psfs = per_photo_values(args.save_psf, n, "--save-psf", (0, n), "PSF drawing")
     saved = per_photo_values(args.save_capture, n, "--save-capture", (0, 1, n),
-                       "corrected capture description")
+                             "corrected capture description")
     turns = photo_rotations(args.photo_rotation, n)
     refuse_one_start_for_several(args, n)
     if n > 1:                              # one photo's: said as each is checked
