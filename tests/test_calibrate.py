@@ -611,6 +611,10 @@ def test_cli_calibrate_reads_per_photo_options_as_deblur_does(cli_dir, capsys, m
     assert main(["calibrate", photo, "--capture", str(d / "cap.json"), "-o",
                  str(d / "out" / "a.json"), "-o", str(d / "out" / "b.json")]) == 2
     assert "-o: given 2 times for one photo" in capsys.readouterr().err
+    for empty in ("", ","):                        # no description at all, for two photos
+        assert main(["calibrate", photo, str(d / "again_for_commas.png"), "--capture", empty,
+                     "-o", str(d / "out" / "a.json")]) == 2
+        assert "--capture: 0 capture descriptions for 2 photos" in capsys.readouterr().err
     assert not seen and not (d / "out" / "a.json").exists()
 
 

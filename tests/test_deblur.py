@@ -106,6 +106,14 @@ def test_grid_coarsens_for_huge_psfs():
         warnings.simplefilter("error")
         _, auto, auto_notes = plan_psf_field(cap, (240, 320), grid="auto")
     assert auto.grid[0] * auto.grid[1] < 48 and "grid coarsened" in auto_notes[-1]
+    # so is a method's fixed default grid (Wiener's 6 x 8); the same grid given is warned of
+    photo = np.random.default_rng(0).random((240, 320)).astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, report = deblur(photo, cap, method="wiener", return_report=True)
+    assert report.grid != (6, 8) and "grid coarsened" in report.notes[-1]
+    with pytest.warns(UserWarning, match="grid coarsened from 6x8"):
+        deblur(photo, cap, method="wiener", grid=(6, 8))
 
 
 def test_coarsening_takes_off_only_what_each_axis_needs(monkeypatch):

@@ -439,6 +439,70 @@ def test_png_text_chunks_are_carried_but_not_a_second_exif(tmp_path, bits):
     assert read_photo(write_photo(tmp_path / "no.png", src.pixels)).png_text is None
 
 
+def png_chunks(path):
+    """(type, data) of every chunk of a PNG file."""
+    data, pos, out = open(path, "rb").read(), 8, []
+    while pos < len(data):
+        n = struct.unpack(">I", data[pos:pos + 4])[0]
+        out.append((data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]))
+        pos += 12 + n
+    return out
+
+
+def test_only_a_resolution_the_file_states_is_carried(tmp_path):
+    """No print resolution is made up: a TIFF without resolution tags (Pillow's and
+    OpenCV's) and a JPEG whose JFIF density is an aspect ratio, with no EXIF resolution,
+    have none, and their outputs state none (Pillow reads them as 1 and 72 dpi); such a
+    JPEG's EXIF resolution counts, per cm too; a float TIFF (read by tifffile) keeps its
+    dpi and XMP; a resolution under 1 pixel per metre is dropped."""
+    rgb = np.full((8, 12, 3), 90, np.uint8)
+    Image.fromarray(rgb).save(tmp_path / "plain.tif")
+    exif = Image.Exif()
+    exif[271] = "Canon"
+    Image.fromarray(rgb).save(tmp_path / "aspect.jpg", exif=exif.tobytes())
+    for name in ("plain.tif", "aspect.jpg"):
+        src = read_photo(tmp_path / name)
+        assert src.dpi is None, name
+        out = write_photo(tmp_path / f"{name}.out.tif", src.pixels, like=src)
+        with tifffile.TiffFile(out) as tif:
+            assert int(tif.pages.first.tags["ResolutionUnit"].value) == 1, name    # none
+    exif[0x011A], exif[0x011B], exif[0x0128] = 118.11, 118.11, 3                # per cm
+    Image.fromarray(rgb).save(tmp_path / "exif_dpi.jpg", exif=exif.tobytes())
+    assert read_photo(tmp_path / "exif_dpi.jpg").dpi == (300.0, 300.0)
+    tifffile.imwrite(tmp_path / "f.tif", np.full((8, 12, 3), 0.5, np.float32),
+                     photometric="rgb", resolution=(240, 240), resolutionunit="INCH",
+                     extratags=[(700, 1, len(XMP), XMP, True)])
+    flt = read_photo(tmp_path / "f.tif")
+    assert flt.dpi == (240.0, 240.0) and flt.xmp == XMP
+    tiny = dataclasses.replace(flt, dpi=(0.01, 0.01))
+    out = read_photo(write_photo(tmp_path / "tiny.png", tiny.pixels, like=tiny))
+    assert out.dpi is None
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_png_xmp_and_international_text_are_itxt_chunks(tmp_path, bits):
+    """XMP goes into a PNG as an iTXt chunk, where the XMP standard (and Pillow's
+    ``getxmp``) look for it, even when it is plain ASCII; an iTXt keeps its language tag
+    and translated keyword; a keyword is Latin-1; XMP that is not Unicode text is left out
+    of a PNG with a warning."""
+    src = Photo(np.full((4, 5, 3), 0.4, np.float32), 8, "JPEG", xmp=XMP,
+                png_text={"Gr\u00f6\u00dfe": "\u65e5", "Title": PngImagePlugin.iTXt("Hi", "en", "Titel")})
+    out = write_photo(tmp_path / "x.png", src.pixels, like=src, bit_depth=bits)
+    chunks = dict((k.decode("latin-1").split("\0")[0], t) for t, k in png_chunks(out)
+                  if t in (b"tEXt", b"iTXt"))
+    assert chunks == {"XML:com.adobe.xmp": b"iTXt", "Gr\u00f6\u00dfe": b"iTXt",
+                      "Title": b"iTXt"}
+    with Image.open(out) as im:
+        im.load()
+        assert im.info["xmp"] == XMP
+        assert (im.text["Title"].lang, im.text["Title"].tkey) == ("en", "Titel")
+        assert im.text["Gr\u00f6\u00dfe"] == "\u65e5"
+    bad = dataclasses.replace(src, xmp=b"<x>\xff</x>", png_text=None)
+    with pytest.warns(UserWarning, match="XMP is not UTF-8"):
+        out = write_photo(tmp_path / "bad.png", bad.pixels, like=bad, bit_depth=bits)
+    assert read_photo(out).png_text is None
+
+
 def test_an_xmp_packet_too_long_for_a_jpeg_is_left_out_with_a_warning(tmp_path):
     src = like()
     src = Photo(pixels=src.pixels, bit_depth=8, format="TIFF", xmp=b"x" * 70_000)

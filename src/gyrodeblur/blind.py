@@ -276,7 +276,7 @@ def _check_options(iterations, levels, lambda_grad, lambda_min, lambda_decay, ke
             raise ValueError(f"{name} must be {what}, got {v!r}")
 
 
-def _check_kernel_size(kernel_size, shape: tuple[int, int]) -> None:
+def _check_kernel_size(kernel_size, shape: tuple[int, int], what: str = "image") -> None:
     if not is_whole(kernel_size):
         raise InputError("--kernel-size", f"must be an odd integer, got {kernel_size!r}")
     k = int(kernel_size)
@@ -285,7 +285,7 @@ def _check_kernel_size(kernel_size, shape: tuple[int, int]) -> None:
     limit = min(shape) / 2
     if k >= limit:
         raise InputError("--kernel-size",
-                         f"{k} px is too large for a {shape[1]}x{shape[0]} image "
+                         f"{k} px is too large for a {shape[1]}x{shape[0]} {what} "
                          f"(must be smaller than {limit:g}, half its shorter side)")
 
 

@@ -112,7 +112,7 @@ def calibrate_command(args, say, load_capture) -> None:
     photos = [read_photo(p) for p in args.photos]
     photos = [replace(ph, pixels=to_sensor_layout(ph.stored_channels, deg))
               for ph, deg in zip(photos, turns)]
-    paths = per_photo_values(args.capture, len(photos), "--capture", (0, 1, len(photos)),
+    paths = per_photo_values(args.capture, len(photos), "--capture", (1, len(photos)),
                              "capture description", read=True)
     refuse_repeated_photos(args.photos, [p.pixels for p in photos])
     caps, args.logs = [], {}            # one long log named by every capture: read once

@@ -231,7 +231,8 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
 
 def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "variant",
                    grid=DEFAULT_GRID, overlap: float = DEFAULT_OVERLAP,
-                   max_fraction: float = 1.0, align: bool = False):
+                   max_fraction: float = 1.0, align: bool = False,
+                   warn_coarsened: bool = True):
     """Patches and their PSFs for a photo of ``shape`` (rows, cols).
 
     ``mode="invariant"``: one patch (the whole photo) and the PSF at the principal point
@@ -240,7 +241,8 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     (and its row's timing). If a PSF's
     extent exceeds ``max_fraction`` of its window's height (width), the grid gets fewer
     rows (columns), each axis only as far as its windows need, and a warning says so
-    (a note only, for ``"auto"``: its sizing, which nothing the caller gave can change).
+    (a note only, for ``"auto"`` or where not ``warn_coarsened``: a grid the caller did
+    not choose, whose sizing nothing they gave can change).
 
     ``align=True``: the PSFs are rendered centred (their shape only) and the field keeps
     the mean-displacement field; :func:`deblur_with_psfs` then warps the photo by it
@@ -294,7 +296,7 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
     if (rows, cols) != first:
         msg = (f"grid coarsened from {first[0]}x{first[1]} to {rows}x{cols}: PSFs up to "
                f"{worst} px do not fit patches of the finer grid")
-        if not automatic:              # the grid asked for is not the one used: said
+        if warn_coarsened and not automatic:     # the grid asked for is not the one used
             warnings.warn(msg, stacklevel=3)
         notes.append(msg)
     return patches, PSFField(pts, psfs, (rows, cols), disp), notes
@@ -823,13 +825,15 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
                 raise InputError(name, "does not apply with mode='invariant' (one PSF for "
                                        "the whole photo, no patches)")
     overlap = DEFAULT_OVERLAP if overlap is None else overlap
+    grid_given = grid is not None
     if grid is None:
         grid = defaults["grid"]
         if not isinstance(grid, str):    # the method's fixed default: as much as fits
             grid = _grid_that_fits(image.shape[:2], check_grid(grid), overlap)
     align = defaults["align"] if align is None else align
     patches, field_, notes = plan_psf_field(capture, image.shape[:2], mode=mode, grid=grid,
-                                            overlap=overlap, align=align)
+                                            overlap=overlap, align=align,
+                                            warn_coarsened=grid_given)
     out = deblur_with_psfs(image, patches, field_.psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, displacement=field_.displacement,
                            **options)
@@ -944,7 +948,9 @@ def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
     """
     from .blind import _check_kernel_size
     patches = patch_grid(shape, grid, overlap)
-    _check_kernel_size(kernel_size, _central_shape(shape, max_pixels))
+    central = _central_shape(shape, max_pixels)
+    _check_kernel_size(kernel_size, central, "image" if central == tuple(shape[:2]) else
+                       "px central crop the kernel is estimated on")
     if len(patches) > 1:
         if kernel_size >= min(patches[0].shape) // 2:
             raise InputError("--grid", f"{len(patches)} patches of {patches[0].shape[1]}x"
@@ -953,7 +959,8 @@ def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
                                        f"patch's shorter side): use a coarser grid")
         share = max_pixels / len(patches)
         for p in patches:
-            _check_kernel_size(kernel_size, _central_shape(p.shape, share))
+            _check_kernel_size(kernel_size, _central_shape(p.shape, share),
+                               "px central crop of each patch its kernel is estimated on")
     return patches
 
 

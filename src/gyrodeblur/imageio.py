@@ -272,8 +272,8 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
     except UnidentifiedImageError:
         if not _is_tiff(p):
             raise
-        ints, icc = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot open
-        return "TIFF", ints, None, icc, None, None, {}
+        ints, icc, carried = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot
+        return "TIFF", ints, None, icc, None, None, carried     # open
     with im:
         fmt = {"MPO": "JPEG"}.get(im.format, im.format)
         if fmt not in ("JPEG", "PNG", "TIFF"):
@@ -312,28 +312,76 @@ _RAW_PROFILES_WRITTEN = ("raw profile type exif", "raw profile type app1",
 def _carried_metadata(im: Image.Image, fmt: str) -> dict:
     """The metadata :func:`write_photo` carries beside EXIF and ICC, as :class:`Photo`'s
     ``dpi``, ``xmp`` and ``png_text`` (after the pixels are read: a PNG's text chunks
-    may follow them). What is malformed is left out."""
+    may follow them). Only what the file states: not Pillow's fallbacks (1 dpi for a
+    TIFF without resolution tags, 72 for a JPEG whose JFIF density is an aspect ratio);
+    what is malformed is left out."""
     carried = {}
-    dpi = im.info.get("dpi")
-    try:
-        x, y = (float(v) for v in dpi)
-        if all(math.isfinite(v) and 0 < v < 1e6 for v in (x, y)):   # a PNG's 300 dpi, in
-            carried["dpi"] = tuple(float(round(v)) if abs(v - round(v)) < 0.02 else v
-                                   for v in (x, y))                # whole px/m: 299.9994
-    except (TypeError, ValueError):
-        pass
+    if fmt == "PNG":
+        dpi = im.info.get("dpi")                 # from pHYs only where given per metre
+    elif fmt == "TIFF":
+        dpi = _dpi_of_tags(dict(im.tag_v2))
+    elif im.info.get("jfif_unit") in (1, 2):     # JFIF's density per inch or per cm
+        dpi = [float(v) * (2.54 if im.info["jfif_unit"] == 2 else 1.0)
+               for v in im.info.get("jfif_density", ())]
+    else:                                        # an aspect ratio: the EXIF's, if any
+        dpi = _dpi_of_tags(dict(im.getexif()))
+    dpi = _checked_dpi(dpi)
+    if dpi:
+        carried["dpi"] = dpi
     if fmt == "PNG":
         text = {str(k): v for k, v in dict(getattr(im, "text", None) or {}).items()
                 if isinstance(v, str) and str(k).lower() not in _RAW_PROFILES_WRITTEN}
         if text:
             carried["png_text"] = text
         return carried
-    xmp = im.tag_v2.get(700) if fmt == "TIFF" else im.info.get("xmp")
-    if isinstance(xmp, str):
-        xmp = xmp.encode("utf-8")
-    if isinstance(xmp, bytes) and xmp:
+    xmp = _xmp_bytes(im.tag_v2.get(700) if fmt == "TIFF" else im.info.get("xmp"))
+    if xmp:
         carried["xmp"] = xmp
     return carried
+
+
+def _dpi_of_tags(tags: dict):
+    """(x, y) pixels per inch from TIFF or EXIF IFD0 tags (X/YResolution, 282/283, as
+    numbers or (numerator, denominator); ResolutionUnit 296: 2 inch, the default, or 3
+    cm), or ``None`` where either is missing or the unit is none."""
+    def number(v):
+        if isinstance(v, (tuple, list)) and len(v) == 2:
+            return float(v[0]) / float(v[1]) if float(v[1]) else float("nan")
+        return float(v)
+
+    unit = tags.get(296, 2)
+    if 282 not in tags or 283 not in tags or unit not in (2, 3):
+        return None
+    try:
+        return [number(tags[k]) * (2.54 if unit == 3 else 1.0) for k in (282, 283)]
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+
+
+def _checked_dpi(dpi) -> tuple[float, float] | None:
+    """``dpi`` as two floats, a value within 0.02 of a whole number of at least 1 made
+    whole (a PNG stores whole pixels per metre: 300 dpi reads back as 299.9994), or
+    ``None`` where it is not two numbers from 1 pixel per metre to a million per inch."""
+    try:
+        x, y = (float(v) for v in dpi)
+    except (TypeError, ValueError):
+        return None
+    out = tuple(float(round(v)) if math.isfinite(v) and round(v) >= 1
+                and abs(v - round(v)) < 0.02 else v for v in (x, y))
+    return out if all(math.isfinite(v) and 0.0254 <= v <= 1e6 for v in out) else None
+
+
+def _xmp_bytes(value) -> bytes | None:
+    """An XMP packet as bytes (Pillow gives a TIFF's tag 700 as bytes, a tuple of
+    integers or text), or ``None``."""
+    if isinstance(value, str):
+        value = value.encode("utf-8")
+    elif isinstance(value, (tuple, list, np.ndarray)):
+        try:
+            value = bytes(bytearray(int(b) for b in value))
+        except (TypeError, ValueError):
+            return None
+    return bytes(value) if isinstance(value, (bytes, bytearray)) and value else None
 
 
 #: ISO base media file brands (bytes 8-12 after ``ftyp``) of formats read elsewhere, and
@@ -596,8 +644,9 @@ def _tifffile_quiet():
         logger.setLevel(level)
 
 
-def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
-    """First page of a TIFF with tifffile: (samples as (H, W) or (H, W, C), ICC)."""
+def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None, dict]:
+    """First page of a TIFF with tifffile: (samples as (H, W) or (H, W, C), ICC, the
+    metadata carried as :func:`_carried_metadata` reads it)."""
     with _tifffile_quiet(), tifffile.TiffFile(path) as tif:
         if len(tif.pages) > 1:
             warnings.warn(f"{path}: only the first of its {len(tif.pages)} pages is read",
@@ -622,6 +671,15 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
         extra = [int(e) for e in (page.extrasamples or ())]
         icc_tag = page.tags.get(34675)
         icc = bytes(icc_tag.value) if icc_tag is not None else None
+        values = {t.code: t.value for t in page.tags.values() if t.code in (282, 283, 296,
+                                                                             700)}
+    carried = {}
+    dpi = _checked_dpi(_dpi_of_tags({k: int(v) if k == 296 else v for k, v in values.items()}))
+    if dpi:
+        carried["dpi"] = dpi
+    xmp = _xmp_bytes(values.get(700))
+    if xmp:
+        carried["xmp"] = xmp
     if arr.ndim == 3 and axes.startswith("S"):
         arr = np.moveaxis(arr, 0, -1)
     arr = _with_plain_alpha(arr, extra)
@@ -629,7 +687,7 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None]:
         arr = arr[..., 0]
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[-1] not in (2, 3, 4)):
         raise InputError(path, f"unsupported TIFF layout (samples of shape {arr.shape})")
-    return arr, icc
+    return arr, icc, carried
 
 
 def _with_plain_alpha(arr: np.ndarray, extra: list[int]) -> np.ndarray:
@@ -992,7 +1050,12 @@ def write_photo(
         gamma = like.png_gamma if like is not None else None
         text = dict(like.png_text or {}) if like is not None else {}
         if xmp and _PNG_XMP_KEY not in text:                    # a JPEG's or TIFF's
-            text[_PNG_XMP_KEY] = xmp.decode("utf-8", "replace")
+            packet = _xmp_text(xmp)
+            if packet is None:
+                warnings.warn(f"{p}: the photo's XMP is not UTF-8 or UTF-16/32 text, as a "
+                              "PNG's must be: left out (.jpg or .tif keep it)", stacklevel=2)
+            else:
+                text[_PNG_XMP_KEY] = packet
         atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma,
                                              dpi=dpi, text=text))
         return p
@@ -1160,19 +1223,66 @@ def _write_png(f, ints, *, exif, icc, gamma=None, dpi=None, text=None) -> None:
     info = PngImagePlugin.PngInfo()
     if gamma:
         info.add(b"gAMA", _png_gamma_bytes(gamma))
-    for key, value in (text or {}).items():
-        info.add_text(key, value)
+    for key, value in _png_text_items(text):
+        if _png_itxt(key, value):
+            info.add_itxt(key, value, getattr(value, "lang", None) or "",
+                          getattr(value, "tkey", None) or "")
+        else:
+            info.add_text(key, value)
     options["pnginfo"] = info
     Image.fromarray(ints).save(f, format="PNG", **options)
 
 
-def _png_text_chunk(key: str, value: str) -> bytes:
-    """A ``tEXt`` chunk, or ``iTXt`` where keyword or text is not Latin-1 (as Pillow
-    writes them)."""
+def _png_text_items(text):
+    """``text``'s (keyword, text) pairs that a PNG can hold: a keyword of 1-79 Latin-1
+    characters (others are left out)."""
+    for key, value in (text or {}).items():
+        try:
+            ok = 1 <= len(str(key).encode("latin-1")) <= 79
+        except UnicodeEncodeError:
+            ok = False
+        if ok and isinstance(value, str):
+            yield str(key), value
+
+
+def _png_itxt(key: str, value: str) -> bool:
+    """Whether a text chunk is written as ``iTXt``: XMP (which the XMP standard puts
+    there), an ``iTXt`` read as such (its language tag kept), text that is not Latin-1."""
+    if key == _PNG_XMP_KEY or isinstance(value, PngImagePlugin.iTXt):
+        return True
     try:
-        return _png_chunk(b"tEXt", key.encode("latin-1") + b"\0" + value.encode("latin-1"))
+        value.encode("latin-1")
     except UnicodeEncodeError:
-        return _png_chunk(b"iTXt", key.encode("utf-8") + b"\0\0\0\0\0" + value.encode("utf-8"))
+        return True
+    return False
+
+
+def _png_text_chunk(key: str, value: str) -> bytes:
+    """A ``tEXt`` chunk, or an uncompressed ``iTXt`` as :func:`_png_itxt` decides (the
+    keyword Latin-1, as the PNG standard has it; the text UTF-8)."""
+    keyword = key.encode("latin-1")
+    if not _png_itxt(key, value):
+        return _png_chunk(b"tEXt", keyword + b"\0" + value.encode("latin-1"))
+    lang = str(getattr(value, "lang", None) or "").encode("latin-1", "replace")
+    tkey = str(getattr(value, "tkey", None) or "").encode("utf-8")
+    return _png_chunk(b"iTXt", keyword + b"\0\0\0" + lang + b"\0" + tkey + b"\0"
+                      + str(value).encode("utf-8"))
+
+
+def _xmp_text(xmp: bytes) -> str | None:
+    """An XMP packet's text (UTF-8, or UTF-16/32 with a byte-order mark), else ``None``."""
+    import codecs
+    for bom, codec in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+                       (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16")):
+        if xmp.startswith(bom):
+            try:
+                return xmp.decode(codec)
+            except UnicodeDecodeError:
+                return None
+    try:
+        return xmp.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
 
 
 def _png_gamma_bytes(gamma: float) -> bytes:
@@ -1235,7 +1345,7 @@ def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None, dpi=None, text=N
     if dpi:                                          # pixels per metre
         f.write(_png_chunk(b"pHYs", struct.pack(">IIB", *(int(v / 0.0254 + 0.5) for v in dpi),
                                                 1)))
-    for key, value in (text or {}).items():
+    for key, value in _png_text_items(text):
         f.write(_png_text_chunk(key, value))
     compressor = zlib.compressobj(6)
     block = max(1, (1 << 20) // raw.shape[1])  # about 1 MiB of scanlines at a time
