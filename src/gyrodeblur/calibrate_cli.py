@@ -16,7 +16,8 @@ from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
            "refuse_non_json", "refuse_repeated_photos", "refuse_one_start_for_several",
-           "refuse_repeated_outputs", "photo_rotations", "per_photo_values"]
+           "refuse_repeated_outputs", "photo_rotations", "per_photo_values",
+           "note_one_start_for_all"]
 
 
 def format_estimates(est: dict) -> list[str]:
@@ -121,11 +122,8 @@ def calibrate_command(args, say, load_capture) -> None:
         a.capture = paths[k] if len(paths) > 1 else paths[0]
         a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
-    if len(paths) == 1 and len(photos) > 1 and not any(c.exposure_start_from_exif
-                                                       for c in caps):
-        say(f"note: all {len(photos)} photos take their exposure start from {paths[0]}; give "
-            "one capture per photo (--capture a.json,b.json,... or --capture repeated) if "
-            "they were taken at different times")
+    if len(paths) == 1:
+        note_one_start_for_all(paths[0], caps, say)
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=inputs)
@@ -145,6 +143,16 @@ def calibrate_command(args, say, load_capture) -> None:
     if len(outputs) < len(photos):
         say("(the first photo's description: the others keep their own exposure start, "
             "exposure time and log; give one -o per photo to write each)")
+
+
+def note_one_start_for_all(path, caps, say) -> None:
+    """Say that several photos given one capture description (``path``; ``None``: the
+    options alone) all start exposing at its one start, unless that is their EXIF times
+    (each photo's own)."""
+    if len(caps) > 1 and not any(c.exposure_start_from_exif for c in caps):
+        say(f"note: all {len(caps)} photos take their exposure start from "
+            f"{path or 'the options'}; give one capture per photo (--capture "
+            "a.json,b.json,... or --capture repeated) if they were taken at different times")
 
 
 def refuse_one_start_for_several(args, n_photos: int) -> None:

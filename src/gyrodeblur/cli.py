@@ -500,12 +500,9 @@ def cmd_deblur(args, say) -> None:
                                              r.args.save_capture)]
         for r in runs:         # no output is another photo's capture or log either
             _check_not_over_capture(r.cap, args.overwrite, *outputs)
-        if len({a.capture for a in jobs}) == 1 \
-                and not any(r.cap.exposure_start_from_exif for r in runs):
-            say(f"note: all {len(jobs)} photos take their exposure start from "
-                f"{jobs[0].capture or 'the options'}; give one capture per photo (--capture "
-                "a.json,b.json,... or --capture repeated) if they were taken at different "
-                "times")
+        if len({a.capture for a in jobs}) == 1:
+            from .calibrate_cli import note_one_start_for_all
+            note_one_start_for_all(jobs[0].capture, [r.cap for r in runs], say)
     from_exif = [r.args.photo for r in runs if r.cap is not None
                  and r.cap.exposure_start_from_exif]
     if args.refine and not from_exif:
@@ -669,10 +666,11 @@ class _PhotoDeblur:
             if grid == "auto":
                 raise InputError("--grid", "'auto' sizes patches by the gyro's PSFs: with "
                                            "--blind give RxC (default 1x1, one kernel)")
+            self.blind_grid = (1, 1) if grid is None else grid
+            self.kernel_size = (BLIND_KERNEL_SIZE if args.kernel_size is None
+                                else args.kernel_size)
             from .deblur import check_blind_sizes     # now, not at the photo's turn
-            check_blind_sizes((h, w), BLIND_KERNEL_SIZE if args.kernel_size is None
-                              else args.kernel_size, (1, 1) if grid is None else grid,
-                              self.overlap)
+            check_blind_sizes((h, w), self.kernel_size, self.blind_grid, self.overlap)
             self._jpeg_noise()
             return
         if args.refine:
@@ -755,9 +753,8 @@ class _PhotoDeblur:
             say(self.noise_note)
         if args.blind:
             from .deblur import deblur_blind
-            blind_grid = (1, 1) if grid is None else grid
-            kernel_size = BLIND_KERNEL_SIZE if args.kernel_size is None else args.kernel_size
-            restored, field = deblur_blind(colour, kernel_size, grid=blind_grid,
+            blind_grid = self.blind_grid
+            restored, field = deblur_blind(colour, self.kernel_size, grid=blind_grid,
                                            overlap=overlap, method=args.method,
                                            transfer=curve, check_blur=not args.no_blur_check,
                                            progress=progress, **options)
