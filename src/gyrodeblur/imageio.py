@@ -25,7 +25,7 @@ Conventions
   followed by a TIFF-structured directory. From JPEG and PNG it is the file's own block,
   byte for byte. TIFF files keep EXIF in their own tags, so for TIFF the block is
   rebuilt from the descriptive IFD0 tags (Make, Model, Orientation, ...) and the Exif and
-  GPS sub-directories.
+  GPS sub-directories (:mod:`gyrodeblur.exif`).
 * The print resolution (``Photo.dpi``: a JPEG's JFIF density, a PNG's ``pHYs``, a TIFF's
   X/YResolution, where given in inches or centimetres), XMP (``Photo.xmp``: a JPEG's APP1
   XMP packet, a TIFF's tag 700) and a PNG's text chunks (``Photo.png_text``: title,
@@ -45,34 +45,35 @@ temporary file in the destination folder and moved into place
 Decoders: JPEG and PNG are read with Pillow. Pillow cannot hold 16-bit colour, so
 16-bit RGB(A) PNGs are read by letting Pillow's decoder run twice, once keeping the high
 and once the low byte of each sample (exact; interlaced files included), and written by
-a small numpy + zlib encoder here (all 16-bit PNGs; 8-bit PNGs go through Pillow). TIFFs
-are written with :mod:`tifffile` (Deflate, horizontal predictor) and read with it; what
-it cannot decode (LZW or JPEG compression without ``imagecodecs``, palette images...)
-falls back to Pillow/libtiff, with the same two-pass trick for 16-bit colour and with
-the rotation Pillow applies to TIFFs undone.
+a small numpy + zlib encoder (all 16-bit PNGs; 8-bit PNGs go through Pillow; both in
+:mod:`gyrodeblur.pngwrite`). TIFFs are written with :mod:`tifffile` (Deflate, horizontal
+predictor) and read with it; what it cannot decode (LZW or JPEG compression without
+``imagecodecs``, palette images...) falls back to Pillow/libtiff, with the same two-pass
+trick for 16-bit colour and with the rotation Pillow applies to TIFFs undone.
 """
 
 from __future__ import annotations
 
-import datetime
 import logging
 import math
 import os
-import re
 import struct
 import sys
 import warnings
-import zlib
 from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 import tifffile
-from PIL import Image, PngImagePlugin, TiffImagePlugin, UnidentifiedImageError
+from PIL import Image, TiffImagePlugin, UnidentifiedImageError
 
 from gyrodeblur.arguments import is_whole
 from gyrodeblur.atomicfile import atomic_write, check_folder_of, check_writable
 from gyrodeblur.errors import InputError
+from gyrodeblur.exif import (_EXIF_ERRORS, _IFD0_ASCII, _JPEG_MAX_EXIF, _ORIENTATION,
+                             _exif_for_jpeg, _load_exif, _normalise_exif, _pillow_exif,
+                             _sub_ifds, _tiff_exif, exif_capture_hints)
+from gyrodeblur.pngwrite import _PNG_XMP_KEY, _write_png
 
 __all__ = ["Photo", "read_photo", "write_photo", "check_destination", "exif_capture_hints",
            "EXTENSIONS"]
@@ -86,24 +87,8 @@ EXTENSIONS: dict[str, str] = {
     ".tiff": "TIFF",
 }
 
-_EXIF_HEADER = b"Exif\x00\x00"
-_EXIF_IFD, _GPS_IFD, _INTEROP_IFD = 0x8769, 0x8825, 0xA005
-# IFD0 tags that describe the capture rather than the pixel layout; carried into TIFFs.
-_IFD0_ASCII = (270, 271, 272, 305, 306, 315, 33432)  # Description, Make, Model, Software,
-_ORIENTATION = 274  #                                  DateTime, Artist, Copyright
-# Exif sub-IFD tags used by exif_capture_hints.
-_EXPOSURE_TIME, _FOCAL_LENGTH, _FOCAL_35MM = 0x829A, 0x920A, 0xA405
-_FP_XRES, _FP_UNIT = 0xA20E, 0xA210
-_PIXEL_X_DIM, _PIXEL_Y_DIM = 0xA002, 0xA003
-_DATETIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9291
-_OFFSET_TIME, _OFFSET_TIME_ORIGINAL = 0x9010, 0x9011      # the zones of DateTime, and of it
-_MM_PER_UNIT = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}  # inch, cm, and the mm/um extension
-_FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)  # 43.27 mm
-
 # Exceptions that Pillow, tifffile and zlib raise for damaged or odd files.
-_DECODE_ERRORS = (OSError, SyntaxError, ValueError, EOFError, struct.error, zlib.error,
-                  IndexError, KeyError, TypeError, MemoryError, RuntimeError,
-                  tifffile.TiffFileError)
+_DECODE_ERRORS = _EXIF_ERRORS + (tifffile.TiffFileError,)
 
 
 @dataclass(frozen=True, eq=False)
@@ -746,226 +731,8 @@ def _to_float(path: str, arr: np.ndarray, keep_bright: bool = False) -> tuple[np
                      "use 8 or 16 bits")
 
 
-# --------------------------------------------------------------------------- EXIF
-
-
-def _normalise_exif(block: bytes | None) -> bytes | None:
-    """EXIF block with the ``Exif\\0\\0`` header, or None when empty."""
-    if not block:
-        return None
-    block = bytes(block)
-    return block if block.startswith(_EXIF_HEADER) else _EXIF_HEADER + block
-
-
-#: The largest EXIF block (``Exif\0\0`` header included) a JPEG's APP1 segment holds.
-_JPEG_MAX_EXIF = 65533
 #: Longest XMP packet one JPEG APP1 segment holds (after its 29-byte namespace header).
 _JPEG_MAX_XMP = 65504
-#: Exif tags a JPEG's EXIF may lose when the block is too long: MakerNote, UserComment.
-_BULKY_EXIF_TAGS = (0x927C, 0x9286)
-
-
-def _exif_for_jpeg(block: bytes, path: str) -> bytes | None:
-    """An EXIF ``block`` too long for a JPEG, without its bulky tags (a maker's notes), or
-    ``None`` when that is not enough; either is warned of."""
-    try:
-        exif = _load_exif(block[len(_EXIF_HEADER):])
-        ifd = exif.get_ifd(_EXIF_IFD)
-        dropped = [t for t in _BULKY_EXIF_TAGS if t in ifd]
-        for t in dropped:
-            del ifd[t]
-        smaller = _normalise_exif(exif.tobytes())
-    except Exception:                  # a block Pillow cannot rewrite
-        smaller, dropped = None, []
-    if smaller is not None and dropped and len(smaller) <= _JPEG_MAX_EXIF:
-        names = {0x927C: "MakerNote", 0x9286: "UserComment"}
-        warnings.warn(f"{path}: the EXIF block ({len(block)} bytes) is more than a JPEG "
-                      f"holds ({_JPEG_MAX_EXIF}); written without its "
-                      f"{' and '.join(names[t] for t in dropped)}", stacklevel=3)
-        return smaller
-    warnings.warn(f"{path}: the EXIF block ({len(block)} bytes) is more than a JPEG holds "
-                  f"({_JPEG_MAX_EXIF}); written without EXIF (a PNG or TIFF keeps it)",
-                  stacklevel=3)
-    return None
-
-
-def _pillow_exif(im: Image.Image) -> bytes | None:
-    """The EXIF block of a loaded JPEG/PNG, as stored."""
-    block = im.info.get("exif")
-    if block:
-        return block
-    exif = im.getexif()  # e.g. ImageMagick's "Raw profile type exif" PNG text
-    return exif.tobytes() if len(exif) else None
-
-
-def _tiff_exif(im: Image.Image) -> bytes | None:
-    """EXIF block rebuilt from a TIFF's descriptive tags and Exif/GPS sub-IFDs."""
-    try:
-        src = im.getexif()
-        out = Image.Exif()
-        for tag in (*_IFD0_ASCII, _ORIENTATION):
-            if tag in src and not (tag == 270 and _is_layout_note(src[tag])):
-                out[tag] = src[tag]
-        sub = _sub_ifds(src)
-        for tag, values in sub.items():
-            out[tag] = values
-        return out.tobytes() if len(out) else None
-    except _DECODE_ERRORS:
-        return None  # damaged metadata is not worth refusing the photo for
-
-
-def _is_layout_note(description) -> bool:
-    """Whether a TIFF ImageDescription is tifffile's note of the file's array layout
-    (``{"shape": [...]}``): it describes that file, not the photo, and would misdescribe
-    the output."""
-    return str(description).lstrip().startswith('{"shape"')
-
-
-def _sub_ifds(exif: Image.Exif) -> dict[int, dict]:
-    """Exif and GPS sub-directories of ``exif`` as dicts (Interop nested in Exif)."""
-    out = {}
-    for tag in (_EXIF_IFD, _GPS_IFD):
-        if tag not in exif:
-            continue
-        values = dict(exif.get_ifd(tag))
-        if tag == _EXIF_IFD and _INTEROP_IFD in values:
-            interop = exif.get_ifd(_INTEROP_IFD)
-            if interop:
-                values[_INTEROP_IFD] = dict(interop)
-            else:
-                del values[_INTEROP_IFD]
-        if values:
-            out[tag] = values
-    return out
-
-
-def _load_exif(block: bytes) -> Image.Exif:
-    exif = Image.Exif()
-    exif.load(block)
-    return exif
-
-
-def exif_capture_hints(photo: Photo) -> dict:
-    """Exposure time and focal length in pixels from a photo's EXIF block.
-
-    Parameters
-    ----------
-    photo : Photo
-        A photo from :func:`read_photo` (or any with ``exif`` set).
-
-    Returns
-    -------
-    dict
-        Keys present only when found:
-
-        ``"exposure_time"`` : float
-            Seconds, from ExposureTime.
-        ``"focal_length_mm"`` : float
-            The lens's real focal length, from FocalLength.
-        ``"fx"`` : float
-            Focal length in pixels at this photo's stored width and height.
-        ``"capture_time_unix"`` : float
-            When the photo was taken, Unix time (s), from DateTimeOriginal,
-            OffsetTimeOriginal or else OffsetTime (the time zone: without one there is
-            no Unix time) and SubSecTimeOriginal (fractions of a second; without it, the
-            middle of the second). A phone writes it to the
-            millisecond but it marks the exposure only to tens or hundreds of them.
-        ``"capture_time_whole_second"`` : bool
-            Present (True) where there was no SubSecTimeOriginal.
-        ``"capture_time_text"`` : str
-            DateTimeOriginal as written, with its zone and fraction where present
-            (``"2024:12:05 07:27:10.512 +01:00"``).
-
-    Notes
-    -----
-    ``fx`` comes from the first source that is present and valid:
-
-    1. FocalLengthIn35mmFilm :math:`f_{35}` with the **diagonal** convention (the usual
-       crop-factor definition): the photo's diagonal corresponds to the 43.27 mm
-       diagonal of 36 x 24 mm film, so
-
-       .. math:: f_x = f_{35} \\, \\sqrt{W^2 + H^2} \\, / \\, 43.27\\,\\mathrm{mm}.
-
-       For a 3:2 landscape photo this equals :math:`f_{35} W / 36\\,\\mathrm{mm}`; unlike
-       that width rule it also holds for 4:3 sensors and for portrait photos.
-    2. FocalLength :math:`f` (mm) and FocalPlaneXResolution :math:`r` (pixels per
-       FocalPlaneResolutionUnit: 2 = inch, 3 = cm, and 4 = mm, 5 = um as some cameras
-       write): :math:`f_x = f \\, r / \\mathrm{mm\\_per\\_unit}`, scaled by
-       :math:`\\max(W, H) / \\max(X, Y)` when PixelXDimension/PixelYDimension
-       (:math:`X, Y`) record a different size (a resized photo).
-
-    Square pixels are assumed (``fy == fx``). A damaged EXIF block gives ``{}``.
-    """
-    if not photo.exif:
-        return {}
-    try:
-        exif = _load_exif(photo.exif)
-        ifd0 = dict(exif)
-        sub = dict(exif.get_ifd(_EXIF_IFD))
-    except _DECODE_ERRORS:
-        return {}
-
-    def number(tag):
-        value = sub.get(tag, ifd0.get(tag))
-        if isinstance(value, tuple):
-            value = value[0] if value else None
-        try:
-            value = float(value)
-        except (TypeError, ValueError, ZeroDivisionError):
-            return None
-        return value if math.isfinite(value) and value > 0 else None
-
-    hints: dict = {}
-    exposure, focal = number(_EXPOSURE_TIME), number(_FOCAL_LENGTH)
-    if exposure is not None:
-        hints["exposure_time"] = exposure
-    if focal is not None:
-        hints["focal_length_mm"] = focal
-    height, width = photo.pixels.shape[:2]
-    f35 = number(_FOCAL_35MM)
-    xres, unit = number(_FP_XRES), number(_FP_UNIT)
-    if f35 is not None:
-        hints["fx"] = f35 * math.hypot(width, height) / _FULL_FRAME_DIAGONAL_MM
-    elif focal is not None and xres is not None and int(unit or 2) in _MM_PER_UNIT:
-        fx = focal * xres / _MM_PER_UNIT[int(unit or 2)]
-        px, py = number(_PIXEL_X_DIM), number(_PIXEL_Y_DIM)
-        if px is not None and py is not None:
-            fx *= max(width, height) / max(px, py)
-        hints["fx"] = fx
-    hints.update(_capture_time(sub, ifd0))
-    return hints
-
-
-def _capture_time(sub: dict, ifd0: dict) -> dict:
-    """``capture_time_unix`` and ``capture_time_text`` of :func:`exif_capture_hints` from
-    the Exif sub-IFD (or IFD0) tags; ``{}`` without a readable DateTimeOriginal. The zone
-    is OffsetTimeOriginal's, else OffsetTime's (the file's, which phones write alike)."""
-    def text(tag):
-        v = sub.get(tag, ifd0.get(tag))
-        if isinstance(v, bytes):
-            v = v.decode("ascii", "replace")
-        return v.strip().strip("\x00").strip() if isinstance(v, str) else None
-
-    stamp, frac = text(_DATETIME_ORIGINAL), text(_SUBSEC_ORIGINAL)
-    zone = text(_OFFSET_TIME_ORIGINAL) or text(_OFFSET_TIME)
-    try:
-        local = datetime.datetime.strptime(stamp or "", "%Y:%m:%d %H:%M:%S")
-    except ValueError:
-        return {}
-    frac = frac if frac and re.fullmatch("[0-9]+", frac) else None
-    out = {"capture_time_text": stamp + (f".{frac}" if frac else "") + (f" {zone}" if zone else "")}
-    if zone and re.fullmatch(r"[+-][0-9]{2}", zone):
-        zone += ":00"                          # whole hours written short
-    try:
-        tz = datetime.datetime.strptime(zone or "", "%z").tzinfo
-    except ValueError:
-        return out                             # a local time of no known zone
-    # without SubSecTimeOriginal the time is the whole second it fell in: its middle
-    out["capture_time_unix"] = (local.replace(tzinfo=tz).timestamp()
-                                + (float("0." + frac) if frac else 0.5))
-    if not frac:
-        out["capture_time_whole_second"] = True
-    return out
 
 
 # --------------------------------------------------------------------------- writing
@@ -1193,9 +960,6 @@ def _refuse_too_big_for_jpeg(path: str, pixels: np.ndarray) -> None:
 
 
 #: The keyword of a PNG's XMP text chunk (``iTXt``).
-_PNG_XMP_KEY = "XML:com.adobe.xmp"
-
-
 def _write_jpeg(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
     options = {"quality": quality, "subsampling": 0 if ints.ndim == 3 else -1}
     if exif:
@@ -1207,66 +971,6 @@ def _write_jpeg(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
     if xmp:
         options["xmp"] = xmp
     Image.fromarray(ints).save(f, format="JPEG", **options)
-
-
-def _write_png(f, ints, *, exif, icc, gamma=None, dpi=None, text=None) -> None:
-    if ints.dtype == np.uint16:
-        _write_png16(f, ints, exif=exif, icc=icc, gamma=gamma, dpi=dpi, text=text)
-        return
-    options = {"compress_level": 6}
-    if exif:
-        options["exif"] = exif
-    if icc:
-        options["icc_profile"] = icc
-    if dpi:
-        options["dpi"] = dpi
-    info = PngImagePlugin.PngInfo()
-    if gamma:
-        info.add(b"gAMA", _png_gamma_bytes(gamma))
-    for key, value in _png_text_items(text):
-        if _png_itxt(key, value):
-            info.add_itxt(key, value, getattr(value, "lang", None) or "",
-                          getattr(value, "tkey", None) or "")
-        else:
-            info.add_text(key, value)
-    options["pnginfo"] = info
-    Image.fromarray(ints).save(f, format="PNG", **options)
-
-
-def _png_text_items(text):
-    """``text``'s (keyword, text) pairs that a PNG can hold: a keyword of 1-79 Latin-1
-    characters (others are left out)."""
-    for key, value in (text or {}).items():
-        try:
-            ok = 1 <= len(str(key).encode("latin-1")) <= 79
-        except UnicodeEncodeError:
-            ok = False
-        if ok and isinstance(value, str):
-            yield str(key), value
-
-
-def _png_itxt(key: str, value: str) -> bool:
-    """Whether a text chunk is written as ``iTXt``: XMP (which the XMP standard puts
-    there), an ``iTXt`` read as such (its language tag kept), text that is not Latin-1."""
-    if key == _PNG_XMP_KEY or isinstance(value, PngImagePlugin.iTXt):
-        return True
-    try:
-        value.encode("latin-1")
-    except UnicodeEncodeError:
-        return True
-    return False
-
-
-def _png_text_chunk(key: str, value: str) -> bytes:
-    """A ``tEXt`` chunk, or an uncompressed ``iTXt`` as :func:`_png_itxt` decides (the
-    keyword Latin-1, as the PNG standard has it; the text UTF-8)."""
-    keyword = key.encode("latin-1")
-    if not _png_itxt(key, value):
-        return _png_chunk(b"tEXt", keyword + b"\0" + value.encode("latin-1"))
-    lang = str(getattr(value, "lang", None) or "").encode("latin-1", "replace")
-    tkey = str(getattr(value, "tkey", None) or "").encode("utf-8")
-    return _png_chunk(b"iTXt", keyword + b"\0\0\0" + lang + b"\0" + tkey + b"\0"
-                      + str(value).encode("utf-8"))
 
 
 def _xmp_text(xmp: bytes) -> str | None:
@@ -1283,84 +987,6 @@ def _xmp_text(xmp: bytes) -> str | None:
         return xmp.decode("utf-8")
     except UnicodeDecodeError:
         return None
-
-
-def _png_gamma_bytes(gamma: float) -> bytes:
-    """A ``gAMA`` chunk's data: the file gamma times 100000, unsigned 32-bit."""
-    return struct.pack(">I", int(round(gamma * 100000)))
-
-
-def _png_chunk(tag: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
-
-
-def _png_filter(rows: np.ndarray, prior: np.ndarray, bpp: int) -> np.ndarray:
-    """PNG-filter scanlines, picking per row the filter of least sum of |signed bytes|.
-
-    Parameters
-    ----------
-    rows : ndarray of uint8, shape (n, N)
-        Raw scanlines (without filter bytes).
-    prior : ndarray of uint8, shape (N,)
-        The scanline above ``rows[0]`` (zeros for the first one).
-    bpp : int
-        Bytes per complete pixel.
-
-    Returns
-    -------
-    ndarray of uint8, shape (n, N + 1)
-        Filter-type byte followed by the filtered scanline, for each row.
-    """
-    x = rows.astype(np.int16)
-    b = np.concatenate([prior[None].astype(np.int16), x[:-1]])
-    a = np.zeros_like(x)
-    a[:, bpp:] = x[:, :-bpp]
-    c = np.zeros_like(x)
-    c[:, bpp:] = b[:, :-bpp]
-    p = a + b - c
-    pa, pb, pc = np.abs(p - a), np.abs(p - b), np.abs(p - c)
-    paeth = np.where((pa <= pb) & (pa <= pc), a, np.where(pb <= pc, b, c))
-    candidates = np.stack([x, x - a, x - b, x - ((a + b) >> 1), x - paeth]).astype(np.uint8)
-    cost = np.abs(candidates.view(np.int8).astype(np.int32)).sum(axis=2)
-    best = cost.argmin(axis=0)
-    chosen = candidates[best, np.arange(len(rows))]
-    return np.concatenate([best.astype(np.uint8)[:, None], chosen], axis=1)
-
-
-def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None, dpi=None, text=None) -> None:
-    """16-bit grey, grey + alpha, RGB or RGBA PNG with numpy + zlib (Pillow cannot write
-    16-bit colour)."""
-    height, width = ints.shape[:2]
-    channels = 1 if ints.ndim == 2 else ints.shape[2]
-    colour_type = {1: 0, 2: 4, 3: 2, 4: 6}[channels]
-    raw = np.ascontiguousarray(ints, dtype=">u2").view(np.uint8).reshape(height, -1)
-    f.write(b"\x89PNG\r\n\x1a\n")
-    f.write(_png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 16, colour_type, 0, 0, 0)))
-    if gamma:                                        # before PLTE/IDAT, as the spec wants
-        f.write(_png_chunk(b"gAMA", _png_gamma_bytes(gamma)))
-    if icc:
-        f.write(_png_chunk(b"iCCP", b"ICC Profile\x00\x00" + zlib.compress(icc)))
-    if exif:
-        f.write(_png_chunk(b"eXIf", exif[len(_EXIF_HEADER):]))
-    if dpi:                                          # pixels per metre
-        f.write(_png_chunk(b"pHYs", struct.pack(">IIB", *(int(v / 0.0254 + 0.5) for v in dpi),
-                                                1)))
-    for key, value in _png_text_items(text):
-        f.write(_png_text_chunk(key, value))
-    compressor = zlib.compressobj(6)
-    block = max(1, (1 << 20) // raw.shape[1])  # about 1 MiB of scanlines at a time
-    pending = []
-    prior = np.zeros(raw.shape[1], np.uint8)
-    for start in range(0, height, block):
-        rows = raw[start:start + block]
-        pending.append(compressor.compress(_png_filter(rows, prior, 2 * channels).tobytes()))
-        prior = rows[-1]
-        if sum(map(len, pending)) >= 1 << 20:
-            f.write(_png_chunk(b"IDAT", b"".join(pending)))
-            pending = []
-    pending.append(compressor.flush())
-    f.write(_png_chunk(b"IDAT", b"".join(pending)))
-    f.write(_png_chunk(b"IEND", b""))
 
 
 def _write_tiff(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
