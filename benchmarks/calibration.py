@@ -420,7 +420,7 @@ def field_aligned(restored: np.ndarray, estimated, true) -> np.ndarray:
     """``restored`` (deblurred with the ``estimated`` capture) moved to where the ``true``
     capture puts its result: resampled at ``x - (d_est(x) - d_true(x))``, with ``d`` the
     captures' mean-displacement fields (to first order in their difference)."""
-    from gyrodeblur.deblur import warp_by_displacement
+    from gyrodeblur.warp import warp_by_displacement
     from gyrodeblur.psf import displacement_field
 
     H, W = restored.shape[:2]

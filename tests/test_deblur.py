@@ -221,7 +221,7 @@ def _reference_warp(image, displacement):
 def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
     from scipy import ndimage
 
-    import gyrodeblur.deblur as db
+    import gyrodeblur.warp as db
 
     rng = np.random.default_rng(3)
     img = ndimage.gaussian_filter(rng.random((300, 410, channels)), (1.5, 1.5, 0)).astype(np.float32)
@@ -243,7 +243,7 @@ def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
 
 
 def test_alignment_warp_takes_photos_wider_than_opencv_remap_does():
-    from gyrodeblur.deblur import warp_by_displacement
+    from gyrodeblur.warp import warp_by_displacement
 
     W = 33000                                      # remap alone stops at 32767 px
     img = np.tile(np.sin(np.arange(W) / 7.0).astype(np.float32), (6, 1))
@@ -315,7 +315,7 @@ def test_alignment_warp_keeps_clipped_plateaus_clipped():
     (Lanczos lobes would leave its rim below it, and the deconvolution would no longer
     see one clipped streak), with no dark halo of undershoot beside it if it is small
     enough to be a light; away from it the warp is the plain Lanczos one."""
-    from gyrodeblur.deblur import _CLIPPED_REACH, CLIPPED, warp_by_displacement
+    from gyrodeblur.warp import _CLIPPED_REACH, CLIPPED, warp_by_displacement
 
     img = np.full((64, 80, 3), 0.05, np.float32)
     img[20:34, 24:45] = 1.0
@@ -342,7 +342,7 @@ def test_alignment_warp_clamps_beside_a_light_at_the_frame_edge():
     """Samples that fall outside the photo beside a clipped blob at its edge are clamped
     to the range of the two pixels they mirror between (the warp mirrors the photo about
     its edge pixels), not of pixels one further in (which moved 24 of these 96 samples)."""
-    from gyrodeblur.deblur import CLIPPED, warp_by_displacement
+    from gyrodeblur.warp import CLIPPED, warp_by_displacement
 
     W = 80
     ramp = np.linspace(0.05, 0.6, W, dtype=np.float32) ** 2  # varies along x only
@@ -401,7 +401,7 @@ def test_blind_kernels_per_patch_follow_a_blur_that_changes_across_the_photo():
 
 
 def test_alignment_warp_reports_the_samples_it_mirrors_and_the_solver_skips_them():
-    from gyrodeblur.deblur import warp_by_displacement
+    from gyrodeblur.warp import warp_by_displacement
     from gyrodeblur.tiling import deconvolve_patchwise, patch_grid
 
     img = np.random.default_rng(0).random((40, 60)).astype(np.float32)
@@ -472,7 +472,7 @@ def test_clip_false_keeps_the_overshoot_with_every_method(cases):
 def test_the_alignment_grid_is_interpolated_bilinearly():
     """The warp's sample map: bilinear interpolation of the displacement grid, in a fixed
     order of two-tap sums (no matrix product, whose result depends on BLAS threads)."""
-    from gyrodeblur.deblur import _interpolate_grid, _linear_taps
+    from gyrodeblur.warp import _interpolate_grid, _linear_taps
     rng = np.random.default_rng(3)
     grid = rng.normal(0, 3, (5, 7)).astype(np.float32)
     ty, tx = np.linspace(-0.5, 4.5, 23), np.linspace(0, 6, 31)     # clamped at the ends

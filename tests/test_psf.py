@@ -204,7 +204,7 @@ def test_displacement_field_is_where_the_light_lands(make_capture):
     # must leave each pixel's blur centred on it: the warped photo then matches the sharp
     # one convolved with the centred PSF. With the old own-row timing the residual was
     # 0.14-0.47 of the signal; the field is also each PSF's mean.
-    from gyrodeblur.deblur import warp_by_displacement
+    from gyrodeblur.warp import warp_by_displacement
     cap = make_capture([2.0, 0.3, 0.5], readout=0.03, exposure=0.03)
     rng = np.random.default_rng(1)
     u = ndimage.gaussian_filter(rng.normal(size=(240, 320)), 2.0)

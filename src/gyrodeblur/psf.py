@@ -495,7 +495,7 @@ def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
     """Mean displacement (px) of each pixel's PSF: where, on average over the exposure,
     the light of the reference-time pixel is recorded, relative to that pixel
     (:func:`landing_pixel`; warping the photo by it,
-    :func:`gyrodeblur.deblur.warp_by_displacement`, leaves each pixel's PSF centred on it).
+    :func:`gyrodeblur.warp.warp_by_displacement`, leaves each pixel's PSF centred on it).
 
     Evaluated on a regular grid (about ``step`` px apart, corners included) with ``n``
     time steps per row's exposure, vectorised; the field is smooth, so bilinear
