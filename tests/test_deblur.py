@@ -201,58 +201,6 @@ def test_output_matches_sharp_geometry(cases):
         assert np.abs(shift).max() <= 0.5, (rows, shift)
 
 
-def _reference_warp(image, displacement):
-    """The warp written plainly: whole-image sample positions, a quintic B-spline per
-    channel in float64 (sharper than any interpolation the warp may use)."""
-    from scipy import ndimage
-
-    ys, xs, d = displacement
-    H, W = image.shape[:2]
-    gy = np.arange(H) * (len(ys) - 1) / ys[-1]
-    gx = np.arange(W) * (len(xs) - 1) / xs[-1]
-    grid = np.stack(np.meshgrid(gy, gx, indexing="ij"))
-    coords = np.stack([np.arange(H)[:, None] + ndimage.map_coordinates(d[..., 1], grid, order=1),
-                       np.arange(W)[None, :] + ndimage.map_coordinates(d[..., 0], grid, order=1)])
-    return np.stack([ndimage.map_coordinates(image[..., c].astype(np.float64), coords, order=5,
-                                             mode="mirror") for c in range(image.shape[2])], -1)
-
-
-@pytest.mark.parametrize("channels", [3, 1, 5])
-def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
-    from scipy import ndimage
-
-    import gyrodeblur.warp as db
-
-    rng = np.random.default_rng(3)
-    img = ndimage.gaussian_filter(rng.random((300, 410, channels)), (1.5, 1.5, 0)).astype(np.float32)
-    field = (np.linspace(0, 299, 5), np.linspace(0, 409, 6), rng.normal(0, 4, (5, 6, 2)))
-    ref = _reference_warp(img, field)
-    whole = db.warp_by_displacement(img, field)
-    monkeypatch.setattr(db, "_WARP_TILE", (128, 96))  # 3 x 5 tiles, the last ones short
-    out = db.warp_by_displacement(img, field)
-    # same samples; a BLAS may round the sample positions differently per tile, which can
-    # move a rare one across remap's 1/32 px grid (a slope of ~0.1 per px: ~3e-3)
-    assert np.abs(out - whole).max() < 5e-3 and np.abs(out - whole).mean() < 1e-5
-    assert out.dtype == np.float32 and out.shape == img.shape
-    err = np.abs(out - ref)[8:-8, 8:-8]   # mirrored borders: the reference mirrors exactly
-    assert err.max() < 0.004 and np.sqrt((err ** 2).mean()) < 6e-4  # bicubic: 0.0056, 0.0012
-    if channels == 1:
-        np.testing.assert_array_equal(db.warp_by_displacement(img[..., 0], field), out[..., 0])
-    # moved the right way: content at x + c(x) lands on x
-    assert np.sqrt(((out - img) ** 2).mean()) > 10 * np.sqrt((err ** 2).mean())
-
-
-def test_alignment_warp_takes_photos_wider_than_opencv_remap_does():
-    from gyrodeblur.warp import warp_by_displacement
-
-    W = 33000                                      # remap alone stops at 32767 px
-    img = np.tile(np.sin(np.arange(W) / 7.0).astype(np.float32), (6, 1))
-    field = (np.array([0.0, 5.0]), np.array([0.0, W - 1.0]), np.tile([2.0, 0.0], (2, 2, 1)))
-    out = warp_by_displacement(img, field)          # every pixel samples x + 2
-    np.testing.assert_allclose(out[:, :-2], img[:, 2:], atol=1e-5)
-    np.testing.assert_allclose(out[:, -2:], img[:, -3:-1][:, ::-1], atol=1e-5)  # W -> W - 2
-
-
 def test_street_lights_come_back_without_ripples():
     """Issue 5's highlight test through the whole pipeline: a dark scene with point lights
     at 40x the clip level, blurred by ``simulate_blur`` (warping, no PSF) in linear light
@@ -308,58 +256,6 @@ def test_street_lights_come_back_without_ripples():
             assert ratio >= least, (align, (y, x), ratio)
             spot = ours[y - 1:y + 2, x - 1:x + 2].min(axis=2).max()   # the 3 x 3 light
             assert spot > 0.9, (align, (y, x), spot)
-
-
-def test_alignment_warp_keeps_clipped_plateaus_clipped():
-    """A clipped block moved by a sub-pixel warp stays one flat block at the clip value
-    (Lanczos lobes would leave its rim below it, and the deconvolution would no longer
-    see one clipped streak), with no dark halo of undershoot beside it if it is small
-    enough to be a light; away from it the warp is the plain Lanczos one."""
-    from gyrodeblur.warp import _CLIPPED_REACH, CLIPPED, warp_by_displacement
-
-    img = np.full((64, 80, 3), 0.05, np.float32)
-    img[20:34, 24:45] = 1.0
-    ys, xs = np.array([0.0, 63.0]), np.array([0.0, 79.0])
-    field = (ys, xs, np.tile([0.37, -0.61], (2, 2, 1)))
-    block = 14 * 21
-    plain = warp_by_displacement(img, field)
-    kept = warp_by_displacement(img, field, clipped=CLIPPED, light_area=block)
-    assert (plain[..., 0] >= CLIPPED).sum() < 0.8 * block        # the rim dips below the clip
-    at_clip = kept[..., 0] >= CLIPPED
-    assert abs(at_clip.sum() - block) <= 14 + 21 and np.all(kept[at_clip] == 1.0)
-    assert plain.min() < 0.0                                    # Lanczos undershoots...
-    assert kept.min() >= 0.05 - 1e-6                            # ...clamped, it does not
-    r = _CLIPPED_REACH + 2                                      # + the sub-pixel shift
-    far = np.ones((64, 80), bool)
-    far[20 - r:34 + r, 24 - r:45 + r] = False
-    np.testing.assert_array_equal(kept[far], plain[far])
-    # a blob bigger than light_area is an ordinary edge: plain Lanczos beside it
-    big = warp_by_displacement(img, field, clipped=CLIPPED, light_area=block - 1)
-    np.testing.assert_array_equal(big[~at_clip], plain[~at_clip])
-
-
-def test_alignment_warp_clamps_beside_a_light_at_the_frame_edge():
-    """Samples that fall outside the photo beside a clipped blob at its edge are clamped
-    to the range of the two pixels they mirror between (the warp mirrors the photo about
-    its edge pixels), not of pixels one further in (which moved 24 of these 96 samples)."""
-    from gyrodeblur.warp import CLIPPED, warp_by_displacement
-
-    W = 80
-    ramp = np.linspace(0.05, 0.6, W, dtype=np.float32) ** 2  # varies along x only
-    img = np.repeat(np.tile(ramp, (64, 1))[..., None], 3, axis=2)
-    img[30:33, 0:3] = 1.0                                   # a light at the left edge
-    ys, xs = np.array([0.0, 63.0]), np.array([0.0, W - 1.0])
-    rows = [27, 28, 34, 35]     # clamped (within 4 px of the light), ramp pixels only
-    for shift in (-1.6, -0.4):  # the first columns sample left of the photo
-        field = (ys, xs, np.tile([shift, 0.0], (2, 2, 1)))
-        plain = warp_by_displacement(img, field, clipped=CLIPPED)
-        kept = warp_by_displacement(img, field, clipped=CLIPPED, light_area=9)
-        s = np.arange(8) + shift
-        f = np.floor(s).astype(int)
-        pair = np.abs(np.stack([f, f + 1]))                 # mirrored about pixel 0
-        lo, hi = ramp[pair].min(axis=0), ramp[pair].max(axis=0)
-        expected = np.clip(plain[rows][:, :8], lo[None, :, None], hi[None, :, None])
-        np.testing.assert_allclose(kept[rows][:, :8], expected, atol=1e-6)
 
 
 def test_blind_kernels_per_patch_follow_a_blur_that_changes_across_the_photo():
@@ -467,22 +363,6 @@ def test_clip_false_keeps_the_overshoot_with_every_method(cases):
         free = deblur(bright, cap, method=method, grid=(2, 2), clip=False)
         kept = deblur(bright, cap, method=method, grid=(2, 2))
         assert free.max() > 1.0 and 0.0 <= kept.min() and kept.max() <= 1.0, method
-
-
-def test_the_alignment_grid_is_interpolated_bilinearly():
-    """The warp's sample map: bilinear interpolation of the displacement grid, in a fixed
-    order of two-tap sums (no matrix product, whose result depends on BLAS threads)."""
-    from gyrodeblur.warp import _interpolate_grid, _linear_taps
-    rng = np.random.default_rng(3)
-    grid = rng.normal(0, 3, (5, 7)).astype(np.float32)
-    ty, tx = np.linspace(-0.5, 4.5, 23), np.linspace(0, 6, 31)     # clamped at the ends
-    got = _interpolate_grid(grid, _linear_taps(ty, 5), _linear_taps(tx, 7))
-    from scipy.interpolate import RegularGridInterpolator
-    ref = RegularGridInterpolator((np.arange(5), np.arange(7)), grid.astype(np.float64))
-    yy, xx = np.meshgrid(np.clip(ty, 0, 4), tx, indexing="ij")
-    np.testing.assert_allclose(got, ref((yy, xx)), atol=1e-5)
-    one = _interpolate_grid(grid[:1, :1], _linear_taps(ty, 1), _linear_taps(tx, 1))
-    np.testing.assert_array_equal(one, np.full((23, 31), grid[0, 0]))
 
 
 def test_a_long_readout_s_displacement_is_not_counted_as_blur():
