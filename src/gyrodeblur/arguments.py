@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_flag", "check_callback", "check_real", "is_whole"]
+__all__ = ["check_flag", "check_callback", "check_real", "check_seed", "is_whole"]
 
 
 def check_flag(value, name: str) -> bool:
@@ -45,3 +45,17 @@ def check_real(value, name: str, *, allow_inf: bool = False) -> float:
     if np.isnan(x) or (np.isinf(x) and not allow_inf):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     return x
+
+
+def check_seed(value, name: str = "seed"):
+    """``value`` unchanged when :func:`numpy.random.default_rng` takes it (a whole number
+    >= 0 or a sequence of them, a ``Generator``, a ``SeedSequence`` or ``None``), else a
+    ``TypeError`` naming ``name`` (a ``bool`` is refused, not read as 0 or 1)."""
+    try:
+        if isinstance(value, (bool, np.bool_)):
+            raise TypeError
+        np.random.default_rng(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a whole number >= 0 (or a sequence of them), a numpy "
+                        f"Generator or SeedSequence, or None, got {value!r}") from None
+    return value

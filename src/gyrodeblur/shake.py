@@ -12,9 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .arguments import check_real, check_seed
 from .gyrolog import GyroLog
 
 __all__ = ["synthetic_hand_shake"]
+
+#: Shortest stretch (s) the bands are drawn over; a shorter log is its start.
+_MIN_DRAWN = 1.0
 
 
 def _band_noise(rng, n: int, dt: float, lo: float, hi: float) -> np.ndarray:
@@ -33,24 +37,70 @@ def synthetic_hand_shake(duration: float = 2.0, rate_hz: float = 200.0, *, seed:
     Parameters
     ----------
     duration : float
-        Seconds.
+        Seconds, > 0; at least two samples' worth.
     rate_hz : float
-        Sampling rate.
-    seed : int
+        Sampling rate, > 0.
+    seed : int, sequence of int, numpy Generator or SeedSequence
     sway_rms, tremor_rms : 3 floats
-        RMS angular rate (rad/s) of the slow sway (0.3-3 Hz) and the tremor (7-12 Hz)
-        about x, y, z.
+        RMS angular rate (rad/s, >= 0) of the slow sway (0.3-3 Hz) and the tremor
+        (7-12 Hz) about x, y, z.
     sensor_noise : float
-        Std of white measurement noise, rad/s (0.007 is typical of phone gyros).
+        Std of white measurement noise, rad/s, >= 0 (0.007 is typical of phone gyros).
     t0 : float
         Time of the first sample, seconds.
+
+    Returns
+    -------
+    GyroLog
+        ``round(duration * rate_hz)`` samples from ``t0``, every ``1 / rate_hz`` s.
+
+    Raises
+    ------
+    TypeError, ValueError
+        An argument of the wrong kind or out of its range, named.
+
+    Notes
+    -----
+    The bands are drawn over at least :data:`_MIN_DRAWN` seconds and a shorter log is
+    their start: a band of 0.3-3 Hz has no frequency to draw from in a fraction of a
+    second (a 0.2 s draw had been scaled up from nearly nothing to absurd rates). Logs
+    of :data:`_MIN_DRAWN` s or more are drawn over their own length.
     """
-    rng = np.random.default_rng(seed)
+    duration = check_real(duration, "duration")
+    rate_hz = check_real(rate_hz, "rate_hz")
+    if rate_hz <= 0:
+        raise ValueError(f"rate_hz must be > 0 (samples per second), got {rate_hz!r}")
     n = int(round(duration * rate_hz))
+    if n < 2:
+        raise ValueError(f"duration must hold at least two samples at {rate_hz:g} Hz "
+                         f"(>= {1.5 / rate_hz:.3g} s), got {duration!r}")
+    check_seed(seed)
+    sway, tremor = (_three_rates(v, name) for v, name in ((sway_rms, "sway_rms"),
+                                                           (tremor_rms, "tremor_rms")))
+    sensor_noise = check_real(sensor_noise, "sensor_noise")
+    if sensor_noise < 0:
+        raise ValueError(f"sensor_noise must be >= 0 (rad/s), got {sensor_noise!r}")
+    t0 = check_real(t0, "t0")
+    rng = np.random.default_rng(seed)
     dt = 1.0 / rate_hz
-    w = np.zeros((n, 3))
+    drawn = max(n, int(np.ceil(_MIN_DRAWN * rate_hz)))
+    w = np.zeros((drawn, 3))
     for k in range(3):
-        w[:, k] = (sway_rms[k] * _band_noise(rng, n, dt, 0.3, 3.0)
-                   + tremor_rms[k] * _band_noise(rng, n, dt, 7.0, 12.0))
+        w[:, k] = (sway[k] * _band_noise(rng, drawn, dt, 0.3, 3.0)
+                   + tremor[k] * _band_noise(rng, drawn, dt, 7.0, 12.0))
     w += rng.normal(0.0, sensor_noise, w.shape)
-    return GyroLog(t0 + np.arange(n) * dt, w, "synthetic hand shake", {"seed": seed})
+    return GyroLog(t0 + np.arange(n) * dt, w[:n], "synthetic hand shake", {"seed": seed})
+
+
+def _three_rates(value, name: str) -> np.ndarray:
+    """``value`` as three RMS rates (rad/s, finite, >= 0), or an error naming ``name``."""
+    try:
+        rates = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        rates = None
+    if rates is None or rates.shape != (3,) or not np.all(np.isfinite(rates)):
+        raise ValueError(f"{name} must be three finite RMS rates (rad/s, about x, y, z), "
+                         f"got {value!r}")
+    if np.any(rates < 0):
+        raise ValueError(f"{name} must be >= 0 (RMS rates, rad/s), got {value!r}")
+    return rates

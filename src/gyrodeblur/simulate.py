@@ -14,7 +14,7 @@ from scipy import ndimage
 
 from .bands import for_row_bands
 from .capture import Capture, check_capture
-from .arguments import check_flag, check_real, is_whole
+from .arguments import check_flag, check_real, check_seed, is_whole
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, join_alpha, split_alpha
 from .psf import check_blur_span
 from .tonecurve import LINEAR, TransferCurve, get_transfer_curve
@@ -208,13 +208,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         snr_db = check_real(snr_db, "snr_db")
         if not -100.0 <= snr_db <= 300.0:     # checked before the work, not after it
             raise ValueError(f"snr_db must be -100 to 300 dB, got {snr_db!r}")
-    try:
-        if isinstance(seed, (bool, np.bool_)):
-            raise TypeError
-        np.random.default_rng(seed)
-    except (TypeError, ValueError):
-        raise TypeError(f"seed must be a whole number >= 0 (or a sequence of them), a numpy "
-                        f"Generator or SeedSequence, or None, got {seed!r}") from None
+    check_seed(seed)
     quantize = check_flag(quantize, "quantize")
     check_capture(capture)
     curve = get_transfer_curve(transfer, "transfer")

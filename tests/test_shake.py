@@ -1,0 +1,62 @@
+"""Synthetic hand shake (:mod:`gyrodeblur.shake`): its rates and bands, its seed, short
+logs, and its arguments checked."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrodeblur.shake import synthetic_hand_shake
+
+
+def test_rates_are_the_given_rms_in_their_bands():
+    sway, tremor, noise = (0.10, 0.12, 0.05), (0.08, 0.06, 0.04), 0.005
+    log = synthetic_hand_shake(60.0, 200.0, seed=5, sway_rms=sway, tremor_rms=tremor,
+                               sensor_noise=noise)
+    assert len(log.t) == 12000 and np.allclose(np.diff(log.t), 1 / 200.0)
+    rms = np.sqrt((log.omega ** 2).mean(axis=0))
+    expected = np.sqrt(np.square(sway) + np.square(tremor) + noise ** 2)
+    np.testing.assert_allclose(rms, expected, rtol=0.03)
+    power = np.abs(np.fft.rfft(log.omega, axis=0)) ** 2
+    f = np.fft.rfftfreq(len(log.t), 1 / 200.0)
+    slow, fast = (f > 0.1) & (f < 4.0), (f > 6.0) & (f < 13.5)
+    share_slow = power[slow].sum(axis=0) / power.sum(axis=0)
+    share_fast = power[fast].sum(axis=0) / power.sum(axis=0)
+    np.testing.assert_allclose(share_slow, np.square(sway) / expected ** 2, atol=0.03)
+    np.testing.assert_allclose(share_fast, np.square(tremor) / expected ** 2, atol=0.03)
+
+
+def test_a_seed_gives_the_same_log_and_another_seed_another():
+    a, b = synthetic_hand_shake(1.5, seed=7), synthetic_hand_shake(1.5, seed=7)
+    np.testing.assert_array_equal(a.omega, b.omega)
+    assert not np.allclose(a.omega, synthetic_hand_shake(1.5, seed=8).omega)
+    later = synthetic_hand_shake(1.5, seed=7, t0=12.25)
+    np.testing.assert_allclose(later.t, a.t + 12.25)
+
+
+@pytest.mark.parametrize("duration", [0.05, 0.2, 0.5])
+def test_a_short_log_is_the_start_of_a_one_second_one_at_hand_rates(duration):
+    """The bands are drawn over a second at least: a 0.2 s draw had been scaled up from
+    almost nothing to millions of rad/s."""
+    short = synthetic_hand_shake(duration, 200.0, seed=3)
+    assert len(short.t) == round(duration * 200)
+    np.testing.assert_array_equal(short.omega,
+                                  synthetic_hand_shake(1.0, 200.0, seed=3).omega[:len(short.t)])
+    assert np.abs(short.omega).max() < 1.0
+
+
+@pytest.mark.parametrize("kwargs,error,words", [
+    (dict(duration=-1.0), ValueError, "duration"),
+    (dict(duration=0.004), ValueError, "two samples"),
+    (dict(rate_hz=0), ValueError, "rate_hz"),
+    (dict(rate_hz="200"), TypeError, "rate_hz"),
+    (dict(sway_rms=(0.1, 0.1)), ValueError, "sway_rms"),
+    (dict(tremor_rms=(0.1, -0.1, 0.1)), ValueError, "tremor_rms"),
+    (dict(seed="a"), TypeError, "seed"),
+    (dict(seed=True), TypeError, "seed"),
+    (dict(sensor_noise=-0.01), ValueError, "sensor_noise"),
+    (dict(t0=float("nan")), ValueError, "t0"),
+])
+def test_bad_arguments_are_named(kwargs, error, words):
+    with pytest.raises(error, match=words):
+        synthetic_hand_shake(**kwargs)
