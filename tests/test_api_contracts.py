@@ -81,6 +81,25 @@ def test_simulate_with_the_srgb_curve_is_what_deblur_expects(scene, make_capture
         simulate_blur(scene, cap, transfer="gamma 2.2")
 
 
+def test_simulated_srgb_photos_hold_no_light_below_black_and_deblur_takes_them(make_capture):
+    """Hard 0/1 edges (the cubic spline undershoots beside them) and strong noise near
+    black give a little negative light; encoded by sRGB's 12.92 foot it came out far
+    below black (-0.36), and ``deblur`` refused the photo it had been told to expect.
+    An encoded result holds no light below black; a linear one keeps its undershoot."""
+    cap = make_capture([0.0, 0.5, 0.0], width=96, height=64, f=100.0)
+    y, x = np.mgrid[0:64, 0:96]
+    checker = ((x // 8 + y // 8) % 2).astype(np.float32)
+    linear = simulate_blur(checker, cap)
+    assert linear.min() < -0.01                                # the spline's undershoot
+    for out in (simulate_blur(checker, cap, transfer="srgb"),
+                simulate_blur(0.02 + 0.1 * checker, cap, transfer="srgb", snr_db=10, seed=1)):
+        assert out.min() >= 0.0 and out.max() <= 1.5
+        assert deblur(out, cap).shape == out.shape
+    encoded = simulate_blur(checker, cap, transfer="srgb")
+    from gyrodeblur.tonecurve import linear_to_srgb
+    np.testing.assert_allclose(encoded, linear_to_srgb(np.maximum(linear, 0)), atol=1e-5)
+
+
 def test_a_method_of_ones_own_gets_what_it_names(scene, make_capture, own_method):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
     blurred = simulate_blur(scene, cap)

@@ -157,7 +157,12 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         light itself. For an sRGB photo pass ``"srgb"``: the result is then what
         :func:`gyrodeblur.deblur.deblur` expects by default (its ``transfer="srgb"``);
         blurring encoded values directly would model a camera that does not exist and
-        cost a deblur of them several dB.
+        cost a deblur of them several dB. With a curve other than linear, light below
+        black (the cubic spline's undershoot beside a hard edge, noise near black) is
+        clipped to 0 before it is encoded, as in a camera's output: the curves' steep
+        foot (sRGB's 12.92) would turn a little negative light into values far below
+        black, which ``deblur`` refuses. Linear results are left unclipped (a linear
+        operator).
     snr_db : float, optional
         Add Gaussian noise with standard deviation ``std(blurred) / 10**(snr_db / 20)``.
     seed : int, sequence of int, numpy Generator or SeedSequence, optional
@@ -247,6 +252,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     out = np.ascontiguousarray(np.moveaxis(acc, 0, -1) / n).reshape(img.shape)
     if snr_db is not None:
         out = add_noise(out, snr_db, seed)
+    if not linear:          # an encoded photo holds no light below black, as a camera's
+        np.maximum(out, 0.0, out=out)
     out = curve.encode(out)
     if quantize:
         out = quantize_8bit(out)
