@@ -400,3 +400,32 @@ def test_landing_pixel_never_returns_a_root_where_the_map_folds():
         assert abs(y0 + mean_offset_y(px, py) - py) < 1e-2, (y0, py)       # a root
         slope = (mean_offset_y(px, py + 0.05) - mean_offset_y(px, py - 0.05)) / 0.1
         assert slope < 1.0, (y0, py, slope)
+
+
+def test_a_forced_radius_that_cuts_the_trace_is_warned_of(make_capture):
+    """``radius=`` shorter than the blur cuts the PSF and renormalises what is left: no
+    longer the blur, so it says so; a radius holding the trace says nothing."""
+    import warnings
+
+    cap = make_capture([0, 1.0, 0], f=300.0, exposure=0.03)          # a 9 px streak
+    cx, cy = cap.camera.cx, cap.camera.cy
+    with pytest.warns(UserWarning, match="beyond radius=2"):
+        cut = render_psf(cap, cx, cy, radius=2)
+    assert cut.shape == (5, 5) and np.isclose(cut.sum(), 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        whole = render_psf(cap, cx, cy, radius=12)
+    assert whole.shape == (25, 25) and np.isclose(whole.sum(), 1)
+    assert cut.max() > 2 * whole.max()            # the streak's mass piled into 5 x 5
+
+
+def test_a_point_far_outside_the_frame_is_refused_as_such(make_capture):
+    from gyrodeblur.errors import InputError
+
+    cap = make_capture([0, 1.0, 0], f=300.0, exposure=0.03)
+    w, h = cap.camera.width, cap.camera.height
+    with pytest.raises(InputError, match="more than a frame outside"):
+        render_psf(cap, 1e6, 0)
+    with pytest.raises(InputError, match="more than a frame outside"):
+        render_psf(cap, -w - 1, h / 2)
+    assert np.isclose(render_psf(cap, -w / 2, -h / 2).sum(), 1)   # outside, within a frame

@@ -27,7 +27,10 @@ class Camera:
     Attributes
     ----------
     fx, fy : float
-        Focal lengths in pixels.
+        Focal lengths in pixels (from millimetres: ``f_mm * width_px / sensor_width_mm``).
+        Only their sign is checked here; a capture description
+        (:func:`gyrodeblur.capture.load_capture`) also refuses one under 0.15 x the longer
+        side, a value in mm.
     cx, cy : float
         Principal point in pixels.
     width, height : int

@@ -34,6 +34,7 @@ brings the photo back to the reference orientation, free of rolling-shutter skew
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -363,7 +364,9 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         Largest distance (px) between consecutive trace samples (default 0.25).
     radius : int, optional
         Force the half-size; default: the smallest holding the whole trace and its
-        samples' sinc lobes (+ :data:`LANCZOS_A` px).
+        samples' sinc lobes (+ :data:`LANCZOS_A` px). A trace that reaches beyond it is
+        cut there and what is left renormalised, with a warning: that PSF is no longer
+        the blur.
     row : float, optional
         Row whose rolling-shutter timing to use (default: the row the light lands on,
         :func:`landing_pixel`).
@@ -378,9 +381,9 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     Raises
     ------
     InputError
-        A PSF (trace, or its distance from ``(x, y)``) larger than the frame, a
-        ``max_step`` that is not a positive number, or a ``radius`` that is not a whole
-        number from 0 to the frame's size.
+        A PSF (trace, or its distance from ``(x, y)``) larger than the frame, a point more
+        than a frame outside it, a ``max_step`` that is not a positive number, or a
+        ``radius`` that is not a whole number from 0 to the frame's size.
     """
     if not (isinstance(max_step, (int, float, np.floating, np.integer)) and max_step > 0
             and np.isfinite(max_step)):
@@ -392,13 +395,21 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         raise InputError(None, f"radius must be a whole number of pixels from 0 to "
                                f"{max(cam.width, cam.height)}, got {radius!r}")
     x, y = _pixel_position(x, y)
+    if not (-cam.width <= x <= 2 * cam.width and -cam.height <= y <= 2 * cam.height):
+        raise InputError(None, f"pixel position ({x:g}, {y:g}) lies more than a frame outside "
+                               f"the {cam.width}x{cam.height} frame")
     row = _timing_row(capture, row)
     pts = _adaptive_trace(capture, x, y, max_step, row)
     offsets = pts - np.array([x, y])
     if centred:
         offsets -= offsets.mean(axis=0)
+    reach = float(np.abs(offsets).max())
     if radius is None:     # a point far off the frame sees its trace far from itself
-        check_blur_span(capture, 2 * float(np.abs(offsets).max()), f"at ({x:.0f}, {y:.0f})")
+        check_blur_span(capture, 2 * reach, f"at ({x:.0f}, {y:.0f})")
+    elif reach > radius + 0.5:
+        warnings.warn(f"the blur at ({x:.0f}, {y:.0f}) reaches {reach:.1f} px from it, "
+                      f"beyond radius={radius}: the PSF is cut there and renormalised, and is "
+                      "no longer the blur (leave radius out for the whole trace)", stacklevel=2)
     return lanczos_splat(offsets, radius=radius)
 
 
