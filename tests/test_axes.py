@@ -24,6 +24,8 @@ def test_24_proper_permutations():
     ("YXZ", "reflection"), ("XXZ", "exactly once"), ("XY", "three letters"),
     ([[0, 1, 0], [1, 0, 0], [0, 0, 1]], "determinant"),
     ([[1, 0, 0], [0, 2, 0], [0, 0, 1]], "orthonormal"),
+    ([[1, 0, 0], [0, 0.87, -0.5], [0, 0.5, 0.87]], "orthonormal"),   # 30 degrees, rounded
+    ([[float("nan"), 0, 0], [0, 1, 0], [0, 0, 1]], "finite"),
 ])
 def test_refuses_non_rotations(spec, why):
     with pytest.raises(InputError, match=why) as e:

@@ -142,3 +142,21 @@ def test_the_log_near_the_photos_is_found_on_the_logs_own_clock():
     rate, se, secs = log_typical_rate([cap])
     np.testing.assert_allclose(rate, first, atol=1e-3)
     assert secs == pytest.approx(50.0, abs=1.5), secs
+
+
+def test_photos_far_apart_on_one_log_pool_their_neighbourhoods():
+    """The samples within 30 s of either photo count: photos 80 s apart on a 100 s log
+    give 80 s of log, not one photo's 40."""
+    cap = _capture(100.0, (0.02, 0.0, 0.0), "Xyz", start=10.0)
+    assert log_typical_rate([cap])[2] == pytest.approx(40.0, abs=1.0)
+    both = log_typical_rate([cap, cap.replace(exposure_start=90.0)])
+    assert both[2] == pytest.approx(80.0, abs=1.0)
+
+
+def test_a_short_log_leaves_its_turn_over_its_length():
+    """Over 9 s, a net turn of 0.05 rad is 0.0056 rad/s: more than the 0.005 floor."""
+    t = np.arange(0.0, 9.0, 1 / 200)
+    log = GyroLog(t, np.tile([0.01, 0.0, -0.01], (t.size, 1)))
+    cap = Capture(4.5, 0.03, 0.03, Camera.centred(640, 480, 600.0), log)
+    prior, _ = BiasPrior.from_logs([cap], np.eye(3), np.zeros(3))
+    np.testing.assert_allclose(prior.log_rate[1], 0.05 / 9, rtol=1e-6)

@@ -141,6 +141,7 @@ def test_bias_auto(tmp_path):
 @pytest.mark.parametrize("change,match", [
     ({"exposure_start": 2000.0}, "covers"),
     ({"exposure_time": -1}, "positive"),
+    ({"exposure_time": 0}, "exposure_time must be positive"),    # no light at all
     ({"gyro": {"path": "missing.gcsv"}}, "not found"),
     ({"gyro": {"path": "gyro.gcsv", "orientation": "YXZ"}}, "reflection"),
     ({"gyro": {"path": "gyro.gcsv", "format": "mp4"}}, "unknown gyro log format"),
@@ -469,6 +470,7 @@ def test_parsing_mistakes_are_named_not_tracebacks(capture_files):
 
 
 @pytest.mark.parametrize("direction, readout", [("0", 0.0166), ("0.0", 0.0166), ("1", 0.0),
+                                                ("2", 0.0), ("3", 0.0),    # along the rows
                                                 ("top", None), ("7", None)])
 def test_the_gcsv_readout_direction_is_read_as_a_number(tmp_path, direction, readout):
     from gyrodeblur.gyrolog import GyroLog, write_gcsv
@@ -604,3 +606,108 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
     (tmp_path / "c.json").write_text(json.dumps(doc))
     with pytest.raises(InputError, match="c.json: missing 'exposure_start'$"):
         load_capture(tmp_path / "c.json", exif_hints={})
+
+
+def test_camera_rates_are_the_mapped_log_less_the_bias(capture_files):
+    """``w_camera = axes @ w_log - bias``, on ``camera_time = gyro_time + time_offset``:
+    with a mapping that is not its own transpose (YxZ), so that M and M^T differ."""
+    d, doc = capture_files
+    doc["gyro"].update(orientation="YxZ", bias=[0.01, -0.02, 0.005], time_offset=0.25)
+    doc["exposure_start"] = 1001.25
+    (d / "cap.json").write_text(json.dumps(doc))
+    cap = load_capture(d / "cap.json")
+    t, w = cap.camera_rates()
+    assert t[0] == pytest.approx(1000.25)
+    # the log is (0.01, 0.3, -0.02): camera x = log Y, y = -log X, z = log Z
+    np.testing.assert_allclose(w[0], [0.3 - 0.01, -0.01 + 0.02, -0.02 - 0.005], atol=1e-9)
+
+
+def test_the_log_must_cover_the_exposure_on_its_own_clock(capture_files):
+    """The log (1000-1002 s, gyro clock) covers a camera-clock exposure at 1002.0 s only
+    through a time_offset of 1.5 s; one at 1001.0 s, gyro 999.5 s, it does not cover."""
+    d, _ = capture_files
+    cap = load_capture(d / "cap.json", overrides={"time_offset": 1.5, "exposure_start": 1002.0})
+    assert cap.window[0] - cap.time_offset == pytest.approx(1000.5)
+    with pytest.raises(InputError, match=r"gyro.gcsv: gyro log covers .* but the exposure "
+                                         r"needs 999.500000"):
+        load_capture(d / "cap.json", overrides={"time_offset": 1.5, "exposure_start": 1001.0})
+
+
+def test_max_gap_sets_the_largest_gap_allowed_inside_the_exposure(capture_files):
+    """An 80 ms gap inside the exposure is refused at the default 50 ms and accepted
+    with gyro.max_gap (or --max-gap) 0.1 s."""
+    d, doc = capture_files
+    t = 1000.0 + np.arange(400) / 200.0
+    keep = (t < 1000.99) | (t > 1001.06)            # 1000.985 s, then 1001.065 s: 80 ms
+    write_gcsv(d / "gyro.gcsv", GyroLog(t[keep], np.tile([0.01, 0.3, -0.02], (keep.sum(), 1))))
+    with pytest.raises(InputError, match=r"gyro.gcsv: gap of 80.0 ms .* \(limit 50 ms"):
+        load_capture(d / "cap.json")
+    assert load_capture(d / "cap.json", overrides={"max_gap": 0.1}).max_gap == 0.1
+    doc["gyro"]["max_gap"] = 0.1
+    (d / "cap.json").write_text(json.dumps(doc))
+    assert load_capture(d / "cap.json").max_gap == 0.1
+
+
+def test_an_exif_focal_length_is_scaled_to_the_cameras_size(capture_files):
+    """The EXIF ``fx`` is in pixels of the photo (``image_size``); a camera size given in
+    the JSON (here twice the photo's) gets it scaled to that size."""
+    d, doc = capture_files
+    doc["camera"] = {"width": 1024, "height": 764}
+    (d / "cap.json").write_text(json.dumps(doc))
+    cap = load_capture(d / "cap.json", image_size=(512, 382), exif_hints={"fx": 400.0})
+    assert cap.camera.fx == pytest.approx(800.0) and cap.camera.fy == pytest.approx(800.0)
+
+
+def test_a_gyro_log_given_as_an_option_is_relative_to_the_working_folder(
+        capture_files, tmp_path_factory, monkeypatch):
+    """``--gyro other.gcsv`` names a file where the command runs, not beside the JSON."""
+    d, _ = capture_files
+    elsewhere = tmp_path_factory.mktemp("cwd")
+    (elsewhere / "other.gcsv").write_text((d / "gyro.gcsv").read_text())
+    monkeypatch.chdir(elsewhere)
+    cap = load_capture(d / "cap.json", overrides={"gyro_path": "other.gcsv"})
+    assert os.path.samefile(cap.log.source, elsewhere / "other.gcsv")
+
+
+def test_an_automatic_bias_is_in_the_camera_frame_and_clear_of_the_exposure(tmp_path):
+    """bias "auto": the median of the samples outside the exposure (on the gyro clock:
+    gyro time = camera time - time_offset), mapped to the camera frame; refused where
+    fewer than 20 samples lie outside it."""
+    t = np.arange(0, 1, 0.005)
+    still = np.array([0.02, -0.01, 0.005])
+    w = np.tile(still, (t.size, 1))
+    w[(t >= 0.2) & (t <= 0.8)] += 0.5                     # moving during the exposure only
+    write_gcsv(tmp_path / "g.gcsv", GyroLog(t, w))
+    doc = {"exposure_start": 0.05, "exposure_time": 0.6, "readout_time": 0.0,
+           "camera": {"fx": 500, "width": 640, "height": 480},
+           "gyro": {"path": "g.gcsv", "bias": "auto", "orientation": "YxZ",
+                    "time_offset": -0.15}}                # the exposure: gyro 0.2-0.8 s
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    cap = load_capture(tmp_path / "c.json")
+    np.testing.assert_allclose(cap.bias, [-0.01, -0.02, 0.005], atol=2e-6)   # YxZ @ still
+    with pytest.raises(InputError, match="g.gcsv: bias 'auto' needs at least 20 gyro "
+                                         "samples outside the exposure window, the log has 0"):
+        load_capture(tmp_path / "c.json", overrides={"exposure_time": 0.9,
+                                                     "exposure_start": -0.1})
+
+
+def test_a_large_negative_automatic_bias_is_warned_of():
+    """A bias of -0.08 rad/s is as suspect as +0.08 (a phone's is under 0.02)."""
+    from gyrodeblur.capture import estimate_bias_outside
+
+    t = np.arange(0, 2, 0.005)
+    log = GyroLog(t, np.tile([-0.08, 0.0, 0.0], (t.size, 1)), "g.gcsv")
+    with pytest.warns(UserWarning, match="g.gcsv: the automatic bias, -0.080.* agree to "
+                                         "0.000 rad/s: the camera was turning steadily"):
+        estimate_bias_outside(log, np.eye(3), 0.9, 1.0, source="g.gcsv")
+    shaky = log.omega + np.random.default_rng(0).normal(0.0, 0.1, log.omega.shape)
+    with pytest.warns(UserWarning, match=r"vary by 0.\d+ rad/s: the camera was not still"):
+        estimate_bias_outside(GyroLog(t, shaky, "g.gcsv"), np.eye(3), 0.9, 1.0,
+                              source="g.gcsv")
+
+
+def test_a_focal_length_too_short_on_one_axis_is_refused(capture_files):
+    d, _ = capture_files
+    with pytest.raises(InputError, match=r"cap.json with --fy: camera: focal length "
+                                         r"fx=819.2, fy=4.2 px is under"):
+        load_capture(d / "cap.json", overrides={"fy": 4.2})

@@ -305,6 +305,8 @@ def test_coverage_and_gaps():
         check_coverage(log, 0.05, 0.25)
     with pytest.raises(InputError, match="g.csv.*covers"):
         check_coverage(log, 0.25, 0.4)
+    with pytest.raises(InputError, match="g.csv.*covers"):     # starts before the log
+        check_coverage(log, -0.05, 0.02)
 
 
 def test_rate_noise_measures_white_noise_not_hand_motion():
@@ -579,3 +581,41 @@ def test_a_rate_column_whose_name_carries_a_sign_is_refused(tmp_path, trace, hea
     unsigned = {k: [signed[1:] if c == signed else c for c in v] for k, v in options.items()}
     np.testing.assert_allclose(read_gyro_log(p, "csv", **unsigned).omega, trace.omega,
                                atol=1e-9)
+
+
+def test_a_log_needs_two_samples_of_three_rates(trace):
+    with pytest.raises(InputError, match="g.csv: only 1 gyro sample"):
+        GyroLog(trace.t[:1], trace.omega[:1], "g.csv")
+    with pytest.raises(InputError, match=r"g.csv: expected N times and N x 3 rates, got "
+                                         r"\(50,\) and \(50, 2\)"):
+        GyroLog(trace.t, trace.omega[:, :2], "g.csv")
+
+
+def test_window_keeps_both_ends_and_median_rate_counts_seconds(trace):
+    assert len(trace.window(trace.t[0], trace.t[4])) == 5             # t0 <= t <= t1
+    from gyrodeblur.gyrolog import median_rate
+
+    t = np.arange(0.0, 20.0, 1 / 200)
+    assert median_rate(GyroLog(t, np.zeros((t.size, 3))), block=2.0)[2] == pytest.approx(20.0)
+
+
+def test_csv_units_and_time_names_loggers_use(tmp_path, trace):
+    """``gx_dps`` states deg/s; ``ts`` names a time column whose unit (here ms) the sample
+    interval tells, not one that ends in the letter s."""
+    p = tmp_path / "g.csv"
+    p.write_text(_csv_text("ts,gx_dps,gy_dps,gz_dps", [int(round(a * 1e3)) for a in trace.t],
+                           np.degrees(trace.omega).T))
+    log = read_csv_log(p)
+    assert log.meta["time_unit"] == "ms" and log.meta["rate_unit"] == "deg/s"
+    assert np.allclose(log.t, trace.t, atol=1e-9)
+    assert np.allclose(log.omega, trace.omega, atol=1e-9)
+
+
+def test_five_unnamed_columns_are_not_guessed(tmp_path, trace):
+    """A time and four unnamed columns (a gyro and a temperature?): which three are the
+    rates would be a guess."""
+    wx, wy, wz = trace.omega.T
+    p = tmp_path / "imu.csv"
+    p.write_text(_csv_text("t_s,c1,c2,c3,c4", trace.t, [wx, wy, wz, wx]))
+    with pytest.raises(InputError, match="imu.csv: the column names .* do not say which three"):
+        read_gyro_log(p)

@@ -46,6 +46,13 @@ def test_ssim_identical_is_one_and_drops_with_noise():
     assert 0 < s < 0.95
     per_channel = np.mean([ssim(rgb[..., c], noisy[..., c]) for c in range(3)])
     assert s == pytest.approx(per_channel)
+    # scikit-image's, Gaussian-weighted as Wang et al. (sigma 1.5, population covariance)
+    from skimage.metrics import structural_similarity
+
+    grey_noisy = np.clip(img + np.random.default_rng(1).normal(0, 0.05, img.shape), 0, 1)
+    assert ssim(img, grey_noisy) == pytest.approx(structural_similarity(
+        img, grey_noisy, data_range=1.0, gaussian_weights=True, sigma=1.5,
+        use_sample_covariance=False), abs=1e-12)
 
 
 def test_border_is_left_out():
@@ -62,6 +69,8 @@ def test_border_is_left_out():
     assert crop_border(ref, 0) is ref
     with pytest.raises(ValueError):
         crop_border(ref, 20)
+    with pytest.raises(ValueError, match="border must be a whole number of pixels >= 0"):
+        crop_border(ref, -2)
 
 
 def test_default_border():

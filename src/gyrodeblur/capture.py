@@ -317,12 +317,15 @@ def estimate_bias_outside(log: GyroLog, axes: np.ndarray, t0: float, t1: float,
     bias = np.median(rates, axis=0)
     spread = 1.4826 * np.median(np.abs(rates - bias), axis=0)     # robust sigma
     if np.max(np.abs(bias)) > _AUTO_BIAS_SUSPECT or np.max(spread) > _AUTO_BIAS_SUSPECT:
+        why = (f"comes from samples that vary by {np.max(spread):.3f} rad/s: the camera "
+               "was not still outside the exposure" if np.max(spread) > _AUTO_BIAS_SUSPECT
+               else f"comes from samples that agree to {np.max(spread):.3f} rad/s: the "
+                    "camera was turning steadily outside the exposure (a pan, a tripod "
+                    "head), if not a gyro that drifts that much")
         warnings.warn(f"{source}: the automatic bias, "
-                      f"{', '.join(f'{b:+.3f}' for b in bias)} rad/s, comes from samples "
-                      f"that vary by {np.max(spread):.3f} rad/s: the camera was not still "
-                      "outside the exposure, and a phone's bias is rarely above "
-                      f"{_AUTO_BIAS_SUSPECT:g}; give gyro.bias, or leave it to calibrate",
-                      stacklevel=3)
+                      f"{', '.join(f'{b:+.3f}' for b in bias)} rad/s, {why}; a phone's bias "
+                      f"is rarely above {_AUTO_BIAS_SUSPECT:g} rad/s: give gyro.bias, or "
+                      "leave it to calibrate", stacklevel=3)
     return bias
 
 
