@@ -1,12 +1,14 @@
 """Tests for gyrodeblur.icc: the transfer curve an embedded ICC profile declares."""
 
 import io
+import struct
 
 import numpy as np
 import pytest
 from iccprofiles import curv_gamma, curv_identity, curv_table, make_icc, para
 from PIL import Image, ImageCms
 
+from gyrodeblur.errors import InputError
 from gyrodeblur.icc import (parametric_curve, photo_transfer_curve, profile_description,
                             profile_transfer_curve)
 from gyrodeblur.imageio import Photo
@@ -145,3 +147,29 @@ def test_a_png_s_file_gamma_stands_in_for_a_profile():
     # a profile, where there is one, says more than the gAMA chunk
     lcms = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
     assert photo_transfer_curve(png(1.0, lcms)) == (SRGB, None)
+
+
+def test_a_damaged_profile_is_said_and_srgb_assumed():
+    """A curve tag whose entries or parameters do not fit it, or a tag that lies past the
+    profile's end (a file cut short), is a ValueError naming it: the photo's curve is then
+    sRGB, with a note, rather than a crash."""
+    short_table = b"curv" + b"\0" * 4 + struct.pack(">I4H", 1000, 0, 100, 200, 300)
+    damaged = {"1000 curve entries": make_icc(short_table),
+               "function 3 is truncated": make_icc(para(3, [2.4, 1.0])),
+               "outside the profile": make_icc(curv_gamma(2.2))[:-8]}
+    for said, icc in damaged.items():
+        with pytest.raises(ValueError, match=said):
+            profile_transfer_curve(icc)
+        curve, note = photo_transfer_curve(_photo(icc))
+        assert curve is SRGB and said in note and "sRGB assumed" in note
+
+
+def test_a_v4_description_of_any_length():
+    assert profile_description(make_icc(curv_gamma(2.2), name="Display P3",
+                                        v4_name=True)) == "Display P3"
+
+
+def test_an_unknown_curve_name_lists_auto_too():
+    with pytest.raises(InputError, match=r"unknown transfer curve 'rec709' \(known: auto, "
+                                         r"linear, none, srgb\)"):
+        photo_transfer_curve(_photo(None), "rec709")

@@ -8,6 +8,7 @@ import math
 import os
 import re
 import struct
+import warnings
 import zlib
 
 import numpy as np
@@ -184,6 +185,22 @@ def test_16bit_png_is_readable_by_independent_decoders(tmp_path):
         assert np.array_equal(np.asarray(im), k >> 8)
 
 
+def test_a_16bit_png_of_several_blocks_of_scanlines_round_trips(tmp_path):
+    """The 16-bit encoder filters about 1 MiB of scanlines at a time and splits IDAT at
+    1 MiB: a photo larger than that (every real one) is exact across the joins. Half of
+    each row is noise (so the file passes 1 MiB), half smooth (so the rows at the joins
+    are filtered against the row above)."""
+    rng = np.random.default_rng(11)
+    h, w = 150, 2048                                 # 12 KiB rows: 85 rows a block
+    k = rng.integers(0, 65536, (h, w, 3))
+    y, x = np.mgrid[0:h, 0:w // 2]
+    k[:, w // 2:] = (20000 + 90 * y + 13 * x + 5000 * np.sin(x / 40) * np.cos(y / 30))[..., None] \
+        + rng.integers(0, 4, (h, w // 2, 3))
+    out = write_photo(tmp_path / "big.png", (k / 65535).astype(np.float32), bit_depth=16)
+    assert sum(t == b"IDAT" for t, _ in png_chunks(out)) > 1
+    assert np.array_equal(np.rint(read_photo(out).pixels * 65535), k)
+
+
 @pytest.mark.parametrize("interlace", [False, True])
 @pytest.mark.parametrize("channels", [3, 4])
 def test_reads_16bit_colour_png_from_another_encoder(tmp_path, interlace, channels):
@@ -321,6 +338,37 @@ def test_lzw_tiffs_with_orientation(tmp_path, shape, bits):
     photo = read_photo(tmp_path / "lzw.tif")
     assert photo.bit_depth == bits
     assert np.array_equal(np.rint(photo.pixels * (2**bits - 1)), k)
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_the_pillow_fallback_undoes_each_orientation(tmp_path, monkeypatch, orientation):
+    """Where Pillow decodes a TIFF (LZW without imagecodecs) it applies the Orientation tag
+    while loading; each of the eight is undone, 8 and 16 bits: the pixels as stored."""
+    k8, _ = levels((6, 10, 3), 8, seed=12)
+    exif = Image.Exif()
+    exif[274] = orientation
+    Image.fromarray(k8.astype(np.uint8)).save(tmp_path / "o8.tif", compression="tiff_lzw",
+                                              exif=exif)
+    k16, _ = levels((6, 10, 3), 16, seed=13)
+    tifffile.imwrite(tmp_path / "o16.tif", k16.astype(np.uint16), photometric="rgb",
+                     compression="zlib", extratags=[(274, 3, 1, orientation, True)])
+    for name, k, bits in (("o8.tif", k8, 8), ("o16.tif", k16, 16)):
+        photo = _read_without_tifffile(tmp_path / name, monkeypatch)
+        assert np.array_equal(np.rint(photo.pixels * (2**bits - 1)), k), name
+        assert exif_values(photo.exif)[0][274] == orientation
+
+
+def test_each_orientation_is_written_into_a_tiff(tmp_path):
+    """The Orientation tag of the EXIF is an IFD0 tag of a TIFF written: all eight values
+    (8, a phone held the other way up in portrait, among them)."""
+    for orientation in range(1, 9):
+        exif = Image.Exif()
+        exif[271], exif[274] = "Canon", orientation
+        src = like(smooth((6, 8, 3)), exif=exif.tobytes())
+        out = write_photo(tmp_path / f"o{orientation}.tif", src.pixels, like=src)
+        with tifffile.TiffFile(out) as tif:
+            assert tif.pages.first.tags["Orientation"].value == orientation
+        assert exif_values(read_photo(out).exif)[0][274] == orientation
 
 
 def test_float_tiffs_are_clipped_and_reported_as_16bit(tmp_path):
@@ -479,6 +527,50 @@ def test_only_a_resolution_the_file_states_is_carried(tmp_path):
     assert out.dpi is None
 
 
+def test_print_resolution_units_jfif_per_cm_and_none(tmp_path):
+    """A JPEG's JFIF density per cm is read in pixels per inch; X/YResolution without a
+    unit (ResolutionUnit 1, as tifffile writes by default) states no print resolution."""
+    Image.new("RGB", (8, 6)).save(tmp_path / "cm.jpg", dpi=(300, 150))
+    data = bytearray((tmp_path / "cm.jpg").read_bytes())
+    assert data[6:11] == b"JFIF\0"
+    data[13:18] = struct.pack(">BHH", 2, 118, 59)             # per cm
+    (tmp_path / "cm.jpg").write_bytes(bytes(data))
+    assert read_photo(tmp_path / "cm.jpg").dpi == pytest.approx((118 * 2.54, 59 * 2.54))
+    tifffile.imwrite(tmp_path / "none.tif", np.zeros((6, 8, 3), np.uint8), photometric="rgb",
+                     resolution=(72, 72), resolutionunit="NONE")
+    assert read_photo(tmp_path / "none.tif").dpi is None
+    exif = Image.Exif()
+    exif[0x011A], exif[0x011B], exif[0x0128] = 72.0, 72.0, 1                  # no unit
+    Image.new("RGB", (8, 6)).save(tmp_path / "none.jpg", exif=exif.tobytes())
+    assert read_photo(tmp_path / "none.jpg").dpi is None
+
+
+def test_a_utf16_xmp_packet_goes_into_a_png_as_text(tmp_path):
+    """XMP may be UTF-16 (with a byte-order mark): a PNG's XMP chunk gets its text."""
+    for codec in ("utf-16", "utf-16-be", "utf-32"):
+        packet = XMP.decode().encode(codec)
+        if codec == "utf-16-be":
+            packet = b"\xfe\xff" + packet
+        src = Photo(np.full((4, 5, 3), 0.4, np.float32), 8, "JPEG", xmp=packet)
+        out = read_photo(write_photo(tmp_path / f"{codec}.png", src.pixels, like=src))
+        assert out.png_text == {"XML:com.adobe.xmp": XMP.decode()}, codec
+
+
+def test_an_xmp_packet_at_the_jpeg_limit(tmp_path):
+    """65504 bytes of XMP fit one JPEG segment and are kept; one more is left out with a
+    warning (Pillow refuses to write it)."""
+    for size, kept in ((65504, True), (65505, False)):
+        src = Photo(np.full((4, 5, 3), 0.4, np.float32), 8, "TIFF", xmp=b"x" * size)
+        if kept:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                out = write_photo(tmp_path / f"{size}.jpg", src.pixels, like=src)
+        else:
+            with pytest.warns(UserWarning, match="XMP .65505 bytes. is longer than one JPEG"):
+                out = write_photo(tmp_path / f"{size}.jpg", src.pixels, like=src)
+        assert read_photo(out).xmp == (src.xmp if kept else None)
+
+
 @pytest.mark.parametrize("bits", [8, 16])
 def test_png_xmp_and_international_text_are_itxt_chunks(tmp_path, bits):
     """XMP goes into a PNG as an iTXt chunk, where the XMP standard (and Pillow's
@@ -501,6 +593,30 @@ def test_png_xmp_and_international_text_are_itxt_chunks(tmp_path, bits):
     with pytest.warns(UserWarning, match="XMP is not UTF-8"):
         out = write_photo(tmp_path / "bad.png", bad.pixels, like=bad, bit_depth=bits)
     assert read_photo(out).png_text is None
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_a_png_text_keyword_longer_than_79_characters_is_left_out(tmp_path, bits):
+    """The PNG standard allows keywords of 1 to 79 Latin-1 characters; text under any
+    other keyword is not written (libpng drops such a chunk as damaged)."""
+    src = Photo(np.full((4, 5, 3), 0.4, np.float32), 8, "PNG",
+                png_text={"K" * 79: "kept", "L" * 80: "left out", "": "left out"})
+    out = write_photo(tmp_path / "t.png", src.pixels, like=src, bit_depth=bits)
+    assert read_photo(out).png_text == {"K" * 79: "kept"}
+
+
+def test_an_imagemagick_png_s_exif_text_chunk_is_read_as_its_exif(tmp_path):
+    """ImageMagick stores a PNG's EXIF as hex in a "Raw profile type exif" text chunk: it
+    is the photo's EXIF block (written back as eXIf), not text."""
+    block = exif_block()
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Raw profile type exif", f"\nexif\n{len(block):8d}\n{block.hex()}\n")
+    Image.fromarray(np.full((4, 5, 3), 90, np.uint8)).save(tmp_path / "im.png", pnginfo=info)
+    src = read_photo(tmp_path / "im.png")
+    assert src.png_text is None
+    assert exif_values(src.exif) == exif_values(block)
+    out = read_photo(write_photo(tmp_path / "out.png", src.pixels, like=src))
+    assert exif_values(out.exif)[0][271] == "Canon"
 
 
 def test_an_xmp_packet_too_long_for_a_jpeg_is_left_out_with_a_warning(tmp_path):
@@ -584,6 +700,32 @@ def test_hints_capture_time_in_unix_time_from_its_zone_and_fraction():
     assert "capture_time_unix" not in local
     assert local["capture_time_text"] == "2024:12:05 07:27:10"
     assert "capture_time_text" not in hints_for((4, 4), x_9003="0000:00:00 00:00:00")
+
+
+def test_hints_focal_plane_resolution_in_mm_and_the_inch_default():
+    """FocalPlaneResolutionUnit 4 is pixels per mm (as some cameras write); without the
+    unit tag the EXIF default, inches, applies."""
+    assert hints_for((40, 60), x_A20E=R(250, 1), x_A210=4)["fx"] == pytest.approx(50 * 250)
+    assert hints_for((40, 60), x_A20E=R(4000, 1))["fx"] == pytest.approx(50 * 4000 / 25.4)
+
+
+def test_hints_the_35mm_equivalent_comes_first_and_a_resize_scales_by_the_long_side():
+    """With both a 35 mm equivalent and a focal-plane resolution, fx is the 35 mm one; a
+    resized photo's focal-plane fx scales by its long side over the recorded long side,
+    whichever way the photo stands."""
+    both = hints_for((40, 60), x_A405=50, x_A20E=R(4000, 1), x_A210=2)
+    assert both["fx"] == pytest.approx(50 / 36 * 60)
+    portrait = hints_for((60, 40), x_A20E=R(4000, 1), x_A210=2, x_A002=6000, x_A003=4000)
+    assert portrait["fx"] == pytest.approx(50 * 4000 / 25.4 * 60 / 6000)
+
+
+def test_hints_offset_time_original_is_the_zone_before_offset_time():
+    """OffsetTimeOriginal is DateTimeOriginal's own zone; OffsetTime (the file's) is only
+    the fallback: a photo edited abroad must not move its capture time by hours."""
+    hints = hints_for((4, 4), x_9003="2024:12:05 07:27:10", x_9291="512",
+                      x_9011="+01:00", x_9010="-08:00")
+    assert hints["capture_time_unix"] == pytest.approx(1733380030.512, abs=1e-6)
+    assert hints["capture_time_text"] == "2024:12:05 07:27:10.512 +01:00"
 
 
 def test_hints_missing_or_damaged_exif():
@@ -680,6 +822,26 @@ def test_never_overwrites_the_input(tmp_path):
     assert read_photo(tmp_path / "in.png").pixels.max() == 0
 
 
+def test_never_overwrites_the_input_through_a_hard_link(tmp_path):
+    """A hard link is the input photo under another name (realpath cannot tell)."""
+    write_photo(tmp_path / "in.png", np.zeros((4, 4), np.float32))
+    src = read_photo(tmp_path / "in.png")
+    os.link(tmp_path / "in.png", tmp_path / "hard.png")
+    with pytest.raises(InputError, match="hard.png: is the input photo"):
+        write_photo(tmp_path / "hard.png", np.ones((4, 4), np.float32), like=src,
+                    overwrite=True)
+    assert read_photo(tmp_path / "in.png").pixels.max() == 0
+
+
+def test_a_dangling_link_at_the_output_is_an_existing_file(tmp_path):
+    """A symbolic link whose target is gone is still a name in the folder: not replaced
+    without ``overwrite``."""
+    os.symlink(tmp_path / "gone.png", tmp_path / "out.png")
+    with pytest.raises(InputError, match="out.png: exists"):
+        write_photo(tmp_path / "out.png", np.zeros((4, 4), np.float32))
+    assert os.path.islink(tmp_path / "out.png")
+
+
 def test_check_destination_is_the_same_check_without_writing(tmp_path):
     imageio.check_destination(tmp_path / "new.png")
     with pytest.raises(InputError, match="unknown image type"):
@@ -723,6 +885,32 @@ def test_failed_write_removes_temporary_and_keeps_old_file(tmp_path, monkeypatch
     with pytest.raises(InputError, match="No space left"):
         write_photo(tmp_path / "b.png", np.ones((4, 4), np.float32))
     assert os.listdir(tmp_path) == ["a.png"]
+
+
+def test_the_temporary_file_is_hidden_beside_the_destination(tmp_path, monkeypatch):
+    """The file is written under a new hidden, random name in the destination's folder
+    (so that the move into place is one rename on one file system), never under a name
+    a user's file may have; a folder refusing new files is said, naming the output."""
+    from gyrodeblur.atomicfile import atomic_write, atomic_write_text, check_writable
+
+    (tmp_path / "a.png.tmp").write_bytes(b"mine")
+    seen = []
+    for _ in range(2):
+        atomic_write(tmp_path / "a.png", lambda f: seen.append(f.name))
+    assert [os.path.dirname(n) for n in seen] == [str(tmp_path)] * 2
+    assert all(os.path.basename(n).startswith(".a.png.") for n in seen) and seen[0] != seen[1]
+    assert (tmp_path / "a.png.tmp").read_bytes() == b"mine"
+    atomic_write_text(tmp_path / "t.json", '{"lens": "\u00e9 \u2713"}')
+    assert (tmp_path / "t.json").read_bytes().decode("utf-8") == '{"lens": "\u00e9 \u2713"}'
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    with monkeypatch.context() as m:
+        m.setattr(os, "open", refuse)
+        with pytest.raises(InputError, match=re.escape(f"o.png: cannot write in folder "
+                                                       f"{tmp_path}: Permission denied")):
+            check_writable(tmp_path / "o.png")
 
 
 # --------------------------------------------------------------------------- bad input
@@ -823,6 +1011,79 @@ def test_an_exif_block_too_long_for_a_jpeg_loses_its_maker_notes(tmp_path):
         assert 0x927C not in kept.get_ifd(0x8769)
     write_photo(tmp_path / "out.png", photo.pixels, like=photo)    # a PNG keeps it all
     assert read_photo(tmp_path / "out.png").exif == photo.exif
+
+
+def test_a_bare_exif_block_is_written_with_its_header(tmp_path):
+    """A Photo's EXIF given without the ``Exif\\0\\0`` header (a bare TIFF-structured
+    block, as some libraries hand it) is stored whole, with the header, in each format."""
+    block = exif_block()
+    src = like(smooth((6, 8, 3)), exif=block[6:])
+    for name, bits in (("a.jpg", 8), ("b.png", 8), ("c.png", 16), ("d.tif", 8)):
+        out = read_photo(write_photo(tmp_path / name, src.pixels, like=src, bit_depth=bits))
+        assert exif_values(out.exif) == exif_values(block), name
+
+
+def test_copyright_artist_and_interoperability_survive_a_tiff(tmp_path):
+    """The descriptive IFD0 tags (Artist, Copyright among them) and the Interoperability
+    directory inside the Exif one (its index R03 says Adobe RGB to DCF readers) are
+    rebuilt from a TIFF's tags and written into a TIFF's."""
+    exif = Image.Exif()
+    exif[271], exif[315], exif[33432] = "Canon", "Ann Onym", "(c) 2024 Ann Onym"
+    exif[0x8769] = {0x829A: R(1, 60), 0xA005: {1: "R03"}}
+    Image.new("RGB", (8, 6)).save(tmp_path / "in.jpg", exif=exif.tobytes())
+    src = read_photo(tmp_path / "in.jpg")
+    for name in ("a.tif", "b.jpg"):                     # JPEG -> TIFF -> TIFF reader -> JPEG
+        src = read_photo(write_photo(tmp_path / name, src.pixels, like=src))
+        got = Image.Exif()
+        got.load(src.exif)
+        assert (got[271], got[315], got[33432]) == ("Canon", "Ann Onym", "(c) 2024 Ann Onym")
+        assert got.get_ifd(0x8769)[0x829A] == R(1, 60)
+        assert dict(got.get_ifd(0xA005)) == {1: "R03"}, name
+
+
+def test_an_exif_block_at_the_jpeg_limit(tmp_path):
+    """Up to 65533 bytes (header included) fit a JPEG's APP1 segment and are written
+    whole; more, and the maker's notes go, with a warning (Pillow refuses to write them).
+    Pillow pads the block to an even length: 65532 and 65534 bytes either side."""
+    def block_of(size):
+        exif = Image.Exif()
+        exif[271] = "Canon"
+        exif.get_ifd(0x8769)[0x927C] = b"M" * 100
+        extra = size - len(exif.tobytes())
+        exif.get_ifd(0x8769)[0x927C] = b"M" * (100 + extra)
+        block = exif.tobytes()
+        assert len(block) == size
+        return block
+
+    fits = like(smooth((8, 8, 3)), exif=block_of(65532))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = read_photo(write_photo(tmp_path / "fits.jpg", fits.pixels, like=fits))
+    assert out.exif == fits.exif
+    over = like(smooth((8, 8, 3)), exif=block_of(65534))
+    with pytest.warns(UserWarning, match=r"\(65534 bytes\) is more than a JPEG holds "
+                                         r"\(65533\); written without its MakerNote"):
+        out = read_photo(write_photo(tmp_path / "over.jpg", over.pixels, like=over))
+    assert exif_values(out.exif)[0][271] == "Canon"
+    assert 0x927C not in exif_values(out.exif)[1]
+
+
+def test_a_long_user_comment_goes_and_an_exif_block_still_too_long_is_left_out(tmp_path):
+    """A UserComment too long for a JPEG goes as a maker's notes do; where leaving them out
+    is not enough (a long description), the JPEG is written without EXIF, with a warning,
+    rather than not at all."""
+    exif = Image.Exif()
+    exif[271] = "Canon"
+    exif.get_ifd(0x8769)[0x9286] = b"ASCII\0\0\0" + b"c" * 70000    # UserComment
+    src = like(smooth((8, 8, 3)), exif=exif.tobytes())
+    with pytest.warns(UserWarning, match="written without its UserComment"):
+        out = read_photo(write_photo(tmp_path / "comment.jpg", src.pixels, like=src))
+    assert exif_values(out.exif)[0][271] == "Canon"
+    exif[270] = "d" * 70000                                         # ImageDescription
+    src = like(smooth((8, 8, 3)), exif=exif.tobytes())
+    with pytest.warns(UserWarning, match="written without EXIF"):
+        out = read_photo(write_photo(tmp_path / "long.jpg", src.pixels, like=src))
+    assert out.exif is None and out.pixels.shape == (8, 8, 3)
 
 
 @pytest.mark.parametrize("bit_depth", [8, 16])

@@ -118,3 +118,25 @@ def test_a_photos_noise_level_reads_its_jpeg_tables(tmp_path):
     assert photo_noise_sigma(jpg) == pytest.approx(
         jpeg_noise_sigma(estimate_noise_sigma(jpg.pixels), jpg.quantization[0]))
     assert photo_noise_sigma(jpg) > 1.5 * estimate_noise_sigma(jpg.pixels)
+
+
+def test_a_barely_noisy_8bit_image_is_not_noiseless():
+    """Where most filter responses are exactly 0 (an 8-bit image with a few pixels a level
+    off) the median is 0, but the noise is not: the estimate comes from the mean."""
+    rng = np.random.default_rng(7)
+    img = np.full((64, 64), 128, np.float32)
+    img[rng.random(img.shape) < 0.05] += 1
+    est = estimate_noise_sigma(img / 255)
+    assert 0.02 / 255 < est < 1 / 255
+
+
+def test_a_photos_noise_level_leaves_its_alpha_out():
+    """An RGBA photo's level is its colours' (a constant alpha would pull it down by a
+    quarter)."""
+    from gyrodeblur.imageio import Photo
+    from gyrodeblur.noise import photo_noise_sigma
+    rng = np.random.default_rng(8)
+    rgb = _textured(rng, (96, 96, 3)) + rng.normal(0, 0.01, (96, 96, 3)).astype(np.float32)
+    rgba = np.concatenate([rgb, np.ones((96, 96, 1), np.float32)], axis=2)
+    photo = Photo(rgba, 16, "PNG")
+    assert photo_noise_sigma(photo) == estimate_noise_sigma(rgb)

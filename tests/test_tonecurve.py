@@ -145,5 +145,35 @@ def test_matching_a_reference_curve():
     assert not matches_curve(ParametricCurve(2.2).transfer_curve(), SRGB)
 
 
+def test_matching_is_to_a_quarter_level_over_the_whole_range():
+    """matches_curve's default tolerance is a quarter of an 8-bit level, shadows included:
+    half a level off is another curve, a tenth of one is the same; so is sRGB's power
+    segment without its linear toe (it differs below 0.04, by up to 3 levels)."""
+    def shifted(levels):
+        return TransferCurve("shifted", lambda v: srgb_to_linear(np.asarray(v) + levels / 255),
+                             linear_to_srgb)
+
+    assert not matches_curve(shifted(0.5), SRGB)
+    assert matches_curve(shifted(0.1), SRGB)
+    no_toe = ParametricCurve(2.4, 1 / 1.055, 0.055 / 1.055).transfer_curve()
+    assert not matches_curve(no_toe, SRGB)
+
+
+def test_a_flat_foot_encodes_as_its_end():
+    """ICC function 2 (b < 0, black lifted to c) is flat below V = -b/a: linear light at
+    or below that black (an undershoot of the deconvolution) encodes as the foot's end, as
+    a table curve's flat stretch does, not as 0."""
+    from gyrodeblur.icc import parametric_curve
+    curve = parametric_curve(2, (2.0, 2.0, -0.5, 0.01))            # flat below V = 0.25
+    np.testing.assert_allclose(curve.encode(np.float32([0.0, 0.005, 0.01, 0.26])),
+                               [0.25, 0.25, 0.25, 0.5], atol=1e-6)
+
+
+def test_a_curve_that_is_not_named_is_an_input_error():
+    """None (a capture description's "transfer": null) is not read as "none" (linear)."""
+    with pytest.raises(InputError, match=r"^cap.json: a transfer curve is a name .*got None"):
+        get_transfer_curve(None, source="cap.json")
+
+
 def test_doctests():
     assert doctest.testmod(tc).failed == 0

@@ -111,6 +111,66 @@ def test_alignment_warp_clamps_beside_a_light_at_the_frame_edge():
         np.testing.assert_allclose(kept[rows][:, :8], expected, atol=1e-6)
 
 
+def test_alignment_warp_in_tiles_is_the_whole_warp_to_the_bit(monkeypatch):
+    """Each tile reads a window of the photo wide enough for all eight Lanczos taps of its
+    samples: on sharp detail (noise) the tiled warp is the whole one exactly."""
+    import gyrodeblur.warp as wp
+
+    rng = np.random.default_rng(5)
+    img = rng.random((200, 230, 2)).astype(np.float32)
+    field = (np.linspace(0, 199, 4), np.linspace(0, 229, 5), rng.normal(0, 3, (4, 5, 2)))
+    whole = wp.warp_by_displacement(img, field)
+    monkeypatch.setattr(wp, "_WARP_TILE", (64, 48))
+    np.testing.assert_array_equal(wp.warp_by_displacement(img, field), whole)
+
+
+def test_alignment_warp_clamps_beside_a_light_at_the_right_edge():
+    """As at the left edge: samples beyond the last column are clamped to the two pixels
+    they mirror between (about the last pixel)."""
+    from gyrodeblur.warp import CLIPPED, warp_by_displacement
+
+    W = 80
+    ramp = np.linspace(0.05, 0.6, W, dtype=np.float32) ** 2
+    img = np.repeat(np.tile(ramp, (64, 1))[..., None], 3, axis=2)
+    img[30:33, W - 3:] = 1.0                                # a light at the right edge
+    ys, xs = np.array([0.0, 63.0]), np.array([0.0, W - 1.0])
+    rows = [27, 28, 34, 35]
+    for shift in (1.6, 0.4):   # the last columns sample right of the photo
+        field = (ys, xs, np.tile([shift, 0.0], (2, 2, 1)))
+        plain = warp_by_displacement(img, field, clipped=CLIPPED)
+        kept = warp_by_displacement(img, field, clipped=CLIPPED, light_area=9)
+        s = np.arange(W - 8, W) + shift
+        f = np.floor(s).astype(int)
+        pair = (W - 1) - np.abs((W - 1) - np.stack([f, f + 1]))  # mirrored about W - 1
+        lo, hi = ramp[pair].min(axis=0), ramp[pair].max(axis=0)
+        expected = np.clip(plain[rows][:, -8:], lo[None, :, None], hi[None, :, None])
+        np.testing.assert_allclose(kept[rows][:, -8:], expected, atol=1e-6)
+
+
+def test_alignment_warp_clipping_rules():
+    """A clipped line half a pixel off the grid comes out two pixels wide at the clip
+    value; a diagonal streak is one blob (8-connected), so one longer than light_area is
+    no point light; a photo with values above 1 is warped as it is."""
+    from gyrodeblur.warp import CLIPPED, warp_by_displacement
+
+    ys, xs = np.array([0.0, 39.0]), np.array([0.0, 49.0])
+    img = np.full((40, 50), 0.2, np.float32)
+    img[:, 20] = 1.0
+    half = (ys, xs, np.tile([0.5, 0.0], (2, 2, 1)))
+    out = warp_by_displacement(img, half, clipped=CLIPPED)
+    np.testing.assert_array_equal(np.flatnonzero(out[20] == 1.0), [19, 20])
+    diagonal = np.full((40, 50), 0.2, np.float32)
+    diagonal[np.arange(10, 22), np.arange(15, 27)] = 1.0         # 12 px, corner to corner
+    shift = (ys, xs, np.tile([0.37, -0.61], (2, 2, 1)))
+    np.testing.assert_array_equal(
+        warp_by_displacement(diagonal, shift, clipped=CLIPPED, light_area=9),
+        warp_by_displacement(diagonal, shift, clipped=CLIPPED))
+    bright = diagonal * 2                                        # linear, no clip ceiling
+    np.testing.assert_array_equal(
+        warp_by_displacement(bright, shift, clipped=CLIPPED, light_area=20),
+        warp_by_displacement(bright, shift))
+
+
 def test_the_alignment_grid_is_interpolated_bilinearly():
     """The warp's sample map: bilinear interpolation of the displacement grid, in a fixed
     order of two-tap sums (no matrix product, whose result depends on BLAS threads)."""
