@@ -169,6 +169,18 @@ def test_a_flat_foot_encodes_as_its_end():
                                [0.25, 0.25, 0.25, 0.5], atol=1e-6)
 
 
+def test_a_curve_flat_at_black_does_not_mirror_through_zero():
+    """ICC function 1 with b < 0 is 0 below V = -b/a: it passes through the origin, but
+    flat. Mirrored, light just below 0 encoded as minus the foot's end (-0.25 beside
+    +0.25 at 0: speckle in deblurred blacks); it is the foot's end on both sides."""
+    from gyrodeblur.icc import parametric_curve
+    curve = parametric_curve(1, (2.0, 2.0, -0.5))                   # flat below V = 0.25
+    np.testing.assert_allclose(curve.encode(np.float32([-1e-3, -1e-6, 0.0, 1e-6])),
+                               [0.25, 0.25, 0.25, 0.2505], atol=1e-4)
+    np.testing.assert_allclose(curve.decode(np.float32([-0.1, 0.1, 0.25, 0.75])),
+                               [0.0, 0.0, 0.0, 1.0], atol=1e-6)
+
+
 def test_a_curve_that_is_not_named_is_an_input_error():
     """None (a capture description's "transfer": null) is not read as "none" (linear)."""
     with pytest.raises(InputError, match=r"^cap.json: a transfer curve is a name .*got None"):

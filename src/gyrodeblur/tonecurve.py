@@ -187,7 +187,8 @@ class ParametricCurve:
 
     Outside ``[0, 1]`` (an overshoot of the deconvolution): a curve through the origin is
     extended with odd symmetry, as :func:`srgb_to_linear` is; one with an offset (``e``
-    or ``f`` shifting black) keeps its own segments.
+    or ``f`` shifting black), or flat at black (``b < 0`` with no linear segment: light
+    at or below 0 encodes as the flat foot's end), keeps its own segments.
     """
 
     g: float
@@ -207,7 +208,10 @@ class ParametricCurve:
 
     @property
     def _odd(self) -> bool:
-        return abs(float(self._decode64(np.zeros(1))[0])) < 1e-7
+        # through the origin and rising from it: a curve flat at black (ICC function 1
+        # with b < 0) would jump from its foot's end to minus it at 0 under the mirror
+        at_0, above = self._decode64(np.array([0.0, 1e-6]))
+        return abs(float(at_0)) < 1e-7 and above > at_0
 
     def _decode64(self, v: np.ndarray) -> np.ndarray:
         base = np.maximum(self.a * v + self.b, 0.0)
