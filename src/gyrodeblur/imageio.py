@@ -37,8 +37,9 @@ Conventions
 Writing: JPEG stores EXIF (APP1), XMP (APP1) and ICC (APP2); PNG stores ``eXIf``,
 ``iCCP``, the input's ``gAMA`` and text chunks (XMP as ``XML:com.adobe.xmp``); TIFF
 stores the ICC profile (tag 34675), XMP (tag 700) and EXIF as IFD0 tags plus Exif/GPS
-sub-IFDs; each stores the print resolution. Values
-are clipped to ``[0, 1]`` and rounded to the nearest integer. Files are written to a
+sub-IFDs; each stores the print resolution. PNG and TIFF are compressed at zlib level
+:data:`~gyrodeblur.pngwrite.DEFLATE_LEVEL` (3: a third of level 6's time, a little larger).
+Values are clipped to ``[0, 1]`` and rounded to the nearest integer. Files are written to a
 temporary file in the destination folder and moved into place
 (:mod:`gyrodeblur.atomicfile`).
 
@@ -73,7 +74,7 @@ from gyrodeblur.errors import InputError
 from gyrodeblur.exif import (_EXIF_ERRORS, _IFD0_ASCII, _JPEG_MAX_EXIF, _ORIENTATION,
                              _exif_for_jpeg, _load_exif, _normalise_exif, _pillow_exif,
                              _sub_ifds, _tiff_exif, exif_capture_hints)
-from gyrodeblur.pngwrite import _PNG_XMP_KEY, _write_png
+from gyrodeblur.pngwrite import _PNG_XMP_KEY, DEFLATE_LEVEL, _write_png
 
 __all__ = ["Photo", "read_photo", "write_photo", "check_destination", "exif_capture_hints",
            "EXTENSIONS"]
@@ -1012,7 +1013,8 @@ def _write_tiff(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
         f, ints,
         photometric="minisblack" if channels <= 2 else "rgb",
         extrasamples=("unassalpha",) if channels in (2, 4) else None,
-        compression="zlib", predictor=True, iccprofile=icc or None,
+        compression="zlib", compressionargs={"level": DEFLATE_LEVEL}, predictor=True,
+        iccprofile=icc or None,
         metadata=None, software=False, byteorder="<", bigtiff=False, extratags=extratags,
         resolution=tuple(dpi) if dpi else None, resolutionunit="INCH" if dpi else None,
     )

@@ -17,13 +17,17 @@ from gyrodeblur.exif import _EXIF_HEADER
 
 #: The keyword of the text chunk that holds a PNG's XMP packet.
 _PNG_XMP_KEY = "XML:com.adobe.xmp"
+#: zlib level of the PNG (and Deflate TIFF) files written: on a 12 MP deblurred photo,
+#: 8-bit PNG, 1.2 s and 11.7 MB at 3 against 3.8 s and 10.3 MB at zlib's usual 6 (0.8 s,
+#: 12.6 MB at 1); TIFF 0.8 s, 13.0 MB against 3.0 s, 11.8 MB (session 44).
+DEFLATE_LEVEL = 3
 
 
 def _write_png(f, ints, *, exif, icc, gamma=None, dpi=None, text=None) -> None:
     if ints.dtype == np.uint16:
         _write_png16(f, ints, exif=exif, icc=icc, gamma=gamma, dpi=dpi, text=text)
         return
-    options = {"compress_level": 6}
+    options = {"compress_level": DEFLATE_LEVEL}
     if exif:
         options["exif"] = exif
     if icc:
@@ -141,7 +145,7 @@ def _write_png16(f, ints: np.ndarray, *, exif, icc, gamma=None, dpi=None, text=N
                                                 1)))
     for key, value in _png_text_items(text):
         f.write(_png_text_chunk(key, value))
-    compressor = zlib.compressobj(6)
+    compressor = zlib.compressobj(DEFLATE_LEVEL)
     block = max(1, (1 << 20) // raw.shape[1])  # about 1 MiB of scanlines at a time
     pending = []
     prior = np.zeros(raw.shape[1], np.uint8)
