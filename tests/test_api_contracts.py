@@ -250,6 +250,13 @@ def test_logs_captures_and_patch_windows_of_the_wrong_kind_are_named(scene, make
         deblur_with_psfs(scene, [Patch(0, 100, 0, 128)], [psf])
     out = deblur_with_psfs(scene, [Patch(0, 96, 0, 128)], [psf])
     assert out.shape == scene.shape
+    streak = np.zeros((3, 201), np.float32)            # light over 201 px: another photo's
+    streak[1] = 1.0
+    with pytest.raises(InputError, match="PSF 1 spreads light over 201 px, more than the "
+                                         "128x96 photo"):
+        deblur_with_psfs(scene, [Patch(0, 96, 0, 128)], [streak])
+    streak[1, :67] = 0.0              # 134 px: a blur as long as the photo, and its lobes
+    assert deblur_with_psfs(scene, [Patch(0, 96, 0, 128)], [streak]).shape == scene.shape
 
 
 def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_capture):

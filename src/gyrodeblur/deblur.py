@@ -22,7 +22,8 @@ from .arguments import check_callback, check_flag
 from .capture import Capture, check_capture
 from .errors import InputError
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
-from .psf import PSFField, displacement_field, psf_extent, psf_variation, render_psf
+from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_variation,
+                  render_psf)
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
                      check_patches, deconvolve_patchwise, patch_grid)
 from .tonecurve import TransferCurve, get_transfer_curve
@@ -331,7 +332,9 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         are deblurred as without it.
     patches : list of Patch
     psfs : list of ndarray
-        One PSF per patch (odd sides, a positive sum; each method normalises it).
+        One PSF per patch (odd sides, a positive sum; each method normalises it), its
+        light spread over no more than the photo's larger side and its sinc lobes (a PSF
+        for another size of photo is refused).
     method : str
         A key of :data:`METHODS` (default :data:`DEFAULT_METHOD`).
     transfer : {"srgb", "linear"} or TransferCurve
@@ -373,8 +376,14 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     encoded, alpha = split_alpha(checked)          # alpha is a mask: passed through
     if len(psfs) != len(patches):
         raise InputError(None, f"{len(psfs)} PSFs for {len(patches)} patches: give one each")
+    side = max(checked.shape[:2])
     for i, k in enumerate(psfs):      # checked here, before any work; used as given
-        check_psf(k, f"PSF {i + 1}")
+        extent = psf_extent(check_psf(k, f"PSF {i + 1}"))
+        if extent > side + 2 * LANCZOS_A:   # longer than any blur a capture may give
+            # (psf.check_blur_span), lobes included: no photo is left to restore from
+            raise InputError(None, f"PSF {i + 1} spreads light over {extent} px, more than the "
+                                   f"{checked.shape[1]}x{checked.shape[0]} photo (a PSF for "
+                                   "another size of photo?)")
     img = curve.decode(encoded)
     factory = METHODS[method]
     if _takes_keyword(factory, "clip"):               # the method clips (or not) itself
