@@ -402,21 +402,31 @@ def test_landing_pixel_never_returns_a_root_where_the_map_folds():
         assert slope < 1.0, (y0, py, slope)
 
 
-def test_a_forced_radius_that_cuts_the_trace_is_warned_of(make_capture):
+def test_a_forced_radius_that_cuts_the_trace_is_warned_of_or_refused(make_capture):
     """``radius=`` shorter than the blur cuts the PSF and renormalises what is left: no
-    longer the blur, so it says so; a radius holding the trace says nothing."""
+    longer the blur, so it says so; one that holds less than half the trace is refused
+    (under a rolling shutter what it held could sum to 0 or below); a radius holding the
+    trace says nothing."""
     import warnings
+
+    from gyrodeblur.errors import InputError
 
     cap = make_capture([0, 1.0, 0], f=300.0, exposure=0.03)          # a 9 px streak
     cx, cy = cap.camera.cx, cap.camera.cy
-    with pytest.warns(UserWarning, match="beyond radius=2"):
-        cut = render_psf(cap, cx, cy, radius=2)
-    assert cut.shape == (5, 5) and np.isclose(cut.sum(), 1)
+    with pytest.warns(UserWarning, match=r"beyond radius=6, which holds 7\d % of its trace"):
+        cut = render_psf(cap, cx, cy, radius=6)
+    assert cut.shape == (13, 13) and np.isclose(cut.sum(), 1)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         whole = render_psf(cap, cx, cy, radius=12)
     assert whole.shape == (25, 25) and np.isclose(whole.sum(), 1)
-    assert cut.max() > 2 * whole.max()            # the streak's mass piled into 5 x 5
+    assert cut.max() > 1.2 * whole.max()          # the streak's mass piled into 13 x 13
+    with pytest.raises(InputError, match=r"radius=2, which holds \d+ % of its trace: leave"):
+        render_psf(cap, cx, cy, radius=2)
+    # a lower row's trace starts away from its pixel (the camera turned before the row began)
+    rolling = make_capture([0, 1.0, 0], f=300.0, exposure=0.03, readout=0.03)
+    with pytest.raises(InputError, match=r"radius=4, which holds \d+ % of its trace: leave"):
+        render_psf(rolling, cx, rolling.camera.height - 1, radius=4)
 
 
 def test_a_point_far_outside_the_frame_is_refused_as_such(make_capture):

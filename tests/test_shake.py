@@ -34,6 +34,20 @@ def test_a_seed_gives_the_same_log_and_another_seed_another():
     np.testing.assert_allclose(later.t, a.t + 12.25)
 
 
+def test_a_log_of_a_second_or_more_is_its_own_draw_at_any_rate():
+    """A log of 1 s or more is drawn over its own length, a rate that is not a whole
+    number of Hz included (200.5 Hz, 1 s: 200 samples, drawn as 200, not 201)."""
+    from gyrodeblur import shake
+
+    log = shake.synthetic_hand_shake(1.0, 200.5, seed=4, sensor_noise=0.0)
+    rng = np.random.default_rng(4)
+    n, dt = len(log.t), 1 / 200.5
+    assert n == 200
+    x = (0.10 * shake._band_noise(rng, n, dt, 0.3, 3.0)
+         + 0.08 * shake._band_noise(rng, n, dt, 7.0, 12.0))
+    np.testing.assert_allclose(log.omega[:, 0], x, atol=1e-12)
+
+
 @pytest.mark.parametrize("duration", [0.05, 0.2, 0.5])
 def test_a_short_log_is_the_start_of_a_one_second_one_at_hand_rates(duration):
     """The bands are drawn over a second at least: a 0.2 s draw had been scaled up from
@@ -51,6 +65,10 @@ def test_a_short_log_is_the_start_of_a_one_second_one_at_hand_rates(duration):
     (dict(rate_hz=0), ValueError, "rate_hz"),
     (dict(rate_hz="200"), TypeError, "rate_hz"),
     (dict(sway_rms=(0.1, 0.1)), ValueError, "sway_rms"),
+    (dict(sway_rms=(0.1, True, 0.1)), TypeError, "sway_rms"),
+    (dict(sway_rms="abc"), TypeError, "sway_rms"),
+    (dict(rate_hz=1e9, duration=2e-9), ValueError, "rate_hz"),
+    (dict(rate_hz=1e5, duration=1e300), ValueError, "at most"),
     (dict(tremor_rms=(0.1, -0.1, 0.1)), ValueError, "tremor_rms"),
     (dict(seed="a"), TypeError, "seed"),
     (dict(seed=True), TypeError, "seed"),

@@ -179,6 +179,9 @@ def test_a_curve_flat_at_black_does_not_mirror_through_zero():
                                [0.25, 0.25, 0.25, 0.2505], atol=1e-4)
     np.testing.assert_allclose(curve.decode(np.float32([-0.1, 0.1, 0.25, 0.75])),
                                [0.0, 0.0, 0.0, 1.0], atol=1e-6)
+    # a b of one 16-bit fixed-point step below 0 is a gamma through the origin: mirrored
+    near = parametric_curve(1, (2.2, 1.0, -1 / 65536))
+    assert near.encode(np.float32([-0.01]))[0] == pytest.approx(-(0.01 ** (1 / 2.2)), abs=1e-3)
 
 
 def test_a_curve_that_is_not_named_is_an_input_error():

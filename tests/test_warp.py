@@ -36,8 +36,9 @@ def test_alignment_warp_matches_a_plain_one_across_bands(monkeypatch, channels):
     whole = wp.warp_by_displacement(img, field)
     monkeypatch.setattr(wp, "_WARP_TILE", (128, 96))  # 3 x 5 tiles, the last ones short
     out = wp.warp_by_displacement(img, field)
-    # same samples; a BLAS may round the sample positions differently per tile, which can
-    # move a rare one across remap's 1/32 px grid (a slope of ~0.1 per px: ~3e-3)
+    # the same samples (bit-exact on noise: test_alignment_warp_in_tiles_is_the_whole_warp_
+    # to_the_bit); the margin allows a remap whose rounding to its 1/32 px grid depended on
+    # the tile's origin (a rare sample a step over: ~3e-3 at a slope of ~0.1 per px)
     assert np.abs(out - whole).max() < 5e-3 and np.abs(out - whole).mean() < 1e-5
     assert out.dtype == np.float32 and out.shape == img.shape
     err = np.abs(out - ref)[8:-8, 8:-8]   # mirrored borders: the reference mirrors exactly

@@ -49,8 +49,9 @@ def check_real(value, name: str, *, allow_inf: bool = False) -> float:
 
 def check_seed(value, name: str = "seed"):
     """``value`` unchanged when :func:`numpy.random.default_rng` takes it (a whole number
-    >= 0 or a sequence of them, a ``Generator``, a ``SeedSequence`` or ``None``), else a
-    ``TypeError`` naming ``name`` (a ``bool`` is refused, not read as 0 or 1)."""
+    >= 0 or a sequence of them, a ``Generator``, ``BitGenerator`` or ``SeedSequence``, or
+    ``None``), else a ``TypeError`` naming ``name`` (a ``bool`` is refused, not read as 0
+    or 1)."""
     try:
         if isinstance(value, (bool, np.bool_)):
             raise TypeError

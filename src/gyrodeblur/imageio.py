@@ -960,7 +960,6 @@ def _refuse_too_big_for_jpeg(path: str, pixels: np.ndarray) -> None:
                                f"{pixels.shape[1]}x{pixels.shape[0]}: write .png or .tif")
 
 
-#: The keyword of a PNG's XMP text chunk (``iTXt``).
 def _write_jpeg(f, ints, *, exif, icc, quality, dpi=None, xmp=None) -> None:
     options = {"quality": quality, "subsampling": 0 if ints.ndim == 3 else -1}
     if exif:

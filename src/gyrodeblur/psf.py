@@ -366,7 +366,7 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         Force the half-size; default: the smallest holding the whole trace and its
         samples' sinc lobes (+ :data:`LANCZOS_A` px). A trace that reaches beyond it is
         cut there and what is left renormalised, with a warning: that PSF is no longer
-        the blur.
+        the blur; one of which it holds less than half is refused.
     row : float, optional
         Row whose rolling-shutter timing to use (default: the row the light lands on,
         :func:`landing_pixel`).
@@ -382,8 +382,9 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     ------
     InputError
         A PSF (trace, or its distance from ``(x, y)``) larger than the frame, a point more
-        than a frame outside it, a ``max_step`` that is not a positive number, or a
-        ``radius`` that is not a whole number from 0 to the frame's size.
+        than a frame outside it, a ``max_step`` that is not a positive number, a
+        ``radius`` that is not a whole number from 0 to the frame's size, or one that
+        holds less than half the trace.
     """
     if not (isinstance(max_step, (int, float, np.floating, np.integer)) and max_step > 0
             and np.isfinite(max_step)):
@@ -407,9 +408,13 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     if radius is None:     # a point far off the frame sees its trace far from itself
         check_blur_span(capture, 2 * reach, f"at ({x:.0f}, {y:.0f})")
     elif reach > radius + 0.5:
-        warnings.warn(f"the blur at ({x:.0f}, {y:.0f}) reaches {reach:.1f} px from it, "
-                      f"beyond radius={radius}: the PSF is cut there and renormalised, and is "
-                      "no longer the blur (leave radius out for the whole trace)", stacklevel=2)
+        kept = float(np.mean(np.abs(offsets).max(axis=1) <= radius + 0.5))
+        where = (f"the blur at ({x:.0f}, {y:.0f}) reaches {reach:.1f} px from it, beyond "
+                 f"radius={radius}, which holds {100 * kept:.0f} % of its trace")
+        if kept < 0.5:     # what is left is not the blur, and may not even sum to 1
+            raise InputError(None, f"{where}: leave radius out for the whole trace")
+        warnings.warn(f"{where}: the PSF is cut there and renormalised, and is no longer the "
+                      "blur (leave radius out for the whole trace)", stacklevel=2)
     return lanczos_splat(offsets, radius=radius)
 
 

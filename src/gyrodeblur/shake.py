@@ -19,6 +19,10 @@ __all__ = ["synthetic_hand_shake"]
 
 #: Shortest stretch (s) the bands are drawn over; a shorter log is its start.
 _MIN_DRAWN = 1.0
+#: Highest sampling rate (Hz; gyros log at up to a few kHz) and most samples (two
+#: hours at 2 kHz; 1.4 GB of rates) a synthetic log may have.
+_MAX_RATE_HZ = 100_000.0
+_MAX_SAMPLES = 15_000_000
 
 
 def _band_noise(rng, n: int, dt: float, lo: float, hi: float) -> np.ndarray:
@@ -68,8 +72,12 @@ def synthetic_hand_shake(duration: float = 2.0, rate_hz: float = 200.0, *, seed:
     """
     duration = check_real(duration, "duration")
     rate_hz = check_real(rate_hz, "rate_hz")
-    if rate_hz <= 0:
-        raise ValueError(f"rate_hz must be > 0 (samples per second), got {rate_hz!r}")
+    if not 0 < rate_hz <= _MAX_RATE_HZ:
+        raise ValueError(f"rate_hz must be > 0 and at most {_MAX_RATE_HZ:g} (samples per "
+                         f"second), got {rate_hz!r}")
+    if not duration * rate_hz <= _MAX_SAMPLES:
+        raise ValueError(f"duration x rate_hz must be at most {_MAX_SAMPLES:g} samples, got "
+                         f"{duration!r} s x {rate_hz!r} Hz")
     n = int(round(duration * rate_hz))
     if n < 2:
         raise ValueError(f"duration must hold at least two samples at {rate_hz:g} Hz "
@@ -83,7 +91,7 @@ def synthetic_hand_shake(duration: float = 2.0, rate_hz: float = 200.0, *, seed:
     t0 = check_real(t0, "t0")
     rng = np.random.default_rng(seed)
     dt = 1.0 / rate_hz
-    drawn = max(n, int(np.ceil(_MIN_DRAWN * rate_hz)))
+    drawn = max(n, int(round(_MIN_DRAWN * rate_hz)))   # a longer log: its own length
     w = np.zeros((drawn, 3))
     for k in range(3):
         w[:, k] = (sway[k] * _band_noise(rng, drawn, dt, 0.3, 3.0)
@@ -94,11 +102,16 @@ def synthetic_hand_shake(duration: float = 2.0, rate_hz: float = 200.0, *, seed:
 
 def _three_rates(value, name: str) -> np.ndarray:
     """``value`` as three RMS rates (rad/s, finite, >= 0), or an error naming ``name``."""
+    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else None
+    if items is None or any(isinstance(v, (bool, np.bool_, str, bytes)) for v in items):
+        raise TypeError(f"{name} must be three numbers (RMS rates, rad/s, about x, y, z), "
+                        f"got {value!r}")
     try:
-        rates = np.asarray(value, dtype=np.float64)
+        rates = np.asarray(items, dtype=np.float64)
     except (TypeError, ValueError):
-        rates = None
-    if rates is None or rates.shape != (3,) or not np.all(np.isfinite(rates)):
+        raise TypeError(f"{name} must be three numbers (RMS rates, rad/s, about x, y, z), "
+                        f"got {value!r}") from None
+    if rates.shape != (3,) or not np.all(np.isfinite(rates)):
         raise ValueError(f"{name} must be three finite RMS rates (rad/s, about x, y, z), "
                          f"got {value!r}")
     if np.any(rates < 0):

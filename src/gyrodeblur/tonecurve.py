@@ -208,9 +208,10 @@ class ParametricCurve:
 
     @property
     def _odd(self) -> bool:
-        # through the origin and rising from it: a curve flat at black (ICC function 1
-        # with b < 0) would jump from its foot's end to minus it at 0 under the mirror
-        at_0, above = self._decode64(np.array([0.0, 1e-6]))
+        # through the origin and rising from it within a quarter of an 8-bit level: a
+        # curve flat at black (ICC function 1 with b < 0) would jump from its foot's end to
+        # minus it at 0 under the mirror; a b of a fixed-point step or so (-1/65536) is 0
+        at_0, above = self._decode64(np.array([0.0, 0.25 / 255]))
         return abs(float(at_0)) < 1e-7 and above > at_0
 
     def _decode64(self, v: np.ndarray) -> np.ndarray:
