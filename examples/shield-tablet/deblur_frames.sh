@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Deblur the Shield-tablet frames that the gyro log covers, into ./shield-out/, with the
-# hand-worked capture_0003.json (or, say, --capture shield-out/calibrated.json after
-# ./calibrate_frames.sh: a later --capture wins).
-# Usage (from this folder): ./deblur_frames.sh [extra gyrodeblur deblur options]
+# hand-worked capture_0003.json, or with another description given as CAPTURE (say
+# CAPTURE=shield-out/calibrated.json after ./calibrate_frames.sh).
+# Usage (from this folder): [CAPTURE=file.json] ./deblur_frames.sh [extra gyrodeblur deblur options]
 set -euo pipefail
 data=../../../shared/data/real/shield-tablet
+capture=${CAPTURE:-capture_0003.json}
 frames=$(./frames_in_log.sh)
 mkdir -p shield-out
 while read -r frame start; do
-  gyrodeblur deblur "$data/$frame.jpg" --capture capture_0003.json --exposure-start "$start" \
+  gyrodeblur deblur "$data/$frame.jpg" --capture "$capture" --exposure-start "$start" \
     -o "shield-out/$frame.jpg" --overwrite "$@"
 done <<< "$frames"

@@ -1,8 +1,11 @@
 """Deblurring a photo with the PSFs its gyro log implies (chapter sec. 6.5, and beyond).
 
-Data flow: capture -> PSF field at patch centres -> per-patch non-blind deconvolution
--> Hamming blending. Methods plug in by name through :data:`METHODS`; each turns the
-whole photo (to estimate e.g. its noise level once) and its options into a
+Data flow: capture -> PSF field at patch centres -> (where the PSFs' mean displacement
+varies fast enough, the alignment warp, :mod:`gyrodeblur.warp`, and centred PSFs) ->
+per-patch non-blind deconvolution -> Hamming blending -> (the sparse method, up to 4 MP by
+default: refinement under one interpolated-PSF model of the whole photo,
+:mod:`gyrodeblur.spacevariant`). Methods plug in by name through :data:`METHODS`; each
+turns the whole photo (to estimate e.g. its noise level once) and its options into a
 ``deconvolve(sub_image, psf)`` callable that the tiler applies patch by patch.
 """
 
