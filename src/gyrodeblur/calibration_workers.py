@@ -159,7 +159,11 @@ class StepRunner:
             _kill_workers(pool)
             raise
         finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+            # not cancel_futures: with the workers killed (or, by a signal to the process
+            # group, dead) the pool's own thread fails the pending futures as broken, and
+            # cancelling them at the same time raced it into an InvalidStateError
+            # traceback (once in seven SIGTERMs, session 44)
+            pool.shutdown(wait=True)
 
     def map(self, method: str, arglist) -> list:
         """``[fit.method(*args) for args in arglist]``, the steps side by side when there
