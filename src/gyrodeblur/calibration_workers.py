@@ -150,19 +150,21 @@ class StepRunner:
         (Ctrl-C, SIGTERM) or failing here, the workers are killed rather than waited for."""
         pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
                                    initializer=_start_worker, initargs=(os.getpid(),))
+        # Futures submitted one by one, not pool.map: interrupted, map's iterator cancels
+        # the pending ones while the pool's own thread, its workers killed (or dead from a
+        # signal to the process group), fails them as broken, and the two raced into an
+        # InvalidStateError traceback before the one-line message (3 in 10 SIGTERMs of
+        # calibrate, session 44). Nothing here cancels them: the pool's thread fails them.
         try:
-            for k, d in enumerate(pool.map(_worker, range(len(arglist)))):
-                done[k] = d
+            futures = [pool.submit(_worker, k) for k in range(len(arglist))]
+            for k, future in enumerate(futures):
+                done[k] = future.result()
         except BrokenProcessPool:
             raise
         except BaseException:
             _kill_workers(pool)
             raise
         finally:
-            # not cancel_futures: with the workers killed (or, by a signal to the process
-            # group, dead) the pool's own thread fails the pending futures as broken, and
-            # cancelling them at the same time raced it into an InvalidStateError
-            # traceback (once in seven SIGTERMs, session 44)
             pool.shutdown(wait=True)
 
     def map(self, method: str, arglist) -> list:
