@@ -378,3 +378,21 @@ def test_options_out_of_range_are_refused_by_name(option, value):
     img = np.random.default_rng(8).random((64, 64)).astype(np.float32)
     with pytest.raises((ValueError, TypeError), match=option):
         estimate_kernel(img, 9, **{option: value})
+
+
+# ------------------------------------------------ from a mutation audit (session 44)
+
+def test_a_refined_kernel_keeps_the_initial_kernel_s_registration(sharp):
+    """Kills re-centring a refinement on the centre sample: with ``init_psf`` the result's
+    centre of mass falls on ``init_psf``'s (to whole pixels), so a refined gyro PSF keeps
+    the gyro's registration, even where that is off the centre sample."""
+    k = _drawn_shake_kernel(9)
+    off = np.zeros((21, 21), np.float32)
+    off[4:4 + k.shape[0], 9:9 + k.shape[1]] = k        # centroid 3 px up, 2 px right of centre
+    psf = estimate_kernel(_blur(sharp, off), 21, init_psf=off, iterations=2)
+    _assert_valid_psf(psf, 21)
+    yy, xx = np.indices(psf.shape)
+    target = ((yy * off).sum(), (xx * off).sum())
+    assert abs(target[0] - 10) > 1.5 and abs(target[1] - 10) > 1.5
+    assert abs((yy * psf).sum() - target[0]) <= 0.5 + 1e-4
+    assert abs((xx * psf).sum() - target[1]) <= 0.5 + 1e-4

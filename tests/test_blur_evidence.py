@@ -119,3 +119,35 @@ def test_deblur_blind_keeps_a_kernel_the_photo_shows():
         kept, field2 = deblur_blind(sharp, 15, grid=(1, 2), transfer="linear")
     assert np.array_equal(kept, sharp) and len(field2.psfs) == 2
     assert all(k[7, 7] == 1 for k in field2.psfs)
+
+
+# ------------------------------------------------ from a mutation audit (session 44)
+
+def test_the_photo_is_judged_in_linear_light_through_its_transfer_curve(make_capture):
+    """Kills ``kernel_gain_over_no_blur`` and ``capture_gain_over_no_blur`` reading the
+    photo's values as light whatever ``transfer`` says: the sRGB-encoded photo with
+    ``transfer="srgb"`` scores as the linear one does; read as linear it scores otherwise."""
+    from gyrodeblur.simulate import simulate_blur
+    from gyrodeblur.tonecurve import linear_to_srgb
+
+    sharp = _scene()[:192, :256]
+    blurred = _moved_along_x(sharp, 9)
+    encoded = linear_to_srgb(blurred)
+    k = _streak(9)
+    linear = kernel_gain_over_no_blur(blurred, k, transfer="linear")
+    assert kernel_gain_over_no_blur(encoded, k) == pytest.approx(linear, rel=0.05)
+    assert abs(kernel_gain_over_no_blur(encoded, k, transfer="linear") - linear) > 5.0
+    cap = make_capture((0.3, 1.5, 0.1), width=256, height=192, f=200.0, readout=0.02)
+    blurred = simulate_blur(sharp, cap, snr_db=45, seed=1)        # a 9 px turn
+    encoded = linear_to_srgb(np.clip(blurred, 0, None))
+    by_light = capture_gain_over_no_blur(blurred, cap, transfer="linear")
+    assert by_light > 10 * NO_BLUR_MARGIN
+    assert capture_gain_over_no_blur(encoded, cap) == pytest.approx(by_light, rel=1e-3)
+    assert abs(capture_gain_over_no_blur(encoded, cap, transfer="linear") - by_light) > 0.3
+
+
+def test_a_photo_without_texture_is_not_judged():
+    """Kills ``_windows`` scoring an empty set of windows: "``nan`` when the photo ...
+    has no textured window"."""
+    flat = np.full((200, 260), 0.4, np.float32)
+    assert np.isnan(kernel_gain_over_no_blur(flat, _streak(9), transfer="linear"))

@@ -380,3 +380,158 @@ def test_a_long_readout_s_displacement_is_not_counted_as_blur():
     blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(lin, cap)), 40, 1))
     out = deblur(blurred, cap)
     assert psnr(sharp, out, 12) > psnr(sharp, blurred, 12) + 1.0
+
+
+# ------------------------------------------------ from a mutation audit (session 44)
+
+def test_auto_grid_windows_are_not_narrower_than_the_blur(make_capture):
+    """Kills ``auto_grid`` dropping the PSF extent from its window floor. A turn with
+    strong roll on a wide lens: the PSF changes so fast that half a pixel of change asks
+    for ~12 px windows, but the blur is ~50 px long, and a window narrower than its blur
+    has no context to deconvolve in. Windows are made the blur's length, one patch more
+    only where the count is rounded up to a whole number."""
+    from gyrodeblur.psf import psf_extent
+
+    shape = (480, 640)
+    cap = make_capture((0.0, 1.5, 2.0), width=640, height=480, f=500.0)
+    extent = max(psf_extent(render_psf(cap, x, y, centred=True))
+                 for x in (0, 319.5, 639) for y in (0, 239.5, 479))
+    assert 0.5 / max(psf_variation(cap, centred=True, per_axis=True)) < 32 < extent
+    rows, cols = auto_grid(cap, shape, max_patches=10_000)
+    one_fewer = patch_grid(shape, (rows - 1, cols - 1), 0.25)[0]
+    assert min(one_fewer.shape) >= extent, (rows, cols, extent)
+
+
+def test_auto_grid_never_gives_more_than_max_patches_when_one_axis_is_at_its_floor():
+    """Kills dropping the last clamp of ``auto_grid`` ("a floor's gain is the other's
+    loss"): under a rolling shutter the rows want ~4x the columns; shrunk alike to the
+    96-patch default, the columns fall below the chapter's 8 and are held there, so the
+    rows must give up the difference."""
+    t = np.arange(0.0, 0.2, 0.005)
+    w = np.zeros((t.size, 3))
+    w[:, 1] = 8.0 * (t - 0.05)
+    cap = Capture(0.05, 0.03, 0.03, Camera.centred(640, 480, 1500.0), GyroLog(t, w))
+    free = auto_grid(cap, (480, 640), max_patches=10_000)
+    assert free[0] * free[1] > 96 and free[1] * np.sqrt(96 / (free[0] * free[1])) < 8
+    rows, cols = auto_grid(cap, (480, 640))
+    assert rows * cols <= 96 and rows >= 6 and cols >= 8, (free, rows, cols)
+
+
+def test_the_alignment_warp_is_skipped_where_the_displacement_barely_changes(make_capture):
+    """Kills ``plan_psf_field`` ignoring :data:`ALIGN_MIN_SLOPE`: the warp resamples the
+    photo (a slight low-pass), so a nearly uniform blur (a yaw on a long lens) is
+    deconvolved without it, and a note says so; a roll, whose displacement grows with the
+    distance from the centre, keeps it."""
+    from gyrodeblur.deblur import ALIGN_MIN_SLOPE
+
+    yaw = make_capture((0.0, 0.4, 0.0), width=160, height=120, f=150.0)
+    _, field, notes = plan_psf_field(yaw, (120, 160), grid=(2, 2), align=True)
+    assert field.displacement is None
+    assert any(n.startswith("alignment warp skipped") for n in notes), notes
+    roll = make_capture((0.0, 0.0, 2.0), width=160, height=120, f=150.0)
+    _, field, notes = plan_psf_field(roll, (120, 160), grid=(2, 2), align=True)
+    assert field.displacement is not None and not notes
+    # the slope is the largest change per px, down the frame or across it
+    from gyrodeblur.deblur import _displacement_slope
+    ys, xs = np.array([0.0, 50.0, 100.0]), np.array([0.0, 40.0, 80.0, 120.0])
+    d = np.zeros((3, 4, 2))
+    d[..., 0] = 2 * ALIGN_MIN_SLOPE * xs               # x displacement grows across
+    assert _displacement_slope((ys, xs, d)) == pytest.approx(2 * ALIGN_MIN_SLOPE)
+    d = np.zeros((3, 4, 2))
+    d[..., 1] = 3 * ALIGN_MIN_SLOPE * ys[:, None]     # y displacement grows down
+    assert _displacement_slope((ys, xs, d)) == pytest.approx(3 * ALIGN_MIN_SLOPE)
+
+
+def test_align_given_overrides_the_method_s_default(make_capture):
+    """Kills ``deblur`` ignoring ``align=``: Wiener's default is no warp (the chapter's
+    design), ``align=True`` asks for it; the sparse default warps, ``align=False`` not."""
+    cap = make_capture((0.0, 0.0, 2.0), width=160, height=120, f=150.0)
+    photo = np.random.default_rng(2).random((120, 160)).astype(np.float32)
+    for method, align in (("wiener", None), ("wiener", True)):
+        _, report = deblur(photo, cap, method=method, grid=(2, 2), align=align,
+                           return_report=True)
+        assert (report.field.displacement is not None) == bool(align), (method, align)
+    _, report = deblur(photo, cap, grid=(2, 2), align=False, model="patches", iterations=1,
+                       return_report=True)
+    assert report.field.displacement is None
+
+
+def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch):
+    """Kills the no-blur branch of ``deblur_blind`` returning the photo unclipped: "The
+    photo is then returned as it is (clipped to [0, 1] with ``clip``)". The verdict is
+    forced (the spectral check itself is tested in test_blur_evidence.py)."""
+    import gyrodeblur.blur_evidence as evidence
+    from gyrodeblur.deblur import deblur_blind
+
+    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
+    rng = np.random.default_rng(6)
+    photo = rng.uniform(0.1, 0.9, (64, 64)).astype(np.float32)
+    photo[3, 4], photo[40, 50] = -0.1, 1.3          # undershoot and overshoot from earlier work
+    for clip in (True, False):
+        with pytest.warns(UserWarning, match="returned as it is"):
+            out, field = deblur_blind(photo, 7, transfer="linear", clip=clip)
+        expected = np.clip(photo, 0, 1) if clip else photo
+        np.testing.assert_array_equal(out, expected)
+        assert field.psfs[0][3, 3] == 1
+
+
+def test_blind_patches_refine_the_photo_s_kernel_on_central_crops(monkeypatch):
+    """Kills ``deblur_blind`` estimating each patch's kernel from scratch, and cropping
+    anything but the centre: the photo's kernel is estimated on its central
+    ``max_pixels`` (same aspect ratio), then each patch's starts from it (``init_psf``),
+    on the central part of that patch's own pixels holding its share of ``max_pixels``."""
+    import gyrodeblur.blind as blind
+    from gyrodeblur.deblur import deblur_blind
+
+    calls = []
+    real = blind.estimate_kernel
+
+    def recording(image, size, **kw):
+        psf = real(image, size, levels=1, iterations=1, **kw)
+        calls.append((np.array(image), kw.get("init_psf"), psf))
+        return psf
+
+    monkeypatch.setattr(blind, "estimate_kernel", recording)
+    photo = np.random.default_rng(7).uniform(0.1, 0.9, (64, 96)).astype(np.float32)
+    _, field = deblur_blind(photo, 5, grid=(1, 2), transfer="linear", check_blur=False,
+                            method="wiener", max_pixels=2000)
+
+    def central(a, pixels):
+        s = np.sqrt(pixels / a.size)
+        hh, ww = int(a.shape[0] * s), int(a.shape[1] * s)
+        y0, x0 = (a.shape[0] - hh) // 2, (a.shape[1] - ww) // 2
+        return a[y0:y0 + hh, x0:x0 + ww]
+
+    assert len(calls) == 3 and calls[0][1] is None          # the photo's, then each patch's
+    np.testing.assert_array_equal(calls[0][0], central(photo, 2000))
+    whole = calls[0][2]
+    for p, (image, init, _) in zip(patch_grid((64, 96), (1, 2), 0.25), calls[1:]):
+        np.testing.assert_array_equal(image, central(photo[p.y0:p.y1, p.x0:p.x1], 1000))
+        assert init is not None and np.array_equal(init, whole)
+
+
+def test_a_blind_photo_too_small_to_judge_is_deconvolved_without_a_warning(monkeypatch):
+    """Kills ``_shows_no_blur`` reading a ``nan`` gain (a photo too small for the spectral
+    check) as "no blur": it is "False when the photo is too small to tell"."""
+    import gyrodeblur.blur_evidence as evidence
+    from gyrodeblur.deblur import deblur_blind
+
+    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: float("nan"))
+    photo = np.random.default_rng(8).uniform(0.1, 0.9, (48, 48)).astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        deblur_blind(photo, 5, transfer="linear", method="wiener")
+
+
+def test_blind_sizes_count_each_patch_s_share_of_max_pixels():
+    """Kills ``check_blind_sizes`` checking each patch's crop at the whole ``max_pixels``:
+    a 31 px kernel fits a 200 x 200 photo's central 10 000 px (100 x 100) and its 2 x 2
+    patches, but not a patch's central 2 500 px (50 x 50), where it is estimated."""
+    from gyrodeblur.deblur import check_blind_sizes
+    from gyrodeblur.errors import InputError
+
+    assert len(check_blind_sizes((200, 200), 31, (1, 1), max_pixels=10_000)) == 1
+    with pytest.raises(InputError, match="central crop of each patch") as err:
+        check_blind_sizes((200, 200), 31, (2, 2), max_pixels=10_000)
+    assert err.value.source == "--kernel-size"
+    assert len(check_blind_sizes((200, 200), 23, (2, 2), max_pixels=10_000)) == 4

@@ -171,3 +171,57 @@ def test_the_predicted_motion_moves_with_the_time_offset_as_the_capture_does():
     np.testing.assert_allclose(moved, predicted([shifted.apply(c) for c in caps], eye),
                                atol=0.05)
     assert np.abs(moved - predicted(caps, eye)).max() > 2.0
+
+
+# ------------------------------------------------ from a mutation audit (session 44)
+
+def test_pairs_are_consecutive_in_time_close_enough_and_clearly_related():
+    """Kills ``FrameRegistration`` pairing photos in the order given, ignoring ``max_dt``,
+    and keeping a pair without a clear correlation peak: photos are paired in the order
+    of their exposure starts, at most ``max_dt`` apart, and only where the peak stands
+    out (prominence 3)."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.frame_registration import FrameRegistration
+
+    photos = _pair(d=(-14.0, 6.0))
+    reg = FrameRegistration(photos[::-1], extent=10.0)          # given latest first
+    assert [p[:2] for p in reg.pairs] == [(1, 0)]
+    assert np.allclose(reg.pairs[0][2], (-14.0, 6.0), atol=1.0)
+    assert FrameRegistration(photos, extent=10.0, max_dt=0.1).pairs == []   # 0.2 s apart
+    rng = np.random.default_rng(9)
+    other = 0.5 + 0.1 * ndimage.gaussian_filter(rng.normal(size=(700, 1000)), 3.0)
+    unrelated = CalibrationPhoto(np.clip(other, 0, 1), photos[1].cap, "linear", 1)
+    assert FrameRegistration([photos[0], unrelated], extent=10.0).pairs == []
+
+
+def test_the_predicted_motion_under_bias_and_focal_corrections_is_the_corrected_capture_s():
+    """Kills the prediction dropping the capture's own gyro bias, negating the correction's
+    and ignoring its focal scale: as for the time offset, the motion predicted under
+    ``Corrections(bias=b, focal=s)`` is that predicted for the captures corrected by them
+    (:meth:`Corrections.apply`: biases add), and differs from no correction."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.frame_registration import FrameRegistration
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import Corrections
+
+    t = np.arange(0.0, 2.0, 0.002)
+    w = np.stack([0.3 * np.sin(2 * np.pi * 1.3 * t), 0.4 + 0 * t, 0.1 * np.cos(t)], 1)
+    cam = Camera.centred(600, 400, 500.0)
+    caps = [Capture(s, 0.02, 0.0, cam, GyroLog(t, w), bias=np.array([0.05, -0.08, 0.02]))
+            for s in (0.8, 1.1)]
+    img = np.full((400, 600), 0.5)
+
+    def predicted(captures, theta):
+        photos = [CalibrationPhoto(img, c, "linear", i) for i, c in enumerate(captures)]
+        return FrameRegistration(photos, extent=10.0).predict(theta, 0, 1)
+
+    eye = Corrections(axes=np.eye(3))
+    for corrected in (eye.copy(bias=np.array([0.1, 0.2, -0.05])), eye.copy(focal=1.2)):
+        moved = predicted(caps, corrected)
+        np.testing.assert_allclose(moved, predicted([corrected.apply(c) for c in caps], eye),
+                                   atol=0.05)
+        assert np.abs(moved - predicted(caps, eye)).max() > 2.0
+    unbiased = [c.replace(bias=np.zeros(3), log=GyroLog(t, w - c.bias)) for c in caps]
+    np.testing.assert_allclose(predicted(caps, eye), predicted(unbiased, eye), atol=0.05)

@@ -439,3 +439,44 @@ def test_a_point_far_outside_the_frame_is_refused_as_such(make_capture):
     with pytest.raises(InputError, match="more than a frame outside"):
         render_psf(cap, -w - 1, h / 2)
     assert np.isclose(render_psf(cap, -w / 2, -h / 2).sum(), 1)   # outside, within a frame
+
+
+# ------------------------------------------------ from a mutation audit (session 44)
+
+def test_a_psf_picture_is_enlarged_square_root_stretched_and_marks_its_centre():
+    """Kills ``psf_image`` without its square-root stretch, its default zoom (~256 px)
+    or its centre mark: a tail at a quarter of the peak draws at half grey, and the red
+    dot lies in the centre sample's block."""
+    from gyrodeblur.psfplot import psf_image
+
+    p = np.zeros((3, 3))
+    p[1, 1], p[1, 0] = 1.0, 0.25
+    one = psf_image(p, zoom=1)
+    assert one[1, 0, 1] == 127 and one[0, 0, 1] == 0
+    big = psf_image(p)
+    assert big.shape == (255, 255, 3)                     # 85 x 3: ~256 px by default
+    red = np.argwhere((big == (255, 0, 0)).all(axis=2))
+    assert len(red) == 1 and np.all((85 <= red) & (red < 170)), red
+
+
+def test_a_field_picture_keeps_the_frame_s_aspect_and_draws_each_psf_at_its_point():
+    """Kills ``field_image`` with a square canvas, x and y swapped, boxes pasted from their
+    centres, or a zoom that lets neighbouring boxes overlap: on a 2 x 2 field of a
+    200 x 100 frame each PSF (a bright dot) is drawn centred on its point, and the four
+    framed boxes stay apart."""
+    from gyrodeblur.psf import PSFField
+    from gyrodeblur.psfplot import field_image
+
+    small, large = np.zeros((5, 5)), np.zeros((9, 9))
+    small[2, 2] = large[4, 4] = 1.0
+    pts = np.array([[50.0, 25.0], [150.0, 25.0], [50.0, 75.0], [150.0, 75.0]])
+    img = field_image(PSFField(pts, [small, large, large, small], (2, 2)), 200, 100,
+                      canvas_width=400)
+    assert img.shape == (200, 400, 3)
+    white = (img == 255).all(axis=2)
+    blobs, n = ndimage.label(white)
+    assert n == 4
+    for (x, y), centre in zip(pts, ndimage.center_of_mass(white, blobs, range(1, 5))):
+        assert np.allclose(centre, (2 * y, 2 * x), atol=1.5), (x, y, centre)
+    frames = (img == (70, 110, 160)).all(axis=2)
+    assert ndimage.label(frames, np.ones((3, 3)))[1] == 4          # no two boxes touch

@@ -264,3 +264,49 @@ def test_fixed_pixels_keep_their_start_values():
     out = refine_globally(g, start, blur, weight=1e-3, outer=2, fixed=fixed)
     np.testing.assert_array_equal(out[fixed], start[fixed])
     assert np.abs(out - start)[~fixed].max() > 1e-2          # the rest did move
+
+
+# ------------------------------------------------ from a mutation audit (session 44)
+
+def test_the_model_default_and_report_follow_the_documented_rules(monkeypatch):
+    """Kills three mutants of ``_check_model``: a photo of exactly
+    GLOBAL_DEFAULT_MAX_PIXELS is still "at most" it (global); patches of unequal windows
+    default to patch-wise (the global model needs patch_grid's equal windows); and one
+    patch covering the photo reports "patches" even when "global" was asked for."""
+    import gyrodeblur.deblur as deblur_mod
+    from gyrodeblur.deblur import _check_model
+
+    shape = (96, 128)
+    grid = patch_grid(shape, (2, 2), 0.25)
+    monkeypatch.setattr(deblur_mod, "GLOBAL_DEFAULT_MAX_PIXELS", shape[0] * shape[1])
+    assert _check_model(None, "sparse", grid, shape) == "global"
+    uneven = [Patch(0, 96, 0, 80), Patch(0, 96, 60, 128)]
+    assert _check_model(None, "sparse", uneven, shape) == "patches"
+    img = np.clip(0.5 + 0.2 * np.random.default_rng(1).standard_normal(shape), 0, 1)
+    img = img.astype(np.float32)
+    psfs = [np.ones((1, 3)), np.ones((3, 1))]
+    np.testing.assert_array_equal(deblur_with_psfs(img, uneven, psfs, iterations=2),
+                                  deblur_with_psfs(img, uneven, psfs, model="patches",
+                                                   iterations=2))
+    cap = constant_rate_capture((0.0, 0.2, 0.0), width=128, height=96, f=120.0)
+    _, report = deblur(img, cap, grid=(1, 1), model="global", iterations=1,
+                       return_report=True)
+    assert report.model == "patches"
+
+
+def test_deblur_with_psfs_never_clips_the_caller_s_photo():
+    """Kills dropping the copy in ``deblur_with_psfs``: a method that hands its input back
+    (one patch, linear light) must not let the clip to [0, 1] reach the caller's array."""
+    from gyrodeblur.deblur import METHODS, register_method
+
+    register_method("as-is", lambda image: (lambda sub, psf: sub))
+    try:
+        photo = np.full((40, 50), 0.5, np.float32)
+        photo[5, 5], photo[20, 30] = -0.1, 1.4
+        before = photo.copy()
+        out = deblur_with_psfs(photo, [Patch(0, 40, 0, 50)], [np.ones((1, 1))],
+                               method="as-is", transfer="linear")
+        assert out.min() == 0.0 and out.max() == 1.0
+        np.testing.assert_array_equal(photo, before)
+    finally:
+        METHODS.pop("as-is")
