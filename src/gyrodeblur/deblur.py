@@ -175,9 +175,12 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     and the rolling shutter make it change (:func:`gyrodeblur.psf.psf_variation`, px per
     px). Windows are made about ``tolerance / variation`` pixels tall and wide, with the
     variation down the frame and across it apart (a rolling shutter makes the PSF
-    change faster from row to row: the rows get more of the patches), but never
-    narrower than the largest PSF's extent (the margin of real neighbours around each
-    window gives the deconvolution its context) nor 32 px, never coarser than the
+    change faster from row to row: the rows get more of the patches), but sized for
+    windows no narrower than the largest PSF's extent (the margin of real neighbours
+    around each window gives the deconvolution its context) nor 32 px (the count is
+    rounded up, so a window can come out a little narrower: :func:`plan_psf_field` then
+    checks each patch's own PSF against its window, and coarsens with a note), never
+    coarser than the
     chapter's 6 x 8 (unless the photo is too small for it: windows stay at least 1.25x
     :data:`~gyrodeblur.tiling.MIN_WINDOW`), and never more than ``max_patches`` in all.
     ``centred``: count only the PSFs' shape, their change and their extent (the photo is
