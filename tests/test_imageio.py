@@ -1176,3 +1176,15 @@ def test_a_jpeg_wider_than_the_format_holds_is_refused_before_writing(tmp_path):
     like = Photo(np.zeros((4, 65501), np.float32), 8, "PNG")
     with pytest.raises(InputError, match="write .png or .tif"):
         imageio.check_destination(tmp_path / "o.jpg", like, False)
+
+
+@pytest.mark.parametrize("name,bits", [("s.png", 8), ("s.png", 16), ("s.tif", 8), ("s.tif", 16)])
+def test_png_and_tiff_are_compressed(tmp_path, name, bits):
+    """PNG and TIFF are written Deflate-compressed (at ``pngwrite.DEFLATE_LEVEL``): a
+    smooth photo takes a fraction of its raw bytes, and reads back exactly."""
+    px = smooth((120, 160, 3))
+    out = write_photo(tmp_path / name, px, bit_depth=bits)
+    raw = px.size * bits // 8
+    assert os.path.getsize(out) < 0.5 * raw
+    top = 2 ** bits - 1
+    np.testing.assert_array_equal(np.rint(read_photo(out).pixels * top), np.rint(px * top))
