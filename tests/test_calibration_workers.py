@@ -252,3 +252,74 @@ def test_workers_do_not_outlive_a_caller_that_is_stopped(tmp_path, how):
     finally:
         if child.poll() is None:
             child.kill()
+
+
+_INTERRUPTED_CALLER = r"""
+import os, signal, sys, time
+sys.path.insert(0, {tests!r})
+from test_calibration_workers import _Fit
+from gyrodeblur.calibration_workers import StepRunner
+
+class Stop(BaseException):
+    pass
+
+def stop(signum, frame):
+    raise Stop
+
+class Sleepy(_Fit):
+    def nap(self, folder, k):
+        open(os.path.join(folder, f"worker{{k}}-{{os.getpid()}}"), "w").close()
+        time.sleep(60)
+        return k
+
+signal.signal(signal.SIGTERM, stop)
+open(os.path.join({folder!r}, "ready-0"), "w").close()
+try:
+    StepRunner(Sleepy(), 2).map("nap", [({folder!r}, 1), ({folder!r}, 2), ({folder!r}, 3)])
+    sys.exit(0)
+except Stop:
+    sys.stderr.write("terminated\n")
+    sys.exit(143)
+except KeyboardInterrupt:
+    sys.stderr.write("interrupted\n")
+    sys.exit(130)
+"""
+
+
+@forks
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_process_group_stops_a_batch_cleanly(tmp_path, how):
+    """Ctrl-C, or a timeout that signals the whole process group, at any moment of a batch:
+    while the pool forks its workers (an interrupt there was dropped, and the batch ran
+    on), as its thread starts, or while the steps run. The caller stops at once with its
+    own one line (no traceback from the pool's thread, no "Process ForkProcess" from a
+    worker), and no worker is left."""
+    import signal
+    import subprocess
+    import time
+    sig = getattr(signal, how)
+    for k, delay in enumerate((0.0, 0.001, 0.003, 0.01, 0.3)):
+        folder = tmp_path / str(k)
+        folder.mkdir()
+        script = _INTERRUPTED_CALLER.format(tests=os.path.dirname(__file__), folder=str(folder))
+        child = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE,
+                                 text=True, start_new_session=True)
+        try:
+            deadline = time.monotonic() + 60
+            while not (folder / "ready-0").exists():
+                assert time.monotonic() < deadline and child.poll() is None, "no start"
+                time.sleep(0.0005)
+            time.sleep(delay)
+            os.killpg(child.pid, sig)
+            _, err = child.communicate(timeout=20)
+            assert child.returncode == (143 if how == "SIGTERM" else 130), (delay, err)
+            assert err == ("terminated\n" if how == "SIGTERM" else "interrupted\n"), (delay, err)
+            workers = [int(p.name.split("-")[1]) for p in folder.iterdir()
+                       if p.name.startswith("worker")]
+            deadline = time.monotonic() + 10
+            while not all(_gone(p) for p in workers):
+                assert time.monotonic() < deadline, "workers outlived their caller"
+                time.sleep(0.05)
+        finally:
+            if child.poll() is None:
+                os.killpg(child.pid, signal.SIGKILL)

@@ -32,6 +32,7 @@ import threading
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 __all__ = ["StepRunner", "available_workers", "MAX_WORKERS"]
@@ -94,7 +95,34 @@ def _start_worker(parent: int) -> None:
     fit = _BATCH[0]
     fit.fine.fft_threads = fit.coarse.fft_threads = 1      # the workers share the CPUs
     signal.signal(signal.SIGTERM, signal.SIG_DFL)         # not the CLI's handler
+    signal.signal(signal.SIGINT, signal.SIG_IGN)          # Ctrl-C: the caller kills them
     _die_with_parent(parent)
+
+
+@contextmanager
+def _interrupts_deferred():
+    """SIGINT and SIGTERM recorded, not acted on, while the pool forks its workers and
+    starts its thread, then raised again: an interrupt in the middle of a fork was dropped
+    by Python ("Exception ignored in _releaseLock", the batch then ran on), and one while
+    the pool's thread started broke its shutdown (a RuntimeError traceback). Main thread
+    only (signal handlers are set there)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list = []
+    old = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            old[sig] = signal.signal(sig, lambda signum, frame: got.append(signum))
+        except (ValueError, OSError):
+            pass
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(got):
+            signal.raise_signal(sig)
 
 
 def _die_with_parent(parent: int) -> None:
@@ -156,7 +184,8 @@ class StepRunner:
         # InvalidStateError traceback before the one-line message (3 in 10 SIGTERMs of
         # calibrate, session 44). Nothing here cancels them: the pool's thread fails them.
         try:
-            futures = [pool.submit(_worker, k) for k in range(len(arglist))]
+            with _interrupts_deferred():      # the first submit forks the workers
+                futures = [pool.submit(_worker, k) for k in range(len(arglist))]
             for k, future in enumerate(futures):
                 done[k] = future.result()
         except BrokenProcessPool:
