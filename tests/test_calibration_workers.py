@@ -206,11 +206,30 @@ class Sleepy(_Fit):
         return k
 
 signal.signal(signal.SIGTERM, stop)
+open(os.path.join({folder!r}, "ready-0"), "w").close()
 try:
-    StepRunner(Sleepy(), 2).map("nap", [({folder!r}, 1), ({folder!r}, 2)])
+    StepRunner(Sleepy(), 2).map("nap", [({folder!r}, 1), ({folder!r}, 2), ({folder!r}, 3)])
+    sys.exit(0)
 except Stop:
+    sys.stderr.write("terminated\n")
     sys.exit(143)
+except KeyboardInterrupt:
+    sys.stderr.write("interrupted\n")
+    sys.exit(130)
 """
+
+
+def _workers(folder) -> list[int]:
+    """The pids of the workers that started a step (their marker files in ``folder``)."""
+    return [int(p.name.split("-")[1]) for p in folder.glob("worker*")]
+
+
+def _wait_until_gone(pids, seconds: float = 10.0) -> None:
+    import time
+    deadline = time.monotonic() + seconds
+    while not all(_gone(p) for p in pids):
+        assert time.monotonic() < deadline, "workers outlived their caller"
+        time.sleep(0.05)
 
 
 def _gone(pid: int) -> bool:
@@ -236,54 +255,19 @@ def test_workers_do_not_outlive_a_caller_that_is_stopped(tmp_path, how):
     child = subprocess.Popen([sys.executable, "-c", script])
     try:
         deadline = time.monotonic() + 60
-        while len(list(tmp_path.iterdir())) < 2:
+        while len(list(tmp_path.glob("worker*"))) < 2:
             assert time.monotonic() < deadline and child.poll() is None, "no workers started"
             time.sleep(0.05)
-        workers = [int(p.name.split("-")[1]) for p in tmp_path.iterdir()]
+        workers = _workers(tmp_path)
         t0 = time.monotonic()
         child.send_signal(getattr(signal, how))
         rc = child.wait(timeout=20)
         assert time.monotonic() - t0 < 10                 # not the steps' 60 s
         assert rc == (143 if how == "SIGTERM" else -signal.SIGKILL)
-        deadline = time.monotonic() + 10
-        while not all(_gone(p) for p in workers):
-            assert time.monotonic() < deadline, "workers outlived their caller"
-            time.sleep(0.05)
+        _wait_until_gone(workers)
     finally:
         if child.poll() is None:
             child.kill()
-
-
-_INTERRUPTED_CALLER = r"""
-import os, signal, sys, time
-sys.path.insert(0, {tests!r})
-from test_calibration_workers import _Fit
-from gyrodeblur.calibration_workers import StepRunner
-
-class Stop(BaseException):
-    pass
-
-def stop(signum, frame):
-    raise Stop
-
-class Sleepy(_Fit):
-    def nap(self, folder, k):
-        open(os.path.join(folder, f"worker{{k}}-{{os.getpid()}}"), "w").close()
-        time.sleep(60)
-        return k
-
-signal.signal(signal.SIGTERM, stop)
-open(os.path.join({folder!r}, "ready-0"), "w").close()
-try:
-    StepRunner(Sleepy(), 2).map("nap", [({folder!r}, 1), ({folder!r}, 2), ({folder!r}, 3)])
-    sys.exit(0)
-except Stop:
-    sys.stderr.write("terminated\n")
-    sys.exit(143)
-except KeyboardInterrupt:
-    sys.stderr.write("interrupted\n")
-    sys.exit(130)
-"""
 
 
 @forks
@@ -301,7 +285,7 @@ def test_a_signal_to_the_process_group_stops_a_batch_cleanly(tmp_path, how):
     for k, delay in enumerate((0.0, 0.001, 0.003, 0.01, 0.3)):
         folder = tmp_path / str(k)
         folder.mkdir()
-        script = _INTERRUPTED_CALLER.format(tests=os.path.dirname(__file__), folder=str(folder))
+        script = _SLEEPING_CALLER.format(tests=os.path.dirname(__file__), folder=str(folder))
         child = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE,
                                  text=True, start_new_session=True)
         try:
@@ -314,12 +298,7 @@ def test_a_signal_to_the_process_group_stops_a_batch_cleanly(tmp_path, how):
             _, err = child.communicate(timeout=20)
             assert child.returncode == (143 if how == "SIGTERM" else 130), (delay, err)
             assert err == ("terminated\n" if how == "SIGTERM" else "interrupted\n"), (delay, err)
-            workers = [int(p.name.split("-")[1]) for p in folder.iterdir()
-                       if p.name.startswith("worker")]
-            deadline = time.monotonic() + 10
-            while not all(_gone(p) for p in workers):
-                assert time.monotonic() < deadline, "workers outlived their caller"
-                time.sleep(0.05)
+            _wait_until_gone(_workers(folder))
         finally:
             if child.poll() is None:
                 os.killpg(child.pid, signal.SIGKILL)
