@@ -301,7 +301,6 @@ def _carried_metadata(im: Image.Image, fmt: str) -> dict:
     may follow them). Only what the file states: not Pillow's fallbacks (1 dpi for a
     TIFF without resolution tags, 72 for a JPEG whose JFIF density is an aspect ratio);
     what is malformed is left out."""
-    carried = {}
     if fmt == "PNG":
         dpi = im.info.get("dpi")                 # from pHYs only where given per metre
     elif fmt == "TIFF":
@@ -311,19 +310,22 @@ def _carried_metadata(im: Image.Image, fmt: str) -> dict:
                for v in im.info.get("jfif_density", ())]
     else:                                        # an aspect ratio: the EXIF's, if any
         dpi = _dpi_of_tags(dict(im.getexif()))
-    dpi = _checked_dpi(dpi)
-    if dpi:
-        carried["dpi"] = dpi
-    if fmt == "PNG":
-        text = {str(k): v for k, v in dict(getattr(im, "text", None) or {}).items()
-                if isinstance(v, str) and str(k).lower() not in _RAW_PROFILES_WRITTEN}
-        if text:
-            carried["png_text"] = text
-        return carried
-    xmp = _xmp_bytes(im.tag_v2.get(700) if fmt == "TIFF" else im.info.get("xmp"))
-    if xmp:
-        carried["xmp"] = xmp
+    if fmt != "PNG":                             # a PNG's XMP is one of its text chunks
+        return _checked_dpi_and_xmp(dpi, im.tag_v2.get(700) if fmt == "TIFF"
+                                    else im.info.get("xmp"))
+    carried = _checked_dpi_and_xmp(dpi)
+    text = {str(k): v for k, v in dict(getattr(im, "text", None) or {}).items()
+            if isinstance(v, str) and str(k).lower() not in _RAW_PROFILES_WRITTEN}
+    if text:
+        carried["png_text"] = text
     return carried
+
+
+def _checked_dpi_and_xmp(dpi=None, xmp=None) -> dict:
+    """``{"dpi": ..., "xmp": ...}`` as :class:`Photo` carries them, each checked
+    (:func:`_checked_dpi`, :func:`_xmp_bytes`) and left out where nothing usable is left."""
+    checked = {"dpi": _checked_dpi(dpi), "xmp": _xmp_bytes(xmp)}
+    return {k: v for k, v in checked.items() if v}
 
 
 def _dpi_of_tags(tags: dict):
@@ -659,13 +661,9 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None, dict]:
         icc = bytes(icc_tag.value) if icc_tag is not None else None
         values = {t.code: t.value for t in page.tags.values() if t.code in (282, 283, 296,
                                                                              700)}
-    carried = {}
-    dpi = _checked_dpi(_dpi_of_tags({k: int(v) if k == 296 else v for k, v in values.items()}))
-    if dpi:
-        carried["dpi"] = dpi
-    xmp = _xmp_bytes(values.get(700))
-    if xmp:
-        carried["xmp"] = xmp
+    carried = _checked_dpi_and_xmp(
+        _dpi_of_tags({k: int(v) if k == 296 else v for k, v in values.items()}),
+        values.get(700))
     if arr.ndim == 3 and axes.startswith("S"):
         arr = np.moveaxis(arr, 0, -1)
     arr = _with_plain_alpha(arr, extra)

@@ -44,10 +44,11 @@ DEFAULT_OUTER = 6
 DEFAULT_CG_STEPS = 5
 #: Penalty of the gradient split: ``beta * weight``, x1.5 per iteration, at most 64. It
 #: starts where the patch-wise solve (:mod:`gyrodeblur.sparse`) ends its continuation at
-#: its default iterations (3 or more; 1 or 2 end lower), whose result it refines: starting again from 8 first undid some of that result's
-#: detail (session 43, one run each, mean PSNR gain of starting from 32: +0.027 dB on the
-#: 36 benchmark cases, 26 better, worst -0.13; +0.037 on 12 blurs of 8-19 px, 8 better;
-#: +0.054 on 12 of 35-67 px, all 12; on four held-out photos -0.11 to +0.44; the same time).
+#: its default iterations (3 or more; 1 or 2 end lower), whose result it refines:
+#: starting again from 8 first undid some of that result's detail (session 43, one run
+#: each, mean PSNR gain of starting from 32: +0.027 dB on the 36 benchmark cases, 26
+#: better, worst -0.13; +0.037 on 12 blurs of 8-19 px, 8 better; +0.054 on 12 of 35-67 px,
+#: all 12; on four held-out photos -0.11 to +0.44; the same time).
 _BETA0, _BETA_GROWTH, _BETA_MAX = _SPARSE_BETA_MAX, 1.5, 64.0
 #: Most threads the windows' transforms are spread over.
 _MAX_THREADS = 4
