@@ -101,11 +101,12 @@ def _start_worker(parent: int) -> None:
 
 @contextmanager
 def _interrupts_deferred():
-    """SIGINT and SIGTERM recorded, not acted on, while the pool forks its workers and
-    starts its thread, then raised again: an interrupt in the middle of a fork was dropped
-    by Python ("Exception ignored in _releaseLock", the batch then ran on), and one while
-    the pool's thread started broke its shutdown (a RuntimeError traceback). Main thread
-    only (signal handlers are set there)."""
+    """SIGINT and SIGTERM recorded, not acted on, while the pool is made, forks its
+    workers and starts its thread, then raised again: an interrupt in the middle of a fork
+    or of an import was dropped by Python ("Exception ignored in _releaseLock", or in
+    ``_get_module_lock``: the batch then ran on), and one while the pool's thread started
+    broke its shutdown (a RuntimeError traceback). Main thread only (signal handlers are
+    set there)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -176,25 +177,33 @@ class StepRunner:
     def _map_in_workers(n: int, arglist, done: list) -> None:
         """The batch's steps in ``n`` forked workers, results into ``done``; interrupted
         (Ctrl-C, SIGTERM) or failing here, the workers are killed rather than waited for."""
-        pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
-                                   initializer=_start_worker, initargs=(os.getpid(),))
         # Futures submitted one by one, not pool.map: interrupted, map's iterator cancels
         # the pending ones while the pool's own thread, its workers killed (or dead from a
         # signal to the process group), fails them as broken, and the two raced into an
         # InvalidStateError traceback before the one-line message (3 in 10 SIGTERMs of
         # calibrate, session 44). Nothing here cancels them: the pool's thread fails them.
+        pool = None
         try:
+            # The pool is made inside the deferral too: making it imports modules, and an
+            # interrupt that lands as an import's lock is let go is dropped by Python
+            # ("Exception ignored in ... _get_module_lock"), and the batch ran on (1 in
+            # about 200 signals to the process group at the start of a batch, session 45).
             with _interrupts_deferred():      # the first submit forks the workers
+                pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
+                                           initializer=_start_worker,
+                                           initargs=(os.getpid(),))
                 futures = [pool.submit(_worker, k) for k in range(len(arglist))]
             for k, future in enumerate(futures):
                 done[k] = future.result()
         except BrokenProcessPool:
             raise
         except BaseException:
-            _kill_workers(pool)
+            if pool is not None:
+                _kill_workers(pool)
             raise
         finally:
-            pool.shutdown(wait=True)
+            if pool is not None:
+                pool.shutdown(wait=True)
 
     def map(self, method: str, arglist) -> list:
         """``[fit.method(*args) for args in arglist]``, the steps side by side when there
