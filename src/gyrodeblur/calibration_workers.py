@@ -187,7 +187,7 @@ class StepRunner:
             # The pool is made inside the deferral too: making it imports modules, and an
             # interrupt that lands as an import's lock is let go is dropped by Python
             # ("Exception ignored in ... _get_module_lock"), and the batch ran on (1 in
-            # about 200 signals to the process group at the start of a batch, session 45).
+            # about 350 signals to the process group at the start of a batch, session 45).
             with _interrupts_deferred():      # the first submit forks the workers
                 pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
                                            initializer=_start_worker,
