@@ -1,5 +1,7 @@
 """Row-band threading: every row once, and whole-image jobs unchanged by the split."""
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -41,3 +43,29 @@ def test_threaded_curves_match_per_element_formula():
 def test_curves_accept_empty_arrays():
     assert srgb_to_linear(np.zeros((0, 4, 3), np.float32)).shape == (0, 4, 3)
     assert linear_to_srgb(np.array([], np.float32)).shape == (0,)
+
+
+def test_bands_are_equal_split_by_workers_and_min_rows():
+    """``workers`` equal bands, fewer when they would be shorter than ``min_rows``; several
+    bands run in the pool's threads, a single band in the calling thread; no ``workers``
+    means one per FFT worker."""
+    import gyrodeblur.bands as bands_mod
+
+    def run(rows, **kw):
+        seen = []
+        for_row_bands(lambda a, b: seen.append((a, b, threading.get_ident())), rows, **kw)
+        return sorted(s[:2] for s in seen), {s[2] for s in seen}
+
+    me = threading.get_ident()
+    got, threads = run(10, workers=2, min_rows=1)
+    assert got == [(0, 5), (5, 10)] and me not in threads
+    got, threads = run(200, workers=4, min_rows=64)              # 200 // 64: three bands
+    assert got == [(0, 66), (66, 133), (133, 200)] and me not in threads
+    assert run(100, workers=4, min_rows=64) == ([(0, 100)], {me})   # one band: no thread
+    assert run(7, workers=0, min_rows=1) == ([(0, 7)], {me})
+    old = bands_mod.FFT_WORKERS
+    try:
+        bands_mod.FFT_WORKERS = 3
+        assert run(9, min_rows=1)[0] == [(0, 3), (3, 6), (6, 9)]
+    finally:
+        bands_mod.FFT_WORKERS = old

@@ -188,3 +188,113 @@ def test_the_time_shift_is_the_pivot_rows_whatever_the_readout():
             got = search.theta_of(x, cap.axes, ubar).apply(cap)
             assert log_time(got, ubar) == pytest.approx(log_time(cap, ubar) - 0.004, abs=1e-12)
             assert log_time(got, 1.0) - log_time(got, 0.0) == pytest.approx(0.03 + kappa)
+
+
+def test_the_search_space_covers_the_shifts_the_log_allows():
+    """The log (0 .. 1.195 s, offset 0) must cover each photo's window (start 0.5 s, 40 ms
+    exposure, a readout searched up to 1.6 times the given 30 ms, 5 ms slack): time shifts
+    from ``0.5 + 0.048 + 0.005 + 0.04 - 1.195`` to ``0.5``, cut to the offset range; a fixed
+    offset allows none but 0, a log that cannot cover that slack at any shift is refused; the vector's focal
+    coordinate is the log of the scale, its last three the bias correction."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.calibration_search import SearchSpace
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.gyrolog import GyroLog
+
+    cap = _capture()
+    photos = [CalibrationPhoto(np.full((256, 384), 0.5, np.float32), cap, "linear", 0)]
+    s = SearchSpace(photos, set(), 1.0)
+    assert s.tau_lo == pytest.approx(0.593 - cap.log.t[-1]) and s.tau_hi == pytest.approx(0.5)
+    assert (SearchSpace(photos, set(), 0.2).tau_lo, SearchSpace(photos, set(), 0.2).tau_hi) == (-0.2, 0.2)
+    assert (SearchSpace(photos, {"offset"}, 1.0).tau_lo, SearchSpace(photos, {"offset"}, 1.0).tau_hi) == (0, 0)
+    t = np.arange(0.49, 0.5801, 0.005)                # covers the window, not its slack
+    short = cap.replace(log=GyroLog(t, np.zeros((t.size, 3))))
+    with pytest.raises(InputError, match="does not cover"):
+        SearchSpace([CalibrationPhoto(photos[0].image, short, "linear", 0)], set(), 0.5)
+    th = s.theta_of(np.array([0.0, 0.0, np.log(1.1), 0.01, -0.02, 0.03]), cap.axes, 0.5)
+    assert th.focal == pytest.approx(1.1)
+    np.testing.assert_array_equal(th.bias, [0.01, -0.02, 0.03])
+
+
+class _Quadratic:
+    """A stand-in criterion: cost ``0.5 |A (v - v_star)|^2`` (exactly Gauss-Newton)."""
+
+    def __init__(self, A, v_star):
+        self.A, self.v_star, self.moves = A, v_star, []
+
+    def set_envelope(self, theta):
+        pass
+
+    def cost(self, v):
+        self.moves.append(np.array(v))
+        r = self.A @ (v - self.v_star)
+        return 0.5 * float(r @ r)
+
+    def gauss_newton(self, theta_of, v, idx, hs):
+        r = self.A @ (v - self.v_star)
+        J = self.A[:, idx]
+        return 0.5 * float(r @ r), J.T @ r, J.T @ J, (J.T @ r)[None]
+
+
+def test_levenberg_marquardt_finds_the_posterior_mode_of_a_quadratic():
+    """On a quadratic cost tempered by ``T`` with Gaussian priors the objective is
+    quadratic: the refinement ends at its exact minimum, reports the objective there and
+    its Hessian ``A^T A / T + diag(1 / sigma^2)``; each trial step stays within the caps;
+    :func:`objective` is the same objective."""
+    from gyrodeblur.calibration_search import lm_refine, objective
+
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(8, 3))
+    v_star = np.array([0.3, -0.2, 0.1])
+    T = 4.0
+    mu, sig = np.zeros(3), np.array([0.5, np.inf, 0.2])
+    prec = np.where(np.isfinite(sig), 1 / sig ** 2, 0.0)
+    H = A.T @ A / T + np.diag(prec)
+    want = np.linalg.solve(H, A.T @ A @ v_star / T + prec * mu)
+    spectra = _Quadratic(A, v_star)
+    caps = np.full(3, 0.05)
+    x, f, F, sc = lm_refine(spectra, lambda v: v, np.zeros(3), [0, 1, 2], np.full(3, -1.0),
+                            np.full(3, 1.0), np.full(3, 1e-6), caps, (mu, sig, T), iters=60,
+                            tol=0.0)
+    np.testing.assert_allclose(x, want, atol=1e-6)
+    np.testing.assert_allclose(F, H, rtol=1e-12)
+    assert f == pytest.approx(objective(spectra, lambda v: v, x, [0, 1, 2], (mu, sig, T)), rel=1e-12)
+    r = A @ (x - v_star)
+    assert f == pytest.approx(0.5 * r @ r / T + 0.5 * np.sum(prec * (x - mu) ** 2), rel=1e-9)
+    steps = np.diff(np.array([np.zeros(3)] + spectra.moves[:1]), axis=0)
+    assert np.abs(steps).max() <= 0.05 + 1e-12
+
+
+def test_equal_line_totals_keep_the_first_kappa():
+    """Patches all on the pivot row: the readout error moves none of them, every ``kappa``
+    totals the same, and both line fits report the first ``kappa`` at the same minimum."""
+    from gyrodeblur.calibration_search import line_fit, line_fit_minima
+
+    taus = np.arange(-0.05, 0.05 + 1e-9, 0.002)
+    C = np.stack([(taus - 0.01) ** 2, 2 * (taus - 0.01) ** 2], 1)
+    u = np.zeros(2)
+    kappas = np.array([0.0, -0.01, 0.01])
+    best = line_fit(C, taus, u, kappas)
+    assert best[1] == pytest.approx(0.01) and best[2] == 0.0
+    assert line_fit_minima(C, taus, u, kappas, 1, 0.02)[0] == best
+
+
+def test_the_psf_extent_is_the_median_over_the_time_shifts():
+    """A camera whose pitch rate grows with time (1 rad/s at the exposure, 20 ms, f 500 px):
+    its largest PSF extent is about ``f w T`` = 10 px, and asked over three time shifts
+    the median of their extents is the middle shift's."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.calibration_search import psf_extent_and_path
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import Corrections
+
+    t = np.arange(0.0, 1.2, 0.005)
+    w = np.stack([2 * t, np.zeros_like(t), np.zeros_like(t)], 1)
+    cap = Capture(0.5, 0.02, 0.0, Camera.centred(384, 256, 500.0), GyroLog(t, w))
+    photos = [CalibrationPhoto(np.full((256, 384), 0.5, np.float32), cap, "linear", 0)]
+    th = Corrections(axes=np.eye(3))
+    ext, path = psf_extent_and_path(photos, th, [0.0])
+    assert ext == pytest.approx(10.0, rel=0.1) and path == pytest.approx(ext, rel=0.02)
+    assert psf_extent_and_path(photos, th, [-0.2, 0.0, 0.2]) == (ext, path)

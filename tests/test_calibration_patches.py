@@ -11,7 +11,7 @@ from scipy import ndimage
 from skimage import data, transform
 
 from gyrodeblur.calibration_fit import BLOCKY
-from gyrodeblur.calibration_patches import CalibrationPhoto, select_patch_centres
+from gyrodeblur.calibration_patches import CalibrationPhoto, patch_centres, select_patch_centres
 from gyrodeblur.camera import Camera
 from gyrodeblur.capture import Capture
 from gyrodeblur.errors import InputError
@@ -159,3 +159,73 @@ def test_a_partly_clipped_window_pays_for_its_clipped_share(seed):
     photo = CalibrationPhoto(img, _capture(), "srgb", 0)
     (x, y), = select_patch_centres(photo, 1, 64)
     assert x < 300 - 16, (x, y)
+
+
+def test_gray_is_linear_light_luminance_of_the_colour_channels():
+    """The criterion models light: a crop's grey is the mean of the decoded (linear) colour
+    channels, an sRGB 0.5 being 0.214 in linear light; an alpha channel is a mask, not
+    light, and leaves the grey alone."""
+    rgb = np.zeros((40, 60, 3), np.float32)
+    rgb[..., 0], rgb[..., 1], rgb[..., 2] = 0.5, 0.5, 1.0
+    g = CalibrationPhoto(rgb, _capture(60, 40), "srgb", 0).gray(5, 15, 10, 30)
+    assert g.shape == (10, 20) and g.dtype == np.float64
+    np.testing.assert_allclose(g, (2 * 0.21404 + 1.0) / 3, rtol=1e-4)
+    rgba = np.concatenate([rgb, np.full((40, 60, 1), 0.25, np.float32)], axis=2)
+    np.testing.assert_allclose(CalibrationPhoto(rgba, _capture(60, 40), "srgb", 0).gray(5, 15, 10, 30),
+                               g, rtol=1e-6)
+    lin = CalibrationPhoto(rgb[..., 0], _capture(60, 40), "linear", 0).gray(0, 2, 0, 2)
+    np.testing.assert_allclose(lin, 0.5)
+
+
+def test_each_thumbnail_size_is_made_for_itself():
+    """The thumbnails are kept per ``max_side``: one asked for after another of a different
+    size has its own block size."""
+    img = np.random.default_rng(0).uniform(0, 1, (700, 1030)).astype(np.float32)
+    photo = CalibrationPhoto(img, _capture(1030, 700), "srgb", 0)
+    assert photo.thumbnail()[2] == 3
+    th, _, k = photo.thumbnail(256)
+    assert k == 5 and th.shape == (140, 206)
+    assert photo.thumbnail()[2] == 3 and photo.thumbnail(256)[0] is th
+
+
+def test_a_window_centre_is_its_thumbnail_blocks_centre_in_photo_pixels():
+    """A single textured blob centred on a thumbnail block (blocks of 3 px: block ``b``
+    spans photo pixels ``3b .. 3b + 2``, centre ``3b + 1``): the one window found is
+    centred on it to the pixel, in photo coordinates."""
+    y, x = np.mgrid[0:700, 0:1030]
+    blob = np.exp(-((x - 301.0) ** 2 + (y - 199.0) ** 2) / (2 * 12.0 ** 2))
+    img = (0.3 + 0.4 * blob).astype(np.float32)
+    photo = CalibrationPhoto(img, _capture(1030, 700), "linear", 0)
+    assert photo.thumbnail()[2] == 3
+    (cx, cy), = select_patch_centres(photo, 1, 64)
+    assert (cx, cy) == (301.0, 199.0)
+
+
+def test_patch_centres_name_their_photo():
+    """Centres of several photos come photo by photo, each tagged with its photo's index
+    and placed as that photo alone would place them."""
+    rng = np.random.default_rng(4)
+    photos = []
+    for i, side in enumerate(("left", "right")):
+        img = np.full((400, 600), 0.4, np.float32)
+        cols = slice(0, 300) if side == "left" else slice(300, 600)
+        img[:, cols] += 0.15 * ndimage.gaussian_filter(rng.normal(size=(400, 300)), 1.5)
+        photos.append(CalibrationPhoto(np.clip(img, 0, 1), _capture(), "srgb", i))
+    got = patch_centres(photos, 3, 64)
+    assert [i for i, _, _ in got] == [0, 0, 0, 1, 1, 1]
+    for i, ph in enumerate(photos):
+        assert [(x, y) for j, x, y in got if j == i] == select_patch_centres(ph, 3, 64)
+    assert all(x < 300 + 32 for i, x, _ in got if i == 0)      # on each photo's texture
+    assert all(x > 300 - 32 for i, x, _ in got if i == 1)
+
+
+def test_the_windows_come_best_texture_first():
+    """Three cells side by side (a 900 x 300 photo, three windows), texture contrast growing
+    from left to right: each cell gives its window, listed best first, so right to left."""
+    rng = np.random.default_rng(6)
+    tex = ndimage.gaussian_filter(rng.normal(size=(300, 900)), 1.5)
+    amp = np.linspace(0.02, 0.3, 900)[None, :]
+    img = np.clip(0.4 + amp * tex / tex.std(), 0, 1).astype(np.float32)
+    photo = CalibrationPhoto(img, _capture(900, 300), "linear", 0)
+    xs = [x for x, _ in select_patch_centres(photo, 3, 64)]
+    assert xs == sorted(xs, reverse=True) and xs[0] - xs[-1] > 400, xs

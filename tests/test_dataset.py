@@ -309,3 +309,82 @@ def test_planning_options_that_are_not_times_or_sizes_are_named(tmp_path):
         with pytest.raises(InputError, match="max_size must be"):
             read_sharp(path, bad)
     assert read_sharp(path, 10).shape == (7, 10, 3)
+
+
+def test_shake_stats_measure_roll_about_the_optical_axis_and_the_windows_rate():
+    """Physics: a camera turning at a constant rate about its optical axis (z) rolls by
+    ``rate x window`` (all of its rotation is roll); turning about x it does not roll. The
+    mean rate is taken over the exposure window only (here a rate growing with time)."""
+    from conftest import constant_rate_capture
+    from gyrodeblur.dataset import shake_stats
+
+    for axis, roll in ((2, True), (0, False)):
+        rate = np.zeros(3)
+        rate[axis] = 1.5
+        cap = constant_rate_capture(rate, exposure=0.03, readout=0.02)
+        t0, t1 = cap.window
+        st = shake_stats(cap)
+        want = np.degrees(1.5 * (t1 - t0))
+        assert st["rotation_deg"] == pytest.approx(want, rel=1e-3)
+        assert st["roll_deg"] == pytest.approx(want if roll else 0.0, rel=1e-3, abs=1e-6)
+        assert st["mean_rate"] == pytest.approx(1.5)
+    cap = constant_rate_capture([0.0, 0.0, 1.0], exposure=0.03, readout=0.0, start=0.05)
+    t = cap.log.t
+    cap = cap.replace(log=GyroLog(t, np.stack([np.zeros_like(t), np.zeros_like(t), t], 1)))
+    assert shake_stats(cap)["mean_rate"] == pytest.approx(0.065, abs=0.003)
+
+
+def test_photos_are_downscaled_in_linear_light(tmp_path):
+    """A fine checker of sRGB 0.2 and 0.8 halved in size averages the light, not the
+    encoded values: linear 0.0331 and 0.6038 average to 0.3185, sRGB 0.600 (0.5 if the
+    encoded values were averaged)."""
+    from gyrodeblur.dataset import read_sharp
+    from gyrodeblur.imageio import write_photo
+
+    y, x = np.mgrid[0:64, 0:64]
+    img = np.where((x + y) % 2 == 0, 0.2, 0.8).astype(np.float32)
+    img = np.repeat(img[..., None], 3, axis=2)
+    write_photo(tmp_path / "checker.png", img, bit_depth=16)
+    got = read_sharp(tmp_path / "checker.png", 32)
+    assert got.shape == (32, 32, 3)
+    np.testing.assert_allclose(got[8:-8, 8:-8], 0.600, atol=0.01)
+
+
+def test_an_exposure_range_must_be_ordered_and_positive():
+    from gyrodeblur.dataset import plan_window
+
+    t = np.arange(0.0, 3.0, 0.005)
+    log = GyroLog(t, np.tile([0.1, 0.3, 0.05], (t.size, 1)))
+    for bad in ((0.04, 0.01), (0.0, 0.02), (-0.01, 0.02)):
+        with pytest.raises(InputError, match="min <= max"):
+            plan_window(log, "x", 0, 200, 150, exposure=bad)
+    cap, _ = plan_window(log, "x", 0, 200, 150, exposure=(0.01, 0.02))
+    assert 0.01 <= cap.exposure_time <= 0.02
+
+
+def test_a_rebuild_removes_only_former_case_folders(tmp_path):
+    """The former index names what a rebuild removes, but only case folders inside the
+    dataset: a listed name that is not a case (no case.json), or ``..`` (the folder
+    above, even when it holds a case.json), is left alone."""
+    from skimage import data
+
+    from gyrodeblur.dataset import build_dataset
+    from gyrodeblur.gyrolog import write_gcsv
+    from gyrodeblur.imageio import write_photo
+    from gyrodeblur.shake import synthetic_hand_shake
+
+    (tmp_path / "photos").mkdir()
+    write_photo(tmp_path / "photos" / "a.png", data.astronaut()[::8, ::8] / 255.0)
+    write_gcsv(tmp_path / "shake.gcsv", synthetic_hand_shake(2.0, seed=1))
+    outer = tmp_path / "outer"
+    ds = outer / "ds"
+    (ds / "mine").mkdir(parents=True)
+    (ds / "mine" / "notes.txt").write_text("keep")
+    (outer / "case.json").write_text("{}")
+    (ds / "dataset.json").write_text(json.dumps({"cases": ["..", "mine", "old"]}))
+    (ds / "old").mkdir()
+    (ds / "old" / "case.json").write_text("{}")
+    build_dataset(ds, photos=tmp_path / "photos", gyro=tmp_path / "shake.gcsv",
+                  windows_per_photo=1, orientation="XYZ")
+    assert (outer / "case.json").is_file() and (ds / "mine" / "notes.txt").is_file()
+    assert sorted(p.name for p in ds.iterdir()) == ["a_w0", "dataset.json", "mine"]

@@ -7,7 +7,7 @@ import pytest
 from scipy import ndimage
 
 from gyrodeblur.errors import InputError
-from gyrodeblur.fftutils import psf_to_otf
+from gyrodeblur.fftutils import convolve_fft, psf_to_otf, smooth_periodic_pad
 from gyrodeblur.wiener import (
     apply_spectral_filter,
     normalize_range,
@@ -242,3 +242,51 @@ def test_psf_to_otf_matches_a_padded_fft(psf_shape, fft_shape):
     otf = psf_to_otf(psf, fft_shape)
     assert otf.dtype == np.complex64 and otf.shape == (fft_shape[0], fft_shape[1] // 2 + 1)
     np.testing.assert_allclose(otf, np.fft.rfft2(padded), atol=2e-6)
+
+
+def test_convolution_moves_content_by_the_psfs_offset_in_every_channel():
+    """Convention (module docstring): a PSF whose mass sits at offset ``+d`` from its centre
+    moves content by ``+d`` (circularly); a colour image is convolved channel by channel,
+    exactly as each channel alone."""
+    rng = np.random.default_rng(0)
+    img = rng.random((12, 17, 3)).astype(np.float32)
+    psf = np.zeros((5, 7), np.float32)
+    psf[2 + 1, 3 + 2] = 1.0                      # offset (+1 row, +2 columns)
+    want = np.roll(img, (1, 2), axis=(0, 1))
+    np.testing.assert_allclose(convolve_fft(img, psf), want, atol=1e-6)
+    np.testing.assert_allclose(convolve_fft(img[..., 1], psf), want[..., 1], atol=1e-6)
+    blur = rng.random((5, 7)).astype(np.float32)
+    colour = convolve_fft(img, blur)
+    for c in range(3):
+        np.testing.assert_allclose(colour[..., c], convolve_fft(img[..., c], blur), atol=1e-6)
+
+
+def test_smooth_padding_commutes_with_flipping_the_image():
+    """The added band cross-fades from a mirror of the far border into a mirror of the near
+    one (weights symmetric about its middle), so padding a flipped image gives the flipped
+    periodic signal: the band of the flipped image is the padded band flipped, along each
+    axis, and the image keeps its place."""
+    rng = np.random.default_rng(1)
+    img = rng.random((9, 11, 2)).astype(np.float32)
+    shape = (16, 19)
+    out = smooth_periodic_pad(img, shape)
+    assert out.shape == shape + (2,) and out.dtype == np.float32
+    np.testing.assert_array_equal(out[:9, :11], img)
+    for axis, n in ((0, 9), (1, 11)):
+        flipped = smooth_periodic_pad(np.flip(img, axis), shape)
+        band = np.take(out, np.arange(n, shape[axis]), axis=axis)
+        fband = np.take(flipped, np.arange(n, shape[axis]), axis=axis)
+        np.testing.assert_allclose(fband, np.flip(band, axis), atol=1e-6)
+    # first and last added samples sit next to the border they continue
+    np.testing.assert_allclose(out[9, :11], img[8], atol=0.05)
+    np.testing.assert_allclose(out[-1, :11], img[0], atol=0.05)
+
+
+def test_shapes_that_do_not_fit_are_refused():
+    with pytest.raises(ValueError, match="shorter than the image"):
+        smooth_periodic_pad(np.zeros((8, 8), np.float32), (7, 10))
+    with pytest.raises(ValueError, match="shorter than the image"):
+        smooth_periodic_pad(np.zeros((8, 8), np.float32), (10, 7))
+    for shape in ((4, 9), (9, 4)):
+        with pytest.raises(ValueError, match="does not fit"):
+            psf_to_otf(np.ones((5, 5)) / 25, shape)
