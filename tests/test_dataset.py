@@ -364,8 +364,8 @@ def test_an_exposure_range_must_be_ordered_and_positive():
 
 def test_a_rebuild_removes_only_former_case_folders(tmp_path):
     """The former index names what a rebuild removes, but only case folders inside the
-    dataset: a listed name that is not a case (no case.json), or ``..`` (the folder
-    above, even when it holds a case.json), is left alone."""
+    dataset: a listed name that is not a case (no case.json), ``..`` (the folder above,
+    even when it holds a case.json) or ``.`` (the dataset itself) is left alone."""
     from skimage import data
 
     from gyrodeblur.dataset import build_dataset
@@ -381,10 +381,12 @@ def test_a_rebuild_removes_only_former_case_folders(tmp_path):
     (ds / "mine").mkdir(parents=True)
     (ds / "mine" / "notes.txt").write_text("keep")
     (outer / "case.json").write_text("{}")
-    (ds / "dataset.json").write_text(json.dumps({"cases": ["..", "mine", "old"]}))
+    (ds / "dataset.json").write_text(json.dumps({"cases": ["..", ".", "mine", "old"]}))
+    (ds / "case.json").write_text("{}")
     (ds / "old").mkdir()
     (ds / "old" / "case.json").write_text("{}")
     build_dataset(ds, photos=tmp_path / "photos", gyro=tmp_path / "shake.gcsv",
                   windows_per_photo=1, orientation="XYZ")
     assert (outer / "case.json").is_file() and (ds / "mine" / "notes.txt").is_file()
-    assert sorted(p.name for p in ds.iterdir()) == ["a_w0", "dataset.json", "mine"]
+    assert sorted(p.name for p in ds.iterdir()) == ["a_w0", "case.json", "dataset.json",
+                                                    "mine"]

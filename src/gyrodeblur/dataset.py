@@ -471,7 +471,7 @@ def build_dataset(out_dir: str | os.PathLike, **options) -> list[Path]:
     folders = [write_case(c, out / c.name) for c in cases]
     for name in sorted(set(former) - {c.name for c in cases}):
         stale = out / name
-        if (stale / "case.json").is_file() and stale.parent == out:
+        if (stale / "case.json").is_file() and stale.parent == out and stale.name == name:
             shutil.rmtree(stale)
 
     def plain(k, v):
@@ -499,7 +499,9 @@ def _indexed_cases(folder: Path) -> list[str]:
         names = json.loads((folder / "dataset.json").read_text(encoding="utf-8"))["cases"]
     except (OSError, ValueError, KeyError, TypeError):
         return []
-    return [n for n in names if isinstance(n, str) and n and os.sep not in n and n != ".."]
+    # one plain folder name each: never "..", ".", a path, or (on Windows) "a/b"
+    return [n for n in names if isinstance(n, str) and n not in ("", ".", "..")
+            and os.path.basename(n) == n and (os.altsep is None or os.altsep not in n)]
 
 
 def load_dataset(folder: str | os.PathLike) -> list[Case]:
