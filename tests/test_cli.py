@@ -1321,3 +1321,296 @@ def test_each_capture_value_given_on_the_command_line_fixes_its_parameter():
         assert fixed_parameters(parse(base + [option, value])) == {name}, option
     both = parse(base + ["--fix", "bias,focal", "--readout-time", "0.02"])
     assert fixed_parameters(both) == {"bias", "focal", "readout"}
+
+
+def test_a_psf_field_npy_is_the_field_for_the_overlap_given_each_psf_centred(capture_dir):
+    """``psf --grid RxC -o F.npy``: the stack holds the PSFs of the field planned with
+    the ``--overlap`` given (not the default's), each centred in its K x K slice (a
+    smaller PSF padded equally on every side)."""
+    from gyrodeblur.capture import load_capture
+    from gyrodeblur.deblur import plan_psf_field
+    from gyrodeblur.tiling import DEFAULT_OVERLAP
+
+    d = capture_dir
+    assert main(["psf", "--capture", str(d / "cap.json"), "--grid", "3x4", "--overlap", "0",
+                 "-o", str(d / "f.npy")]) == 0
+    stack = np.load(d / "f.npy")
+    cap = load_capture(d / "cap.json")
+    fields = {ov: plan_psf_field(cap, (192, 256), grid=(3, 4), overlap=ov,
+                                 max_fraction=np.inf)[1] for ov in (0.0, DEFAULT_OVERLAP)}
+    psfs = fields[0.0].psfs
+    assert [p.shape for p in psfs] != [p.shape for p in fields[DEFAULT_OVERLAP].psfs]
+    assert len({p.shape for p in psfs}) > 1                  # some are padded
+    k = stack.shape[1]
+    assert stack.shape == (12, k, k) and k == max(p.shape[0] for p in psfs)
+    for i, p in enumerate(psfs):
+        o = (k - p.shape[0]) // 2
+        np.testing.assert_array_equal(stack[i, o:o + p.shape[0], o:o + p.shape[1]], p)
+        assert stack[i].sum() == pytest.approx(1.0, abs=1e-5)
+
+
+def test_psf_takes_one_of_at_and_grid_a_pixel_of_the_frame_and_npy_or_png(capture_dir, capsys):
+    """``--at`` and ``--grid`` together (or neither) are refused; ``--at`` must be a pixel
+    centre of the frame: x up to width - 1 and y up to height - 1, not the width; the
+    output is a .npy or a .png, nothing else."""
+    d = capture_dir
+    base = ["psf", "--capture", str(d / "cap.json"), "-o", str(d / "p.npy")]
+    for extra in (["--at", "5,5", "--grid", "2x2"], []):
+        assert "give exactly one of --at X,Y or --grid RxC" in _run_error(base + extra, capsys)
+    for at in ("256,0", "0,192"):
+        assert "is not a pixel of the 256x192 frame" in _run_error(base + ["--at", at], capsys)
+    for name in ("p.jpg", "p.npz"):                          # the two formats only
+        assert f"{name}: output must end in .npy or .png" in _run_error(
+            ["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "-o", str(d / name)],
+            capsys)
+    assert not [p for p in d.iterdir() if p.name.startswith("p.")]
+    assert main(base + ["--at", "255,191"]) == 0
+
+
+def test_the_progress_bar_is_drawn_on_a_terminal_only_and_never_with_quiet(monkeypatch,
+                                                                          capsys):
+    """A log file gets no carriage-return lines, and ``--quiet`` silences the bar on a
+    terminal too."""
+    import gyrodeblur.cli as cli
+
+    for terminal, quiet, drawn in ((False, False, False), (True, True, False),
+                                   (True, False, True)):
+        monkeypatch.setattr(cli, "_is_terminal", lambda stream: terminal)
+        bar = cli._Progress("deblurring", quiet)
+        bar.t0 -= 5.0                                   # past the one-second wait
+        bar(3, 10)
+        bar.close()
+        assert ("3/10" in capsys.readouterr().err) == drawn, (terminal, quiet)
+
+
+def _spy_on_deblur(monkeypatch) -> list:
+    """A stand-in for the library's ``deblur`` that records its keyword arguments and
+    stops the command (:class:`_StopCalibration`)."""
+    import gyrodeblur.deblur as deblur_mod
+
+    seen = []
+
+    def spy(image, cap, **kwargs):
+        seen.append(kwargs)
+        raise _StopCalibration
+
+    monkeypatch.setattr(deblur_mod, "deblur", spy)
+    return seen
+
+
+def test_deblur_options_reach_the_library_and_sparse_limits_are_checked(capture_dir, capsys,
+                                                                         monkeypatch):
+    """``--overlap`` is handed to the deblur, not dropped; ``--phi`` applies to Wiener only,
+    ``--iterations`` is 1-100 and ``--noise-sigma`` under 1, refused before any work."""
+    seen = _spy_on_deblur(monkeypatch)
+    d = capture_dir
+    base = ["deblur", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o",
+            str(d / "o.png")]
+    with pytest.raises(_StopCalibration):
+        main(base + ["--grid", "2x2", "--overlap", "0.1"])
+    assert seen[-1]["overlap"] == 0.1
+    for extra, said in ((["--phi", "0.01"], "--phi: applies to --method wiener only"),
+                        (["--iterations", "101"], "--iterations: must be 1-100, got 101"),
+                        (["--noise-sigma", "1"], "--noise-sigma: must be in [0, 1)")):
+        assert said in _run_error(base + extra, capsys), extra
+    assert len(seen) == 1 and not (d / "o.png").exists()
+
+
+def test_blind_and_invariant_refuse_the_options_they_would_ignore(capture_dir, capsys):
+    """``--blind --mode invariant`` (blind has its own patches) and ``--mode invariant
+    --overlap`` (one PSF, no patches) are refused, not ignored; and without
+    ``--kernel-size`` blind uses 31 px, said too large for a photo of 60 rows."""
+    d = capture_dir
+    photo, out = str(d / "sharp.jpg"), str(d / "o.png")
+    assert "--mode: does not apply with --blind" in _run_error(
+        ["deblur", photo, "--blind", "--mode", "invariant", "-o", out], capsys)
+    assert "--overlap: applies to --mode variant only" in _run_error(
+        ["deblur", photo, "--capture", str(d / "cap.json"), "--mode", "invariant",
+         "--overlap", "0.2", "-o", out], capsys)
+    write_photo(d / "small.png", read_photo(d / "sharp.jpg").pixels[:60, :80], bit_depth=8)
+    assert "--kernel-size: 31 px is too large for a 80x60 image" in _run_error(
+        ["deblur", str(d / "small.png"), "--blind", "-o", out], capsys)
+    assert not (d / "o.png").exists()
+
+
+def test_main_leaves_the_sigterm_handler_as_it_found_it(capture_dir, capsys):
+    """A batch script that calls ``main`` keeps its own SIGTERM handling afterwards,
+    whether the command succeeded or failed."""
+    import signal
+
+    def mine(signum, frame):
+        pass
+
+    before = signal.signal(signal.SIGTERM, mine)
+    try:
+        d = capture_dir
+        assert main(["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "-o",
+                     str(d / "p.npy")]) == 0
+        assert main(["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "-o",
+                     str(d / "p.npy")]) == 2
+        assert signal.getsignal(signal.SIGTERM) is mine
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
+def test_simulate_takes_seed_0_and_checks_the_output_format_before_the_work(capture_dir, capsys,
+                                                                    monkeypatch):
+    """0 is a seed like any other; an output that cannot hold the result (16 bits in a
+    JPEG) is refused before the blur is synthesised, not after."""
+    import gyrodeblur.simulate as simulate_mod
+
+    d = capture_dir
+    base = ["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json")]
+    assert main(base + ["--snr-db", "30", "--seed", "0", "-o", str(d / "s.png")]) == 0
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("blurred before the output was checked")
+
+    monkeypatch.setattr(simulate_mod, "simulate_blur", no_work)
+    assert "x.jpg: JPEG stores 8 bits per sample" in _run_error(
+        base + ["-o", str(d / "x.jpg"), "--bit-depth", "16"], capsys)
+
+
+def test_bias_auto_is_read_from_the_command_line(capture_dir, capsys):
+    """``--bias auto`` (the help's own value) takes the bias from the log outside the
+    exposure, as ``"bias": "auto"`` in a capture description does; not a parse error."""
+    d = capture_dir
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "--bias", "auto",
+                 "-o", str(d / "p.npy")]) == 0
+    assert "gyro bias (auto, median outside the exposure)" in capsys.readouterr().out
+
+
+def test_a_command_without_a_capture_or_log_says_to_give_one(capture_dir, capsys):
+    """Neither ``--capture`` nor ``--gyro``: the message says what is missing (not a
+    missing focal length, the first field the empty description lacks)."""
+    d = capture_dir
+    for argv in (["deblur", str(d / "sharp.jpg"), "-o", str(d / "o.png")],
+                 ["psf", "--at", "5,5", "-o", str(d / "p.npy")],
+                 ["simulate", str(d / "sharp.jpg"), "-o", str(d / "s.png")]):
+        assert "--capture: give a capture description (--capture C.json) or --gyro" in \
+            _run_error(argv, capsys), argv
+
+
+def test_one_photos_psf_drawing_may_not_be_another_photos_output(capture_dir, capsys,
+                                                                  monkeypatch):
+    """``deblur a b -o A,B --save-psf B,F``: photo a's drawing would be written over by
+    photo b's result (or stop the command half-way): refused before any work, as any
+    file named twice among the outputs is."""
+    import gyrodeblur.deblur as deblur_mod
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("deblurred before the outputs were checked")
+
+    monkeypatch.setattr(deblur_mod, "deblur", no_work)
+    d = capture_dir
+    write_photo(d / "other.png", read_photo(d / "sharp.jpg").pixels * 0.9, bit_depth=8)
+    msg = _run_error(["deblur", str(d / "sharp.jpg"), str(d / "other.png"), "--capture",
+                      str(d / "cap.json"), "-o", f"{d / 'n0.png'},{d / 'n1.png'}",
+                      "--save-psf", f"{d / 'n1.png'},{d / 'f1.png'}", "--overwrite"], capsys)
+    assert "n1.png: is named twice as an output" in msg
+    assert not any((d / n).exists() for n in ("n0.png", "n1.png", "f1.png"))
+
+
+def _no_calibration(monkeypatch) -> list:
+    """``calibrate`` as the command finds it, replaced by one that returns the captures
+    as given (a correction of nothing, at once); returns the list of its calls."""
+    from types import SimpleNamespace
+
+    import gyrodeblur.calibrate_cli as calibrate_cli
+
+    calls = []
+
+    def as_given(images, captures, **kwargs):
+        calls.append(len(images))
+        return SimpleNamespace(seconds=0.0, estimates=None, captures=list(captures))
+
+    monkeypatch.setattr(calibrate_cli, "calibrate", as_given)
+    monkeypatch.setattr(calibrate_cli, "format_estimates", lambda est: [])
+    return calls
+
+
+def test_calibrate_says_whose_description_one_output_holds(capture_dir, capsys, monkeypatch):
+    """Two photos, one ``-o``: the description written is the first photo's, and the
+    command says so (and that both took the one start); one photo, or one ``-o`` per
+    photo, says neither."""
+    calls = _no_calibration(monkeypatch)
+    d = capture_dir
+    write_photo(d / "other.png", read_photo(d / "sharp.jpg").pixels * 0.9, bit_depth=8)
+    base = ["calibrate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json")]
+    first, start = "(the first photo's description", "take their exposure start from"
+    assert main(base[:2] + [str(d / "other.png")] + base[2:] + ["-o", str(d / "a.json")]) == 0
+    out = capsys.readouterr().out
+    assert first in out and "all 2 photos " + start in out
+    assert json.loads((d / "a.json").read_text())["exposure_start"] == 50.3
+    assert main(base + ["-o", str(d / "b.json")]) == 0
+    out = capsys.readouterr().out
+    assert first not in out and start not in out and f"wrote {d / 'b.json'}" in out
+    assert calls == [2, 1]
+
+
+def test_an_output_named_twice_through_another_spelling_or_a_link_is_refused(tmp_path):
+    """The same file is the same output however it is spelt: ``sub/../o.json`` or a link
+    to it."""
+    from gyrodeblur.calibrate_cli import refuse_repeated_outputs
+    from gyrodeblur.errors import InputError
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "link.json").symlink_to(tmp_path / "o.json")
+    for other in (tmp_path / "sub" / ".." / "o.json", tmp_path / "link.json"):
+        with pytest.raises(InputError, match="is named twice as an output"):
+            refuse_repeated_outputs([str(tmp_path / "o.json"), str(other)])
+    refuse_repeated_outputs([str(tmp_path / "o.json"), str(tmp_path / "p.json")])
+
+
+def test_a_corrected_description_written_over_keeps_its_permissions(capture_dir):
+    """``save_captures`` over an existing file keeps who may read it (as the other
+    outputs do), and leaves no temporary file behind."""
+    import os
+    import stat
+
+    from gyrodeblur.calibrate_cli import save_captures
+    from gyrodeblur.capture import load_capture
+
+    d = capture_dir
+    out = d / "o.json"
+    out.write_text("{}")
+    os.chmod(out, 0o600)
+    save_captures([load_capture(d / "cap.json")], [str(out)])
+    assert stat.S_IMODE(os.stat(out).st_mode) == 0o600
+    assert json.loads(out.read_text())["exposure_start"] == 50.3
+    assert not [p for p in d.iterdir() if p.name.endswith((".part", ".tmp"))]
+
+
+def test_the_estimates_report_gives_each_uncertainty_in_its_unit_or_says_fixed():
+    """Each line of ``format_estimates``: before -> after, then the one-sigma uncertainty
+    in the parameter's unit (ms for times, none for the focal scale), or "fixed"."""
+    from gyrodeblur.calibrate_cli import format_estimates
+
+    est = {"offset": (0.0, 0.0021, 0.0003), "readout": (0.02, 0.021, 0.0005),
+           "focal": (1.0, 1.01, 0.002), "bias": (np.zeros(3), np.array([1e-3, 0, 0]),
+                                                 np.full(3, 1e-4)),
+           "axes": ("XYZ", "XYZ", 30.0)}
+    lines = format_estimates(est)
+    assert lines[0].endswith("+0.00 ms ->    +2.10 ms  (+- 0.3 ms)")
+    assert lines[1].endswith("20.00 ms ->    21.00 ms  (+- 0.5 ms)")
+    assert lines[2].endswith("1.0000    ->   1.0100     (+- 0.002)")
+    assert lines[3].endswith("rad/s  (+- [0.0001, 0.0001, 0.0001])")
+    assert lines[4].endswith("XYZ -> XYZ  (next best mapping: objective +30.0 higher)")
+    fixed = {k: (b, a, None) for k, (b, a, _) in est.items()}
+    assert all(line.endswith("(fixed)") for line in format_estimates(fixed))
+
+
+def test_calibrate_tells_each_photo_of_its_own_rotation(capture_dir, capsys, monkeypatch):
+    """``--photo-rotation 90,0``: the first portrait export is turned back and fits; the
+    second, said not to be turned, is told it looks turned by 90 degrees, not to leave
+    out a rotation it was not given (the first photo's)."""
+    calls = _no_calibration(monkeypatch)
+    d = capture_dir
+    sharp = read_photo(d / "sharp.jpg").pixels
+    write_photo(d / "p1.png", np.rot90(sharp, -1), bit_depth=8)
+    write_photo(d / "p2.png", np.rot90(sharp * 0.9, -1), bit_depth=8)
+    msg = _run_error(["calibrate", str(d / "p1.png"), str(d / "p2.png"), "--capture",
+                      str(d / "cap.json"), "--photo-rotation", "90,0", "-o",
+                      str(d / "o.json")], capsys)
+    assert "p2.png" in msg and "turned by 90 degrees" in msg, msg
+    assert "leave the option out" not in msg and calls == []

@@ -182,3 +182,40 @@ def test_sensor_layout_undoes_a_clockwise_export_turn_and_back(degrees):
     np.testing.assert_array_equal(back, sensor)
     np.testing.assert_array_equal(to_photo_layout(back, degrees), exported)
     assert back.flags.c_contiguous
+
+
+@pytest.mark.parametrize("bad,match", [
+    (lambda im: (im * 32767).astype(np.int16), "dtype int16 .*divide 8-bit values by 255"),
+    (lambda im: im[None], r"at most 4 channels last, got \(1, 64, 96, 3\)"),
+    (lambda im: im[..., :0], r"at most 4 channels last, got \(64, 96, 0\)"),
+])
+def test_more_that_is_refused_and_how_it_is_named(image, bad, match):
+    """Signed integers get the scaling hint too; a 4-D array and an image of no channels
+    are not images."""
+    with pytest.raises(InputError, match=match):
+        check_image(bad(image), "photo")
+
+
+def test_the_limits_themselves_are_accepted(image):
+    """One to four channels (RGBA included), a side of exactly ``min_size``, and values of
+    exactly ``max_value`` and ``min_value`` pass; one pixel beyond a limit does not."""
+    from gyrodeblur.images import PHOTO_MAX, PHOTO_MIN
+
+    for c in (1, 2, 3, 4):
+        rgba = np.dstack([image] * 2)[..., :c]
+        assert check_image(rgba).shape == (64, 96, c)
+    assert check_image(image[:16, :16], min_size=16).shape[:2] == (16, 16)
+    with pytest.raises(InputError, match="need at least 16x16"):
+        check_image(image[:15, :16], min_size=16)
+    edge = image.copy()
+    edge[0, 0, 0], edge[0, 1, 0] = PHOTO_MAX, PHOTO_MIN
+    assert check_image(edge, max_value=PHOTO_MAX, min_value=PHOTO_MIN) is edge
+
+
+def test_a_psf_needs_both_sides_odd_and_a_sum_above_zero():
+    """A 3 x 4 kernel has no centre sample, and one that sums to zero cannot be
+    normalised (it came out all NaN or infinite)."""
+    with pytest.raises(InputError, match=r"odd sides, got shape \(3, 4\)"):
+        check_psf(np.ones((3, 4)))
+    with pytest.raises(InputError, match="positive finite sum, got 0"):
+        check_psf(np.array([[1.0, -1.0, 0.0]]))

@@ -70,6 +70,7 @@ def test_a_short_log_is_the_start_of_a_one_second_one_at_hand_rates(duration):
     (dict(rate_hz=1e9, duration=2e-9), ValueError, "rate_hz"),
     (dict(rate_hz=1e5, duration=1e300), ValueError, "at most"),
     (dict(tremor_rms=(0.1, -0.1, 0.1)), ValueError, "tremor_rms"),
+    (dict(sway_rms=(0.1, float("nan"), 0.1)), ValueError, "sway_rms must be three finite"),
     (dict(seed="a"), TypeError, "seed"),
     (dict(seed=True), TypeError, "seed"),
     (dict(sensor_noise=-0.01), ValueError, "sensor_noise"),
@@ -78,3 +79,23 @@ def test_a_short_log_is_the_start_of_a_one_second_one_at_hand_rates(duration):
 def test_bad_arguments_are_named(kwargs, error, words):
     with pytest.raises(error, match=words):
         synthetic_hand_shake(**kwargs)
+
+
+def test_the_sample_count_is_rounded_not_truncated():
+    """``round(duration * rate_hz)`` samples: 0.29 s at 100 Hz is 28.999999999999996 in
+    floating point, and 29 samples, not 28 (nor 1.15 s at 100 Hz 114)."""
+    assert len(synthetic_hand_shake(0.29, 100.0, seed=1).t) == 29
+    assert len(synthetic_hand_shake(1.15, 100.0, seed=1).t) == 115
+
+
+def test_the_default_log_has_weak_roll_and_the_stated_sensor_noise():
+    """The defaults as the module describes hand shake: roll (about z) weaker than pitch
+    and yaw, and white sensor noise of 0.005 rad/s (all that is above the tremor band)."""
+    log = synthetic_hand_shake(20.0, 200.0, seed=11)
+    rms = np.sqrt((log.omega ** 2).mean(axis=0))
+    assert rms[2] < 0.6 * min(rms[0], rms[1]), rms
+    spec = np.fft.rfft(log.omega, axis=0)
+    f = np.fft.rfftfreq(len(log.t), 1 / 200.0)
+    high = np.fft.irfft(np.where((f > 25.0)[:, None], spec, 0), len(log.t), axis=0)
+    noise = high.std(axis=0) / np.sqrt(75.0 / 100.0)    # the share of white noise above 25 Hz
+    np.testing.assert_allclose(noise, 0.005, rtol=0.1)
