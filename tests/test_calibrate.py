@@ -728,8 +728,8 @@ def test_cli_save_capture_needs_refine_and_a_json_file_apart(cli_dir, capsys):
 def test_cli_save_capture_failing_leaves_the_other_outputs_as_they_were(cli_dir, capsys,
                                                                        monkeypatch):
     """The corrected capture is written before the photo and moved into place last: where
-    it cannot be written, no output is left, and files --overwrite allowed stay as they
-    were."""
+    it cannot be written, the error names it (not its hidden part file), no output is
+    left, and files --overwrite allowed stay as they were."""
     import types
 
     import gyrodeblur.calibrate
@@ -741,16 +741,21 @@ def test_cli_save_capture_failing_leaves_the_other_outputs_as_they_were(cli_dir,
     monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", lambda *a, **k: fake)
     monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est: [])
 
-    def refused(self, path, gyro_path=None):
-        raise PermissionError(13, "Permission denied")
+    def refused(self, path, gyro_path=None):     # the disk fills as it is written
+        def write(f):
+            raise OSError(28, "No space left on device")
+        atomic_write(path, write)
 
+    from gyrodeblur.atomicfile import atomic_write
     monkeypatch.setattr(Capture, "save", refused)
     out, psf, saved = d / "out" / "kept.png", d / "out" / "kept_psf.png", d / "out" / "c.json"
     argv = ["deblur", str(d / "blurred.png"), "--capture", str(d / "cap.json"), "--refine",
             "--grid", "2x3", "--quiet", "-o", str(out), "--save-psf", str(psf),
             "--save-capture", str(saved)]
     assert main(argv) == 2
-    assert "c.json: cannot write the file: Permission denied" in capsys.readouterr().err
+    err = capsys.readouterr().err        # the output named, not the hidden part file
+    assert "c.json: cannot write the file: No space left on device" in err
+    assert ".part" not in err
     assert not out.exists() and not psf.exists() and not saved.exists()
     out.write_bytes(b"old photo")
     psf.write_bytes(b"old drawing")

@@ -241,6 +241,10 @@ def save_captures(captures, outputs, before_moving=None) -> None:
                 cap.save(part)
             except OSError as exc:
                 raise InputError(out, f"cannot write the file: {exc.strerror}") from None
+            except InputError as exc:    # the atomic write's, naming the hidden part file
+                if exc.source != part:
+                    raise
+                raise InputError(out, exc.problem) from None
         if before_moving is not None:
             before_moving()
         for part, out in zip(parts, outputs):
