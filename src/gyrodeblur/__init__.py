@@ -22,8 +22,7 @@ The API lives in the submodules, one concept each; the entry points:
 Conventions: camera frame x right, y down, z forward (OpenCV); angular velocity of the
 camera body in rad/s in that frame; time in seconds; pixel centres at integer
 coordinates; PSFs odd-sized and summing to 1, their centre sample the pixel they belong
-to. The command line
-(``gyrodeblur --help``) does the same from files.
+to. The command line (``gyrodeblur --help``) does the same from files.
 """
 
 __version__ = "0.1.0"

@@ -180,9 +180,9 @@ def auto_grid(capture: Capture, shape: tuple[int, int], overlap: float = DEFAULT
     around each window gives the deconvolution its context) nor 32 px (the count is
     rounded up, so a window can come out a little narrower: :func:`plan_psf_field` then
     checks each patch's own PSF against its window, and coarsens with a note), never
-    coarser than the
-    chapter's 6 x 8 (unless the photo is too small for it: windows stay at least 1.25x
-    :data:`~gyrodeblur.tiling.MIN_WINDOW`), and never more than ``max_patches`` in all.
+    coarser than the chapter's 6 x 8 (unless the photo is too small for it: windows stay
+    at least 1.25x :data:`~gyrodeblur.tiling.MIN_WINDOW`), and never more than
+    ``max_patches`` in all.
     ``centred``: count only the PSFs' shape, their change and their extent (the photo is
     aligned by the displacement field first, see :func:`plan_psf_field`).
 

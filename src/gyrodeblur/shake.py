@@ -102,15 +102,15 @@ def synthetic_hand_shake(duration: float = 2.0, rate_hz: float = 200.0, *, seed:
 
 def _three_rates(value, name: str) -> np.ndarray:
     """``value`` as three RMS rates (rad/s, finite, >= 0), or an error naming ``name``."""
+    not_numbers = (f"{name} must be three numbers (RMS rates, rad/s, about x, y, z), "
+                   f"got {value!r}")
     items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else None
     if items is None or any(isinstance(v, (bool, np.bool_, str, bytes)) for v in items):
-        raise TypeError(f"{name} must be three numbers (RMS rates, rad/s, about x, y, z), "
-                        f"got {value!r}")
+        raise TypeError(not_numbers)
     try:
         rates = np.asarray(items, dtype=np.float64)
     except (TypeError, ValueError):
-        raise TypeError(f"{name} must be three numbers (RMS rates, rad/s, about x, y, z), "
-                        f"got {value!r}") from None
+        raise TypeError(not_numbers) from None
     if rates.shape != (3,) or not np.all(np.isfinite(rates)):
         raise ValueError(f"{name} must be three finite RMS rates (rad/s, about x, y, z), "
                          f"got {value!r}")
