@@ -84,8 +84,20 @@ def test_two_workers_run_the_steps_in_other_processes():
     assert os.getpid() not in pids
 
 
+@pytest.fixture
+def ctrl_c_live():
+    """Ctrl-C raising ``KeyboardInterrupt``, as at a terminal, for the test's length: a
+    suite run as a background job (``pytest &`` from a script) starts with SIGINT ignored,
+    which Python keeps, and which the processes it starts inherit."""
+    import signal
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @forks
-def test_an_interrupt_while_the_pool_is_made_waits_and_then_stops_the_batch(monkeypatch):
+def test_an_interrupt_while_the_pool_is_made_waits_and_then_stops_the_batch(monkeypatch,
+                                                                           ctrl_c_live):
     """Making the pool imports modules, and an interrupt that lands as an import lets go
     of its lock is dropped by Python ("Exception ignored in ... _get_module_lock"; the
     batch then ran on, 1 in about 350 signals at a batch's start, session 45). So SIGINT
@@ -238,6 +250,7 @@ class Sleepy(_Fit):
         return k
 
 signal.signal(signal.SIGTERM, stop)
+signal.signal(signal.SIGINT, signal.default_int_handler)    # live even if started ignored
 try:                                # the marker inside: a signal as it is written is caught
     open(os.path.join({folder!r}, "ready-0"), "w").close()
     StepRunner(Sleepy(), 2).map("nap", [({folder!r}, 1), ({folder!r}, 2), ({folder!r}, 3)])
