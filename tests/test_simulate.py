@@ -176,3 +176,73 @@ def test_sample_count_sees_the_motion_of_the_lower_rows():
     w[t >= 0.065, 1] = 2.0
     cap = Capture(0.05, 0.01, 0.03, Camera.centred(320, 240, 300.0), GyroLog(t, w))
     assert warp_samples(cap) >= 12
+
+
+# ------------------------------------------------ from a mutation audit (session 46)
+
+def test_sample_count_sees_the_lower_rows_of_a_portrait_frame():
+    """Kills ``warp_samples`` timing its probes by their column, not their row: in a
+    120 x 320 portrait frame the columns reach only row 119's timing. The camera yaws at
+    2 rad/s from 25 ms after the first row starts; with a 30 ms readout only rows below
+    ~160 are exposed then (up to 6 px each), so the samples must be at least 12."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+
+    t = np.arange(0.0, 0.2, 1 / 1000)
+    w = np.zeros((t.size, 3))
+    w[t >= 0.075, 1] = 2.0
+    cap = Capture(0.05, 0.01, 0.03, Camera.centred(120, 320, 300.0), GyroLog(t, w))
+    assert warp_samples(cap) >= 12
+
+
+def test_sample_count_sees_a_jolt_in_the_last_moment_of_the_exposure():
+    """A 10 rad/s jolt in the last millisecond of a 64 ms exposure turns the camera by
+    0.01 rad, 3 px or more at f = 300: at most 0.5 px per step needs 6 samples in that
+    millisecond, 384 in all. Kills the speed probe leaving out the exposure's last 1/64
+    (the jolt unseen: 29 samples)."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+
+    t = np.arange(0.0, 0.2, 1 / 10000)
+    w = np.zeros((t.size, 3))
+    w[t >= 0.113, 1] = 10.0
+    cap = Capture(0.05, 0.064, 0.0, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    assert warp_samples(cap) >= 384
+
+
+def test_a_blur_longer_than_the_frame_is_refused_before_the_work(make_capture):
+    """Wrong capture values (an exposure in ms read as s) would ask for thousands of
+    samples of a meaningless blur: the sample count refuses them, naming the blur's span."""
+    from gyrodeblur.errors import InputError
+
+    cap = make_capture([0.0, 2.0, 0.0], exposure=1.0, duration=1.5)   # 300 px * 2 rad/s * 1 s
+    with pytest.raises(InputError, match="across the frame"):
+        warp_samples(cap)
+    with pytest.raises(InputError, match="across the frame"):
+        simulate_blur(np.zeros((240, 320), np.float32), cap)
+
+
+def test_quantisation_rounds_to_the_nearest_level():
+    x = np.array([0.4, 0.6, 127.49, 127.51, 254.4, 254.6], np.float32) / 255
+    np.testing.assert_array_equal(quantize_8bit(x) * 255,
+                                  np.float32([0, 1, 127, 128, 254, 255]))
+    np.testing.assert_array_equal(quantize_8bit(np.float32([-0.3, 1.7])), [0.0, 1.0])
+
+
+def test_synthesis_quantises_when_asked_and_is_linear_in_linear_light(make_capture):
+    """``quantize=True`` gives 8-bit levels within half a level of the unquantised blur;
+    linear synthesis is a linear operator, so a zero-mean texture keeps its negative
+    values (blur(-x) = -blur(x)), unclipped."""
+    cap = make_capture([-0.4, 0.6, 1.5], width=64, height=48, f=60.0, readout=0.02)
+    rng = np.random.default_rng(4)
+    img = ndimage.gaussian_filter(rng.random((48, 64)), 1).astype(np.float32)
+    plain = simulate_blur(img, cap, n_samples=5)
+    q = simulate_blur(img, cap, n_samples=5, quantize=True)
+    np.testing.assert_array_equal(q * 255, np.round(q * 255))
+    assert np.abs(q - plain).max() <= 0.5 / 255 + 1e-6
+    zero_mean = img - img.mean()
+    out = simulate_blur(zero_mean, cap, n_samples=5)
+    assert out.min() < -0.05
+    np.testing.assert_allclose(simulate_blur(-zero_mean, cap, n_samples=5), -out, atol=1e-6)

@@ -44,11 +44,12 @@ def test_the_adjoint_is_the_transpose_of_the_forward_model():
 def test_a_closed_model_gives_the_same_answer_on_one_thread():
     rng = np.random.default_rng(4)
     with _random_model(rng) as blur:
-        u = rng.standard_normal(blur.padded_shape).astype(np.float32)
+        u, v = rng.standard_normal((2,) + blur.padded_shape).astype(np.float32)
         threaded = blur.forward(u).copy()
+        blur.forward(v)                         # the work buffer now holds v's planes
     blur.close()                                # closing twice is harmless
     assert blur._pool is None
-    np.testing.assert_array_equal(blur.forward(u), threaded)
+    np.testing.assert_array_equal(blur.forward(u), threaded)   # every plane filtered anew
 
 
 def test_one_psf_everywhere_is_a_plain_convolution():
@@ -310,3 +311,112 @@ def test_deblur_with_psfs_never_clips_the_caller_s_photo():
         np.testing.assert_array_equal(photo, before)
     finally:
         METHODS.pop("as-is")
+
+
+# ------------------------------------------------ from a mutation audit (session 46)
+
+def _transposable_case(rng):
+    """A 2 x 3 grid of random 5 x 7 PSFs on a 48 x 64 photo, and the same model transposed
+    (a 3 x 2 grid on 64 x 48, each PSF transposed, in its row-major place)."""
+    shape = (48, 64)
+    patches = patch_grid(shape, (2, 3), 0.25)
+    psfs = [rng.random((5, 7)) for _ in patches]
+    flipped = [psfs[i * 3 + j].T for j in range(3) for i in range(2)]
+    return (InterpolatedBlur(patches, psfs, shape),
+            InterpolatedBlur(patch_grid(shape[::-1], (3, 2), 0.25), flipped, shape[::-1]))
+
+
+@pytest.mark.parametrize("exponent", [1.0, 2 / 3])
+def test_rows_and_columns_are_treated_alike(exponent):
+    """The model, the prior and the splitting are symmetric in x and y: the transposed
+    problem has the transposed answer, to float32 rounding (mean 5e-7). Kills the x dual
+    updated with ``+ w`` (mean 0.006) and the y shrinkage taking p = 1 (0.017 at p = 2/3).
+    The mean, not the largest difference: for p < 1 the shrinkage jumps at its threshold,
+    where rounding may tip a pixel either way (one such pixel moved by 0.0025 in a trial)."""
+    rng = np.random.default_rng(7)
+    blur, blur_t = _transposable_case(rng)
+    g = rng.random(blur.shape).astype(np.float32)
+    start = ndimage.uniform_filter(g, 3)
+    kw = dict(weight=3e-3, exponent=exponent, outer=4)
+    with blur, blur_t:
+        out = refine_globally(g, start, blur, **kw)
+        flipped = refine_globally(np.ascontiguousarray(g.T), np.ascontiguousarray(start.T),
+                                  blur_t, **kw)
+    assert np.abs(flipped.T - out).mean() < 1e-4
+
+
+def test_psfs_of_different_sizes_are_centred_in_the_common_support():
+    """A 1 x 1 delta and a 7 x 7 centred delta are the same PSF: the model is the crop of
+    the unknown to the photo wherever the patches' weights put either of them."""
+    shape = (48, 64)
+    patches = patch_grid(shape, (2, 2), 0.25)
+    wide = np.zeros((7, 7))
+    wide[3, 3] = 1.0
+    psfs = [np.ones((1, 1)), wide, wide, np.ones((1, 1))]
+    with InterpolatedBlur(patches, psfs, shape) as blur:
+        u = np.random.default_rng(3).random(blur.padded_shape).astype(np.float32)
+        p = blur.pad
+        np.testing.assert_allclose(blur.forward(u), u[p:-p, p:-p], atol=1e-6)
+
+
+def test_one_sided_pixels_are_each_channel_s_own():
+    """``at_least`` of shape (H, W, C): channel c is solved with its own plane of it, as if
+    alone. Kills every channel taking channel 0's one-sided pixels."""
+    rng = np.random.default_rng(3)
+    shape = (64, 80)
+    patches = patch_grid(shape, (2, 2), 0.25)
+    g = rng.random(shape + (3,)).astype(np.float32)
+    at_least = np.zeros(g.shape, bool)
+    at_least[20:40, 30:50, 1] = True
+    at_least[5:15, 5:25, 2] = True
+    g[at_least] = -1.0                     # below anything A u reaches: no data there
+    with InterpolatedBlur(patches, [rng.random((5, 7)) for _ in patches], shape) as blur:
+        out = refine_globally(g, g, blur, weight=1e-3, outer=2, at_least=at_least)
+        for c in range(3):
+            alone = refine_globally(g[..., c], g[..., c], blur, weight=1e-3, outer=2,
+                                    at_least=at_least[..., c])
+            np.testing.assert_array_equal(out[..., c], alone)
+
+
+def test_pixels_without_data_do_not_matter_beside_one_sided_ones():
+    """``ignore`` still holds when some pixels are one-sided (whose active set is rebuilt
+    each iteration): the ignored pixels' values change nothing. Kills the rebuilt mask
+    starting from all ones."""
+    rng = np.random.default_rng(2)
+    blur = _random_model(rng)
+    g = rng.random(blur.shape).astype(np.float32)
+    ignore = np.zeros(blur.shape, bool)
+    ignore[30:60, 40:90] = True
+    at_least = np.zeros(blur.shape, bool)
+    at_least[80:100, 100:140] = True
+    spoiled = g.copy()
+    spoiled[ignore] = 1.0
+    kw = dict(weight=1e-3, outer=2, ignore=ignore, at_least=at_least)
+    with blur:
+        np.testing.assert_array_equal(refine_globally(g, g, blur, **kw),
+                                      refine_globally(spoiled, g, blur, **kw))
+
+
+def test_progress_counts_the_iterations_over_the_channels():
+    rng = np.random.default_rng(6)
+    calls = []
+    with _random_model(rng) as blur:
+        g = rng.random(blur.shape + (3,)).astype(np.float32)
+        refine_globally(g, g, blur, weight=1e-3, outer=2, cg_steps=1, progress=calls.append)
+    assert calls == [1, 2, 3, 4, 5, 6]
+
+
+def test_the_penalty_starts_where_the_patch_solver_ends_and_grows_to_64(monkeypatch):
+    """The continuation of ``_BETA0``'s comment: beta starts at the patch-wise solver's
+    last (32), grows 1.5x per iteration, at most 64 (one shrinkage per direction)."""
+    import gyrodeblur.spacevariant as sv
+
+    seen = []
+    shrink = sv._shrink_residual
+    monkeypatch.setattr(sv, "_shrink_residual",
+                        lambda z, beta, p, out: seen.append(beta) or shrink(z, beta, p, out))
+    rng = np.random.default_rng(8)
+    with _random_model(rng) as blur:
+        g = rng.random(blur.shape).astype(np.float32)
+        refine_globally(g, g, blur, weight=1e-3, outer=5, cg_steps=1)
+    assert seen == [b for b in (32.0, 48.0, 64.0, 64.0, 64.0) for _ in "xy"]
