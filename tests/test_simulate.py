@@ -212,6 +212,52 @@ def test_sample_count_sees_a_jolt_in_the_last_moment_of_the_exposure():
     assert warp_samples(cap) >= 384
 
 
+def _row_steps(cap, n):
+    """Each row's largest step (px) of the frame's middle column between the ``n`` time
+    samples that :func:`simulate_blur` takes, each row at its own time."""
+    xy = []
+    for s in (np.arange(n) + 0.5) / n:
+        p = _row_homographies(cap, s) @ np.array([cap.camera.width / 2, 0.0, 1.0])
+        xy.append(p[:, :2] / p[:, 2:])
+    return np.abs(np.diff(xy, axis=0)).max(axis=(0, 2))
+
+
+def test_sample_count_sees_a_turn_between_the_probe_rows_of_a_short_exposure():
+    """A 1 ms exposure under a 40 ms readout: each row sees its own millisecond of the
+    motion, and a 20 rad/s turn 4-5 ms after the first row starts (logged at 1 kHz) blurs
+    rows 7-41 only, by up to 6 px at f = 300: between the first two of five evenly spread
+    probe rows, rows 0 and 60, which saw nothing (8 samples, steps of 0.84 px). The count
+    keeps every row's steps under 0.5 px."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+
+    t = np.arange(0.0, 0.2, 0.001)
+    w = np.zeros((t.size, 3))
+    w[(t >= 0.054) & (t <= 0.055), 1] = 20.0
+    cap = Capture(0.05, 0.001, 0.04, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    steps = _row_steps(cap, warp_samples(cap))
+    still = (np.arange(240) < 5) | (np.arange(240) > 45)
+    assert steps.max() > 0.1 and steps[still].max() < 1e-9
+    assert steps.max() <= 0.5, steps.max()
+
+
+def test_sample_count_sees_a_jolt_shorter_than_its_probes_step():
+    """A 30 rad/s jolt of 0.4 ms (logged at 10 kHz) in the middle of a 64 ms exposure,
+    within one of the 64 steps of a probe timed by the exposure alone: that probe reads
+    its turn as spread over the step and takes too few samples (steps of 0.8 px). Timed
+    by the log's samples as well, every step stays under 0.5 px."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+
+    t = np.arange(0.0, 0.2, 1 / 10000)
+    w = np.zeros((t.size, 3))
+    w[(t >= 0.0803) & (t < 0.0807), 1] = 30.0
+    cap = Capture(0.05, 0.064, 0.0, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    assert _row_steps(cap, warp_samples(cap)).max() <= 0.5
+
+
 def test_a_blur_longer_than_the_frame_is_refused_before_the_work(make_capture):
     """Wrong capture values (an exposure in ms read as s) would ask for thousands of
     samples of a meaningless blur: the sample count refuses them, naming the blur's span."""

@@ -32,6 +32,12 @@ _PAD = 2
 #: Pixels warped per chunk of rows (keeps the sampler's temporaries in cache).
 _CHUNK_PX = 65536
 
+#: The speed probe of :func:`warp_samples`: at least this many time steps per exposure,
+#: and two per gyro sample interval where the log is denser, up to the most.
+_PROBE_STEPS, _MAX_PROBE_STEPS = 64, 1024
+#: Its rows: at least 5, and enough that their exposures tile the readout, up to the most.
+_PROBE_ROWS, _MAX_PROBE_ROWS = 5, 33
+
 
 def _spline_coefficients(planes: np.ndarray, order: int) -> np.ndarray:
     """``(C, H + 2 _PAD, W + 2 _PAD)`` float32: the spline coefficients of the channels of
@@ -117,16 +123,26 @@ def _row_homographies(capture: Capture, s: float, r0: int = 0,
 
 
 def warp_samples(capture: Capture, max_step: float = MAX_STEP_PX) -> int:
-    """Number of time samples so that the fastest of a 5x5 set of probe pixels moves
-    less than ``max_step`` pixels between consecutive samples."""
+    """Number of time samples so that the fastest of a grid of probe pixels moves
+    less than ``max_step`` pixels between consecutive samples.
+
+    The probe's 5 columns and its rows span the frame. Its rows are at least 5, and
+    enough that their exposures tile the readout: under a short exposure and a long
+    readout each row sees its own stretch of the motion, and a turn that falls between
+    the probe rows' exposures would go unseen. Its time steps are at least 64 per
+    exposure and two per gyro sample interval of a denser log (a jolt shorter than a
+    64th of the exposure)."""
     cam = capture.camera
-    n0 = 64
+    T = capture.exposure_time
+    gyro_dt = float(np.median(np.diff(capture.log.t))) if capture.log.t.size > 1 else T
+    n0 = int(np.clip(np.ceil(2 * T / gyro_dt), _PROBE_STEPS, _MAX_PROBE_STEPS))
+    n_rows = int(np.clip(np.ceil(capture.readout_time / T) + 1, _PROBE_ROWS, _MAX_PROBE_ROWS))
     xs = np.linspace(0, cam.width - 1, 5)
-    ys = np.linspace(0, cam.height - 1, 5)
+    ys = np.linspace(0, cam.height - 1, n_rows)
     X, Y = np.meshgrid(xs, ys)
     pts = np.stack([X.ravel(), Y.ravel(), np.ones(X.size)])
     s = (np.arange(n0 + 1)) / n0
-    times = capture.row_start(Y.ravel())[None, :] + s[:, None] * capture.exposure_time
+    times = capture.row_start(Y.ravel())[None, :] + s[:, None] * T
     R = capture.orientation.matrices(times)                          # (n0+1, P, 3, 3)
     H = cam.K @ R @ cam.K_inv
     p = np.einsum("spij,jp->spi", H, pts)
