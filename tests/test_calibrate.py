@@ -1,5 +1,6 @@
 """Self-calibration: recovery of injected errors on a synthetic photo, fixed parameters,
-several photos of one session, the command line.
+several photos of one session, calibrate's decisions on a scripted search (keep rules,
+margins, warnings), the command line.
 
 The blurred photos are made by :func:`gyrodeblur.simulate.simulate_blur` (warping the
 sharp image by the recorded rotation), never by convolving the PSFs the calibration fits.
@@ -10,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -265,6 +267,9 @@ def test_the_given_mapping_stands_against_another_within_the_margin():
     assert standing_candidate(rows, other, 14.0)[1] == "x_twin"       # 83 nats behind
     assert standing_candidate(rows, parse_axes("YXz"), 14.0)[1] == "x_twin"   # not a candidate
     assert standing_candidate(rows[1:], given, 14.0)[1] == "x_given"  # the best already
+    # at exactly the margin the other goes on: the odds ask for "at least" the margin
+    assert standing_candidate([(-100.0, "x_twin", twin, []), (-98.0, "x_given", given, [])],
+                              given, 2.0)[1] == "x_twin"
 
 
 def test_a_wrong_mirror_twin_gives_way_to_the_right_mapping(case):
@@ -498,6 +503,306 @@ def test_mismatched_inputs(case):
     for second in (blurred, blurred.copy()):
         with pytest.raises(InputError, match="photos 1 and 2 hold the same pixels"):
             calibrate([blurred, second], [true, true])
+
+
+# ------------------------------------------------ decisions on a scripted search
+
+class _ScriptedFit:
+    """A stand-in for :class:`CalibrationFit` (``calibrate`` makes it in its place) whose
+    steps come out as ``script`` says, in tempered nats: ``"candidates"`` the first
+    candidate mappings' objectives (letters -> objective; their coarse scores as well),
+    ``"wide"`` the coarse scores with the bias moved, ``"objectives"`` the objectives of
+    mappings first refined from there, ``"winner"`` the winner's refined objective (at
+    ``"x"``, default a 5 ms time shift), ``"given"`` the given parameters', ``"tie"`` the
+    twin step's unsettled tie ``(objective gap, z)``, ``"gains"`` each photo's blur gain
+    and ``"owners"`` each patch's photo. What calibrate decides from them is then exact."""
+
+    def __init__(self, script, search, fix):
+        from gyrodeblur.calibration_search import X_NAMES
+        self.script, self.search = script, search
+        self.idx = [X_NAMES.index(k) for k in search.free()]
+        self.ubar, self.basins, self.blockiness, self.band = 0.5, [], 1.0, np.inf
+        self.refined, self.twin_steps = [], 0          # the mappings of each candidates step
+        owners = script.get("owners", [0] * 9)
+        per_patch = [100.0 * script.get("gains", [30.0])[k] / 9 for k in owners]
+        self.fine = SimpleNamespace(band_cuts=False, scale=1.0, evaluations=0,
+                                    points=[(k, 0.0, 0.0) for k in owners],
+                                    gain_over_no_blur=lambda theta: np.array(per_patch))
+        self.coarse = SimpleNamespace(evaluations=0)
+
+    def coarse_rankings(self, cand, steps, bias_steps=(None,), envelopes=(False, True), stride=1):
+        widened = len(bias_steps) > 1
+        scores = self.script.get("wide", {}) if widened else self.script["candidates"]
+        rows = sorted(((f, 0.0, 0.0, 1.0, parse_axes(a), (), None) for a, f in scores.items()),
+                      key=lambda r: r[0])
+        return [rows] * len(envelopes)
+
+    def candidates(self, rows, steps):
+        objectives = {**self.script["candidates"], **self.script.get("objectives", {})}
+        self.refined.append([axes_to_letters(r[4]) for r in rows])
+        return [(objectives[axes_to_letters(r[4])], np.r_[0.005, np.zeros(5)], r[4], [])
+                for r in rows]
+
+    def refine_winner(self, M, x, alts, steps):
+        return (np.asarray(self.script.get("x", x), float), self.script["winner"],
+                1e6 * np.eye(len(self.idx)), None)
+
+    def given_objective(self, M):
+        return self.script["given"], np.zeros(6)
+
+    def refine(self, M, x, iters, which=None):        # only ever at the given parameters
+        return x, self.script["given"], 1e4 * np.eye(len(self.idx)), None
+
+    def offset_rivals(self, M, x, f):
+        return [(0.01, 0.0, 0.5)]                       # a rival whenever asked
+
+    def prior_for(self, M):
+        return (np.r_[0.0, 0.0, 0.0, 0.02, 0.0, 0.0], np.r_[np.inf, 0.009, 0.1, 0.05, 0.05, 0.05],
+                100.0)
+
+    def mirror_twin(self, M, x, f, given_biases):
+        self.twin_steps += 1
+        tie = self.script.get("tie")
+        note = f"mirror twin {axes_to_letters(TWIN @ M)}: {axes_to_letters(M)} kept"
+        return M, None, note, None if tie is None else (TWIN @ M,) + tuple(tie)
+
+
+def _scripted(monkeypatch, script, captures=None, **kwargs):
+    """:func:`calibrate` on flat photos (one per capture; default one of
+    :func:`_true_capture`'s) with a :class:`_ScriptedFit` run by ``script``: the result
+    and the fit."""
+    import gyrodeblur.calibrate as cal
+    made = []
+    monkeypatch.setattr(cal, "CalibrationFit", lambda photos, search, fix, *args:
+                        made.append(_ScriptedFit(script, search, fix)) or made[-1])
+    captures = [_true_capture(0.5)] if captures is None else captures
+    photos = [np.full((H, W), 0.3 + 0.1 * k, np.float32) for k in range(len(captures))]
+    return calibrate(photos, captures, workers=1, **kwargs), made[-1]
+
+
+def _said(res, words: str) -> bool:
+    return any(words in n for n in res.notes)
+
+
+def test_the_given_parameters_stay_unless_the_found_ones_gain_the_margin(monkeypatch):
+    """All six coordinates free, the given mapping the best: the found parameters must
+    lower the objective by 10 (9.9 keeps the given ones, 10.1 does not). Kept, the capture
+    is the given one, with no offset rivals, no prior distance, no twin step, the
+    uncertainties at the given parameters, and the mapping's gap measured from the given
+    objective (3.1 to the next best mapping: uncertain)."""
+    true = _true_capture(0.5)
+    script = {"candidates": {"Xyz": -100.0, "xYz": -92.0, "YXz": -90.0}, "winner": -105.0}
+    res, fit = _scripted(monkeypatch, dict(script, given=-95.1))
+    assert _said(res, "kept the given parameters") and _said(res, "(< 10)"), res.notes
+    got = res.capture
+    assert (got.time_offset, got.readout_time, got.camera) == (true.time_offset,
+                                                               true.readout_time, true.camera)
+    assert res.offset_rivals == [] and not _said(res, "ambiguous")
+    assert res.prior_distance == 0.0 and fit.twin_steps == 0
+    assert res.estimates["axes"][2] == pytest.approx(3.1)
+    assert _said(res, "the next best (xYz) scores only 3.1 worse")
+    assert res.estimates["readout"][2] == pytest.approx(0.01)      # the given's Hessian
+    assert not _said(res, "covers the exposure only")              # the log covers +-40 ms
+    res, fit = _scripted(monkeypatch, dict(script, given=-94.9))
+    assert not _said(res, "kept the given parameters"), res.notes
+    assert res.capture.time_offset == pytest.approx(true.time_offset + 0.005)
+    assert res.offset_rivals == [(true.time_offset + 0.01, true.readout_time, 0.5)]
+    assert fit.twin_steps == 1 and res.prior_distance > 0
+    assert res.estimates["axes"][2] == pytest.approx(13.0) and not _said(res, "uncertain")
+    assert res.estimates["readout"][2] == pytest.approx(0.001)     # the winner's
+
+
+def test_another_mapping_must_gain_the_mapping_margin(monkeypatch):
+    """Another mapping replaces the given one when it lowers the given objective by 2
+    (three times as much under three times the typical gyro noise, and as much with the
+    mapping the only free parameter); its candidate goes on only when it beats the given
+    mapping's own by 2 as well (within that, the given mapping stands)."""
+    true = _true_capture(0.5)
+    other = {"candidates": {"YXz": -106.0, "Xyz": -103.0, "ZXY": -80.0}, "winner": -106.0}
+    res, _ = _scripted(monkeypatch, dict(other, given=-103.9))              # 2.1
+    assert axes_to_letters(res.capture.axes) == "YXz", res.notes
+    res, _ = _scripted(monkeypatch, dict(other, given=-104.1))              # 1.9
+    assert axes_to_letters(res.capture.axes) == TRUE_AXES and _said(res, "(< 2)"), res.notes
+    res, _ = _scripted(monkeypatch, dict(other, given=-104.1),
+                       fix=("offset", "readout", "focal", "bias"))
+    assert axes_to_letters(res.capture.axes) == TRUE_AXES, res.notes
+    res, _ = _scripted(monkeypatch, dict(other, given=-103.9), captures=[_noisy(true, 0.021)])
+    assert _said(res, "gyro noise ") and axes_to_letters(res.capture.axes) == TRUE_AXES
+    # the given mapping's candidate 1.5 behind: it stands, and is refined as the winner
+    res, _ = _scripted(monkeypatch, {"candidates": {"YXz": -103.0, "Xyz": -101.5},
+                                     "winner": -106.0, "given": -90.0})
+    assert axes_to_letters(res.capture.axes) == TRUE_AXES and _said(res, ": it stands")
+
+
+def test_the_mapping_is_uncertain_under_8_nats_or_a_twin_tie(monkeypatch):
+    """The gap to the next best mapping: 8.0 is confident, 7.5 is not; a runner-up whose
+    candidate beat the winner's refinement (the given mapping stood) makes it 0, not
+    negative; a twin tie that the phase could not settle makes it the tie's objective gap
+    (0 when the other scored better), unless a candidate of the mapping's own pair is
+    closer, and the note names the mapping the phase preferred."""
+    def run(**script):
+        return _scripted(monkeypatch, dict({"given": -80.0}, **script))[0]
+
+    for gap, uncertain in ((8.0, False), (7.5, True)):
+        res = run(candidates={"Xyz": -110.0, "YXz": -110.0 + gap}, winner=-110.0)
+        assert res.estimates["axes"][2] == gap and _said(res, "uncertain") == uncertain
+    res = run(candidates={"YXz": -101.0, "Xyz": -100.0}, winner=-100.5)
+    assert res.estimates["axes"][2] == 0.0 and _said(res, "(YXz) scores only 0.0 worse")
+    three = {"Xyz": -120.0, "xYz": -119.5, "YXz": -110.0}
+    res = run(candidates=three, winner=-120.0, tie=(1.0, 1.5))
+    assert res.estimates["axes"][2] == 0.5, res.notes           # the twin's own candidate
+    assert _said(res, "its mirror twin xYz explains the blur about as well (objective +1.0), "
+                      "and the phase of the deconvolved patches prefers Xyz by only 1.5")
+    res = run(candidates=dict(three, xYz=-110.0), winner=-120.0, tie=(1.0, 1.5))
+    assert res.estimates["axes"][2] == 1.0, res.notes
+    res = run(candidates=dict(three, xYz=-110.0), winner=-120.0, tie=(-0.5, -1.0))
+    assert res.estimates["axes"][2] == 0.0 and _said(res, "prefers xYz by only 1.0")
+
+
+def test_a_mapping_only_the_widened_ranking_found_is_as_uncertain_as_the_first_were_close(
+        monkeypatch):
+    """The first candidates within 3 of each other: the widened ranking's best (ZXY) joins
+    them with its mirror twin, and winning, is reported with the first candidates' gap
+    (unless its own is smaller). The first candidates' best winning after all is not; a
+    given mapping that stood against a better first candidate is not either (nothing was
+    added); and when the first candidates are not close, a widened ranking that only
+    rescored mappings refined already adds nothing."""
+    first = {"Xyz": -100.0, "YXz": -97.0}
+    res, fit = _scripted(monkeypatch, {"candidates": first, "wide": {"ZXY": -140.0},
+                                       "objectives": {"ZXY": -130.0, "zxY": -125.0},
+                                       "winner": -131.0, "given": -100.0})
+    assert axes_to_letters(res.capture.axes) == "ZXY" and fit.refined[1] == ["ZXY", "zxY"]
+    assert res.estimates["axes"][2] == 3.0 and _said(res, "won only once the search moved "
+                                                          "the bias"), res.notes
+    res, _ = _scripted(monkeypatch, {"candidates": first, "wide": {"ZXY": -140.0},
+                                     "objectives": {"ZXY": -130.5, "zxY": -130.0},
+                                     "winner": -131.0, "given": -100.0})
+    assert res.estimates["axes"][2] == 1.0, res.notes
+    res, _ = _scripted(monkeypatch, {"candidates": first, "wide": {"ZXY": -140.0},
+                                     "objectives": {"ZXY": -90.0, "zxY": -90.0},
+                                     "winner": -108.0, "given": -90.0})
+    assert axes_to_letters(res.capture.axes) == TRUE_AXES
+    assert res.estimates["axes"][2] == 11.0 and not _said(res, "uncertain"), res.notes
+    res, fit = _scripted(monkeypatch, {"candidates": {"YXz": -101.0, "Xyz": -100.0},
+                                       "winner": -103.0, "given": -80.0})
+    assert axes_to_letters(res.capture.axes) == TRUE_AXES and len(fit.refined) == 1
+    assert res.estimates["axes"][2] == 2.0 and _said(res, "(YXz) scores only 2.0 worse")
+    lines = []
+    _, fit = _scripted(monkeypatch, {"candidates": {"Xyz": -100.0, "YXz": -90.0},
+                                     "wide": {"Xyz": -200.0, "YXz": -95.0},
+                                     "winner": -100.0, "given": -100.0}, say=lines.append)
+    assert len(fit.refined) == 1 and not any("bias moved" in line for line in lines), lines
+
+
+def test_the_five_best_of_the_shortlist_and_the_best_ones_twin_are_refined(monkeypatch):
+    scores = {a: -100.0 + k for k, a in enumerate(("Xyz", "YXz", "ZXY", "XZy", "yXZ", "zYX",
+                                                   "xYz"))}
+    _, fit = _scripted(monkeypatch, {"candidates": scores, "winner": -100.0, "given": -100.0},
+                       fix=("bias",))
+    assert fit.refined == [["Xyz", "YXz", "ZXY", "XZy", "yXZ", "xYz"]]
+
+
+def test_the_blur_gain_is_that_of_the_photo_that_shows_least(monkeypatch):
+    """Two photos, the second with little blur (a gain of 0.5 per 9 patches, on 2 patches
+    against the first's 4): the reported gain is the second's, and the warning names it
+    alone."""
+    caps = [_true_capture(0.45), _true_capture(0.53)]
+    res, _ = _scripted(monkeypatch, {"candidates": {"Xyz": -100.0}, "winner": -100.0,
+                                     "given": -100.0, "gains": [30.0, 0.5],
+                                     "owners": [0, 0, 0, 0, 1, 1]},
+                       captures=caps, fix=set(PARAMETERS))
+    assert res.blur_gain == pytest.approx(0.5)
+    assert _said(res, "photo 2 shows little of the blur") and not _said(res, "photo 1")
+
+
+def test_estimates_far_from_the_priors_are_weighed_against_the_free_coordinates(monkeypatch):
+    """Bias corrections of 2.45 prior sds on x and y (from the prior's centre, 0.02 rad/s
+    on x) sum to squared z-scores of 12: beyond chi-square's 95 % quantile for the five
+    free coordinates a prior holds (11.07; not six, 12.59: the time offset has none)."""
+    z = np.sqrt(6.0)
+    res, _ = _scripted(monkeypatch, {"candidates": {"Xyz": -130.0, "YXz": -100.0},
+                                     "winner": -130.0, "given": -100.0,
+                                     "x": [0.005, 0.0, 0.0, 0.02 + 0.05 * z, 0.05 * z, 0.0]})
+    assert res.prior_distance == pytest.approx(12.0)
+    assert _said(res, "lie far from the given values for errors of the priors' size (moved by "
+                      "bias x +0.122 rad/s (+2.4 sd), y +0.122 rad/s (+2.4 sd) (camera frame);")
+
+
+def test_the_arguments_reach_the_search_at_their_limits(monkeypatch):
+    """The widest offset range is allowed; a fixed readout lets photos whose descriptions
+    give it and do not share a session."""
+    script = {"candidates": {"Xyz": -100.0}, "winner": -100.0, "given": -100.0}
+    from gyrodeblur.calibrate import MAX_OFFSET_RANGE
+    res, _ = _scripted(monkeypatch, script, offset_range=MAX_OFFSET_RANGE, fix="axes")
+    assert _said(res, "asked: +-5000 ms")
+    caps = [_true_capture(0.45), _true_capture(0.53).replace(readout_time_unknown=True)]
+    _scripted(monkeypatch, script, captures=caps, fix=("readout", "axes"))
+
+
+def test_a_downscale_that_leaves_under_64_px_is_refused(case):
+    _, true, blurred = case
+    with pytest.raises(InputError, match="shrinks a 384x256 photo to 77x51"):
+        calibrate([blurred], true, downscale=0.2)
+
+
+def test_a_fixed_bias_takes_nothing_from_a_long_log(case):
+    """A 20 s log whose typical rate says the given bias is 0.04 rad/s off: with the bias
+    fixed it stays as given, and the log lends no prior."""
+    b = np.array([0.04, -0.04, 0.0])
+    log = _long_log(20.0, b, TRUE_AXES)
+    given = Capture(10.0, 0.04, 0.03, Camera.centred(W, H, 1.3 * W), log, axes=TRUE_AXES)
+    res = calibrate([case[2]], given, fix=set(PARAMETERS))
+    np.testing.assert_array_equal(res.capture.bias, given.bias)
+    assert not _said(res, "prior on the bias")
+
+
+def test_the_gyro_noise_is_the_noisiest_logs():
+    from gyrodeblur.calibrate import _gyro_noise_level
+    quiet, noisy = _true_capture(0.45), _noisy(_true_capture(0.53), 0.02)
+    assert _gyro_noise_level([quiet, noisy]) == pytest.approx(0.02, rel=0.1)
+    assert _gyro_noise_level([noisy, quiet]) == _gyro_noise_level([quiet, noisy])
+
+
+def test_the_candidate_mappings():
+    """All 24 proper signed permutations (or those asked), plus a measured mapping that is
+    none of them; the given one alone when fixed."""
+    from gyrodeblur.axes import PROPER_AXIS_LETTERS
+    from gyrodeblur.calibrate import _candidate_mappings
+    given = parse_axes("Xyz")
+    assert [axes_to_letters(M) for M in _candidate_mappings(given, set(), None)] == \
+        list(PROPER_AXIS_LETTERS)
+    assert [axes_to_letters(M) for M in _candidate_mappings(given, set(), ["YXz"])] == ["YXz"]
+    c, s = np.cos(0.05), np.sin(0.05)
+    measured = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ given
+    cand = _candidate_mappings(measured, set(), ["YXz", "Xyz"])
+    assert len(cand) == 3 and cand[-1] is measured
+    (only,) = _candidate_mappings(measured, {"axes"}, None)
+    assert only is measured
+
+
+def test_the_widened_ranking_steps_each_axis_by_its_own_prior_sd():
+    """A long log's prior on the bias is tighter on some axes than on others: each bias step
+    is one sd of its own axis."""
+    from gyrodeblur.calibrate import _bias_steps
+    prior = BiasPrior(np.zeros(3), (np.zeros(3), np.array([0.004, 0.02, 0.01])))
+    M = parse_axes("Xyz")
+    sd = prior.for_mapping(M)[1]
+    assert sd[0] != sd[1]
+    got = {tuple(np.round(s, 12)) for s in _bias_steps(prior, M)}
+    assert got == {(round(i * sd[0], 12), round(j * sd[1], 12), 0.0)
+                   for i in (-1, 0, 1) for j in (-1, 0, 1) if i or j}
+
+
+def test_the_widened_ranking_runs_one_mapping_of_each_twin_pair():
+    from gyrodeblur.calibrate import _one_of_each_twin_pair
+    cand = [parse_axes(a) for a in ("Xyz", "YXz", "xYz", "ZXY", "yxz")]
+    assert [axes_to_letters(M) for M in _one_of_each_twin_pair(cand)] == ["Xyz", "YXz", "ZXY"]
+
+
+def test_fix_names_may_come_with_empty_ones():
+    from gyrodeblur.calibrate import checked_fix
+    assert checked_fix("offset,,bias,") == {"offset", "bias"}
+    assert checked_fix(["axes", "", None]) == {"axes"} and checked_fix(None) == set()
 
 
 # ----------------------------------------------------------------------------- CLI

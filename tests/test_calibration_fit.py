@@ -1,8 +1,12 @@
 """Tests of the calibration's search steps (gyrodeblur.calibration_fit): the shortlist of
-mappings, the mirror twin's parameters and the phase tie-break. The search as a whole (and
-the twin step on a blurred photo) is tested in test_calibrate.py."""
+mappings, the mirror twin's parameters and the phase tie-break; and the steps themselves on
+stand-in criteria (a mapping's starts, its candidate, the winner's further starts, offset
+rivals, the twin tie). The search as a whole (and the twin step on a blurred photo) is
+tested in test_calibrate.py."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -298,3 +302,278 @@ def test_the_psf_extent_is_the_median_over_the_time_shifts():
     ext, path = psf_extent_and_path(photos, th, [0.0])
     assert ext == pytest.approx(10.0, rel=0.1) and path == pytest.approx(ext, rel=0.02)
     assert psf_extent_and_path(photos, th, [-0.2, 0.0, 0.2]) == (ext, path)
+
+
+# ------------------------------------------------ the steps on stand-in criteria
+
+def _theta_of(x, M, ubar):
+    from gyrodeblur.calibration_search import SearchSpace
+    return SearchSpace.theta_of(None, x, M, ubar)
+
+
+def test_offset_rivals_are_other_basins_within_two_nats_the_lowest_of_each_offset():
+    """Basins of the winner's mapping (objectives against the winner's -100): those whose
+    first-row offset lies more than 3 ms away and scores within 2 nats, one per offset
+    (the lowest), best first; none with the offset fixed."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+
+    def basin(shift, readout, f):
+        return np.r_[shift, readout, 0.0, 0.0, 0.0, 0.0], f
+
+    basins = [basin(0.0, 0.0, -100.0),            # the winner
+              basin(0.010, 0.0, -98.5),           # the same offset as the next, higher
+              basin(0.002, 0.0, -99.9),           # within 3 ms
+              basin(-0.010, 0.004, -99.0),        # offset -0.008 (the first row's)
+              basin(0.0105, 0.0, -99.2),
+              basin(0.020, 0.0, -97.9)]           # 2.1 nats behind
+    fit = SimpleNamespace(fix=set(), ubar=0.5, basins=basins,
+                          search=SimpleNamespace(theta_of=_theta_of))
+    got = CalibrationFit.offset_rivals(fit, np.eye(3), np.zeros(6), -100.0)
+    assert [tuple(np.round(r, 9)) for r in got] == [(0.0105, 0.0, 0.8), (-0.008, 0.004, 1.0)]
+    fit.fix = {"offset"}
+    assert CalibrationFit.offset_rivals(fit, np.eye(3), np.zeros(6), -100.0) == []
+
+
+def test_the_working_scale_band_and_trace_samples():
+    """The working scale shrinks the largest PSF to 32 px (never enlarges), the patch is
+    128 px or what the photo holds (a multiple of 16); a trace has a sample per half
+    working pixel and 30 % to spare, 32 to 400; the band is cut above 1.10 blockiness
+    (the benchmark's PNGs measure up to 1.086; the false positive named, 1.144, is cut)."""
+    from gyrodeblur.calibration_fit import (COMPRESSED_BAND, fine_samples, spectral_band,
+                                            working_patch)
+    assert working_patch(10.0, 1000) == (1.0, 128)
+    assert working_patch(64.0, 1000) == (0.5, 128)
+    assert working_patch(64.0, 200) == (0.5, 96)
+    assert fine_samples(100.0, 1.0) == 260 and fine_samples(100.0, 0.5) == 130
+    assert fine_samples(1.0, 1.0) == 32 and fine_samples(1000.0, 1.0) == 400
+    assert spectral_band(1.086) == np.inf and spectral_band(1.144) == COMPRESSED_BAND
+
+
+def test_of_equal_objectives_the_first_refinement_stands():
+    from gyrodeblur.calibration_fit import _lowest_of
+    a, b, c = (np.zeros(6), -5.0), (np.ones(6), -5.0), (np.full(6, 2.0), -5.1)
+    assert _lowest_of([a, b]) is a and _lowest_of([b, a]) is b
+    assert _lowest_of([a, c, b]) is c
+
+
+def test_identical_phase_ratios_have_no_standard_error():
+    """Every patch's ratio the same: no standard error to count the preference in, so the
+    phase does not settle a tie (and nothing divides by zero)."""
+    from gyrodeblur.calibration_fit import _phase_z
+    same = np.full(6, -0.0625)
+    assert _phase_z(same) == 0.0 and _unsettled_tie(0.3, same)
+
+
+def test_an_unsettled_twin_tie_is_told_from_the_mapping_taken():
+    """The tie the twin step reports is ``(the mapping left, its objective minus the
+    taken one's, the phase's preference for the taken one in standard errors)``: the twin
+    refined 0.5 worse and preferred by 2.5 standard errors is taken, the winner left 0.5
+    better and disfavoured by 2.5; preferred by 3.5 it is a clear decision; disfavoured by
+    1, the winner stays with the twin 0.5 behind."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+    M = parse_axes("Xyz")
+    Mt = TWIN @ M
+
+    def twin_step(log_ratio):
+        fit = SimpleNamespace(fix=set(), lo=np.full(6, -1.0), hi=np.full(6, 1.0), ubar=0.5,
+                              reg=None, search=SimpleNamespace(theta_of=_theta_of))
+        fit.fine = SimpleNamespace(points=[0] * 9, set_envelope=lambda th: None,
+                                   cost=lambda th: 0.0)
+        fit.refine = lambda N, x, iters: (x, -99.5, None, None)
+        fit.phase_patches = lambda: SimpleNamespace(sparsity=lambda th: np.exp(log_ratio)
+                                                    if np.allclose(th.axes, Mt) else 1.0)
+        return CalibrationFit.mirror_twin(fit, M, np.zeros(6), -100.0, [np.zeros(3)])
+
+    taken, twin, _, tie = twin_step(_ratios_at(-2.5))
+    assert np.array_equal(taken, Mt) and twin[1] == -99.5
+    assert np.array_equal(tie[0], M) and tie[1] == pytest.approx(-0.5)
+    assert tie[2] == pytest.approx(2.5)
+    assert twin_step(_ratios_at(-3.5))[3] is None
+    taken, twin, _, tie = twin_step(_ratios_at(1.0))
+    assert np.array_equal(taken, M) and twin is None
+    assert np.array_equal(tie[0], Mt) and tie[1:] == pytest.approx((0.5, 1.0))
+
+
+def _start_fit(ubar, fix=()):
+    """What :meth:`CalibrationFit.start_vec` reads of a fit: the prior's bias 0."""
+    return SimpleNamespace(fix=set(fix), ubar=ubar, lo=np.full(6, -1.0), hi=np.full(6, 1.0),
+                           moved_bias=lambda M, step=None: np.zeros(3))
+
+
+def test_a_start_times_every_row_as_its_line_fit_does():
+    """A line fit puts row ``u`` at time shift ``tau0 - kappa (u - 1/2)``: the start made
+    from it reads every row of the corrected capture that much earlier on the log, whatever
+    the pivot row, and scales the focal length as asked; with the offset fixed, the pivot
+    row stays where it was."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+    cap = _capture()
+    tau0, kap = 0.004, 0.01
+
+    def log_time(c, u):
+        return c.exposure_start + c.readout_time * u - c.time_offset
+
+    for ubar in (0.2, 0.5, 0.9):
+        x = CalibrationFit.start_vec(_start_fit(ubar), tau0, kap, cap.axes, 1.1)
+        got = _theta_of(x, cap.axes, ubar).apply(cap)
+        for u in (0.0, 0.3, 1.0):
+            assert log_time(got, u) == pytest.approx(log_time(cap, u) - (tau0 - kap * (u - 0.5)),
+                                                     abs=1e-12)
+        assert got.camera.fx == pytest.approx(1.1 * cap.camera.fx)
+    x = CalibrationFit.start_vec(_start_fit(0.0, {"offset"}), tau0, kap, cap.axes)
+    assert x[0] == 0.0 and _theta_of(x, cap.axes, 0.0).offset == 0.0
+
+
+def _starts_of(dips, width, ubar, uc, kappas):
+    """:meth:`CalibrationFit.candidate_starts` at time shift 0 where each focal scale's
+    patch costs are dips (``dips``: focal -> (time shift, depth)) ``width`` s wide."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+    from gyrodeblur.spectral_criterion import Corrections
+
+    def costs(theta, taus, rows):
+        at, depth = dips[round(theta.focal, 6)]
+        curve = -depth * np.exp(-0.5 * ((taus - at) / width) ** 2)
+        return np.stack([curve] * len(uc), 1)
+
+    fit = _start_fit(ubar)
+    fit.search = SimpleNamespace(tau_lo=-0.04, tau_hi=0.04, theta_of=_theta_of)
+    fit.fine = SimpleNamespace(set_envelope=lambda th: None, costs=costs)
+    fit.theta0, fit.fgrid = Corrections(axes=np.eye(3)), list(dips)
+    fit.uc, fit.kappas = np.asarray(uc), np.asarray(kappas)
+    fit.start_vec = lambda *args, **kw: CalibrationFit.start_vec(fit, *args, **kw)
+    return CalibrationFit.candidate_starts(fit, 0.0, 0.0, np.eye(3))
+
+
+def test_a_mappings_starts_are_its_best_line_fits_more_than_4_ms_apart():
+    """Per-focal cost curves that dip at 0 (deepest), 2, 10, -12 and 14 ms: the starts are
+    the three best that lie more than 4 ms from each better one (2 ms is the same basin as
+    0), each with its focal scale. Apart means at the pivot row: patches at row 0.9 whose
+    focal 1.1 dips 2.9 ms late fit best 6 ms late with a readout 6 ms longer, which puts
+    the pivot row 3.6 ms late, not a start of its own (nor is 6 ms of readout)."""
+    starts = _starts_of({1.0: (0.0, 3.0), 1.1: (0.002, 2.0), 1.2: (0.010, 1.0),
+                         1.3: (-0.012, 0.5), 1.4: (0.014, 0.2)}, 0.003, 0.5, [-0.25, 0.25],
+                        [0.0])
+    assert [round(x[0], 9) for x in starts] == [0.0, 0.010, -0.012]
+    np.testing.assert_allclose([np.exp(x[2]) for x in starts], [1.0, 1.2, 1.3])
+    starts = _starts_of({1.0: (0.0, 3.0), 1.1: (0.0029, 2.0), 1.2: (-0.010, 1.0)}, 0.001,
+                        0.9, [0.4, 0.4], [0.0, 0.006])
+    assert [round(x[0], 9) for x in starts] == [0.0, -0.010] and [x[1] for x in starts] == [0, 0]
+    np.testing.assert_allclose([np.exp(x[2]) for x in starts], [1.0, 1.2])
+
+
+def test_the_winners_further_starts():
+    """The winner's refinements, recorded on a stand-in criterion (a quadratic bowl;
+    "refined" starts stay put): its start and other starts refined fully; from the given
+    focal length and the prior's bias, the focal length held first; time shifts 2, 4, 6 ms
+    either side of the best from the given readout, focal length and bias, the best two
+    refined fully; readout corrections of -30 to +30 % of the given 30 ms but the one
+    within 5 % of the best's, the best two refined fully; the lowest wins."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+    b_prior = np.array([0.02, -0.01, 0.0])
+    bottom = np.r_[-0.0035, 0.0055, 0.0, b_prior]
+    weights = np.array([1e4, 1e3, 1.0, 1.0, 1.0, 1.0])
+    calls = []
+
+    class Steps:
+        def map(self, method, arglist):
+            out = []
+            for args in arglist:
+                calls.append((method, np.array(args[1])) + tuple(args[2:]))
+                x0 = np.array(args[1])
+                out.append((x0, float(weights @ (x0 - bottom) ** 2), None, None))
+            return out
+
+    prior = SimpleNamespace(for_mapping=lambda M: (b_prior, None))
+    fit = SimpleNamespace(idx=[0, 1, 2, 3, 4, 5], lo=np.full(6, -1.0), hi=np.full(6, 1.0),
+                          fix=set(), bias_prior=prior,
+                          search=SimpleNamespace(readout_unknown=False, r0=0.03))
+    fit._scan = lambda *args: CalibrationFit._scan(fit, *args)
+    x = np.r_[0.001, 0.002, 0.05, 0.01, 0.0, 0.0]
+    xa = np.r_[0.009, 0.0, 0.0, 0.0, 0.0, 0.0]
+    best = CalibrationFit.refine_winner(fit, np.eye(3), x, [xa], Steps())
+
+    def starts(method, k0, k1):
+        assert all(c[0] == method for c in calls[k0:k1]), calls[k0:k1]
+        return [c[1] for c in calls[k0:k1]]
+
+    np.testing.assert_array_equal(starts("refine_fully", 0, 2), [x, xa])
+    given = np.r_[x[:2], 0.0, b_prior]                       # x is the best so far
+    assert calls[2][0] == "refine" and calls[2][2:] == (6, [0, 1, 3, 4, 5])
+    np.testing.assert_array_equal(calls[2][1], given)
+    np.testing.assert_array_equal(starts("refine_fully", 3, 4), [given])
+    shifts = starts("refine", 4, 10)
+    np.testing.assert_allclose([s[0] for s in shifts],
+                               0.001 + np.array([-0.006, -0.004, -0.002, 0.002, 0.004, 0.006]),
+                               atol=1e-12)
+    assert all(np.array_equal(s[1:], np.r_[0.0, 0.0, b_prior]) for s in shifts)
+    assert all(c[2] == 4 for c in calls[4:10])
+    np.testing.assert_allclose([s[0] for s in starts("refine_fully", 10, 12)],
+                               [-0.003, -0.005], atol=1e-12)           # the best two
+    readouts = starts("refine", 12, 18)
+    np.testing.assert_allclose([s[1] for s in readouts],
+                               0.03 * np.array([-0.3, -0.2, -0.1, 0.1, 0.2, 0.3]), atol=1e-12)
+    assert all(s[0] == pytest.approx(-0.003) for s in readouts)
+    np.testing.assert_allclose([s[1] for s in starts("refine_fully", 18, 20)], [0.006, 0.003],
+                               atol=1e-12)
+    assert len(calls) == 20
+    np.testing.assert_allclose(best[0], np.r_[-0.003, 0.006, 0.0, b_prior], atol=1e-12)
+
+
+def test_a_candidate_is_its_mappings_lowest_start():
+    """Each mapping's starts (from its coarse minimum and, over a wide range, its further
+    minima) refined four iterations: the candidate is the lowest, the others kept as its
+    other starts, in the order of the rows."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+    M1, M2 = parse_axes("Xyz"), parse_axes("YXz")
+    rows = [(0.0, 0.001, 0.0, 1.0, M1, ((0.2, 0.0),), None),
+            (1.0, -0.002, 0.0, 1.0, M2, (), None)]
+
+    class Steps:
+        def map(self, method, arglist):
+            if method == "candidate_starts":      # two starts per minimum
+                return [[np.full(6, t), np.full(6, t + 0.5)] for t, _, _, _ in arglist]
+            assert method == "refine"
+            return [(x0, float((x0[0] - 0.2) ** 2), None, None) for _, x0, _ in arglist]
+
+    fit = SimpleNamespace(say=lambda msg: None)
+    (f1, x1, N1, alts1), (f2, x2, N2, alts2) = CalibrationFit.candidates(fit, rows, Steps())
+    assert np.array_equal(N1, M1) and np.array_equal(N2, M2)
+    assert f1 == 0.0 and x1[0] == 0.2                    # the far minimum's start
+    assert sorted(a[0] for a in alts1) == [0.001, 0.501, 0.7]
+    assert x2[0] == -0.002 and [a[0] for a in alts2] == [0.498]
+
+
+def _textured_fit(cap, fix=(), n_patches=9):
+    """A :class:`CalibrationFit` on a photo of noise texture under ``cap``."""
+    from gyrodeblur.bias_prior import BiasPrior
+    from gyrodeblur.calibration_fit import CalibrationFit
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.calibration_search import SearchSpace
+    img = np.random.default_rng(1).uniform(0.2, 0.8, (256, 384)).astype(np.float32)
+    photos = [CalibrationPhoto(img, cap, "linear", 0)]
+    return CalibrationFit(photos, SearchSpace(photos, set(fix), 0.04), set(fix),
+                          BiasPrior(np.zeros(3)), n_patches, 1, lambda msg: None)
+
+
+def test_the_search_grids_and_priors():
+    """The module docstring's grids and priors: readout errors up to +-35 % (8), focal
+    scales 0.8-1.25 (7; the given one alone when fixed, so every start holds it), priors of
+    +-30 % on the readout (at least 2 ms: a global shutter's 0 is held near 0), +-10 % on
+    the focal length, PRIOR_BIAS on the bias and none on the time shift; an unknown readout
+    under its own weak prior; at least 3 patches a photo."""
+    from gyrodeblur.bias_prior import PRIOR_BIAS
+    from gyrodeblur.capture import UNKNOWN_READOUT_PRIOR
+    cap = _capture()
+    fit = _textured_fit(cap)
+    np.testing.assert_allclose(fit.kappas, 0.03 * np.linspace(-0.35, 0.35, 8))
+    np.testing.assert_allclose(fit.fgrid, [0.8, 0.87, 0.94, 1.0, 1.07, 1.15, 1.25])
+    mu, sig, _ = fit.prior_for(cap.axes)
+    np.testing.assert_array_equal(mu, np.zeros(6))
+    np.testing.assert_allclose(sig, [np.inf, 0.009, 0.1, PRIOR_BIAS, PRIOR_BIAS, PRIOR_BIAS])
+    assert _textured_fit(cap.replace(readout_time=0.0)).prior_for(cap.axes)[1][1] == 0.002
+    unknown = _textured_fit(cap.replace(readout_time=0.0, readout_time_unknown=True))
+    mu, sig, _ = unknown.prior_for(cap.axes)
+    assert (mu[1], sig[1]) == UNKNOWN_READOUT_PRIOR
+    held = _textured_fit(cap, fix={"focal", "readout"})
+    assert held.fgrid == [1.0] and np.array_equal(held.kappas, [0.0])
+    assert all(x[2] == 0.0 for x in held.candidate_starts(0.0, 0.0, cap.axes))
+    assert len(_textured_fit(cap, n_patches=1).fine.points) == 3
