@@ -161,20 +161,25 @@ def test_simulate_is_the_mean_of_map_coordinates_warps(make_capture, order):
 
 # ------------------------------------------------ from a mutation audit (session 43)
 
+def _yawing(exposure, readout, on, off=1.0, *, rate=2.0, log_hz=1000, size=(320, 240)):
+    """A capture whose first row starts at 0.05 s (f = 300 px) and whose camera yaws at
+    ``rate`` rad/s from ``on`` to ``off`` s, still otherwise (logged at ``log_hz``)."""
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+
+    t = np.arange(0.0, 0.2, 1 / log_hz)
+    w = np.zeros((t.size, 3))
+    w[(t >= on) & (t < off), 1] = rate
+    return Capture(0.05, exposure, readout, Camera.centred(*size, 300.0), GyroLog(t, w))
+
+
 def test_sample_count_sees_the_motion_of_the_lower_rows():
     """Kills M6 (``warp_samples`` timing every probe by row 0's exposure). The camera is
     still while the top rows are exposed and yaws at 2 rad/s from just after; with a
     30 ms readout the bottom rows move 6 px during their 10 ms exposure, so the samples
     must be at least 6 / 0.5 = 12 to keep every pixel's step under 0.5 px."""
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-    from gyrodeblur.simulate import warp_samples
-
-    t = np.arange(0.0, 0.2, 1 / 1000)
-    w = np.zeros((t.size, 3))
-    w[t >= 0.065, 1] = 2.0
-    cap = Capture(0.05, 0.01, 0.03, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    cap = _yawing(0.01, 0.03, 0.065)
     assert warp_samples(cap) >= 12
 
 
@@ -185,14 +190,7 @@ def test_sample_count_sees_the_lower_rows_of_a_portrait_frame():
     120 x 320 portrait frame the columns reach only row 119's timing. The camera yaws at
     2 rad/s from 25 ms after the first row starts; with a 30 ms readout only rows below
     ~160 are exposed then (up to 6 px each), so the samples must be at least 12."""
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-
-    t = np.arange(0.0, 0.2, 1 / 1000)
-    w = np.zeros((t.size, 3))
-    w[t >= 0.075, 1] = 2.0
-    cap = Capture(0.05, 0.01, 0.03, Camera.centred(120, 320, 300.0), GyroLog(t, w))
+    cap = _yawing(0.01, 0.03, 0.075, size=(120, 320))
     assert warp_samples(cap) >= 12
 
 
@@ -201,14 +199,7 @@ def test_sample_count_sees_a_jolt_in_the_last_moment_of_the_exposure():
     0.01 rad, 3 px or more at f = 300: at most 0.5 px per step needs 6 samples in that
     millisecond, 384 in all. Kills the speed probe leaving out the exposure's last 1/64
     (the jolt unseen: 29 samples)."""
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-
-    t = np.arange(0.0, 0.2, 1 / 10000)
-    w = np.zeros((t.size, 3))
-    w[t >= 0.113, 1] = 10.0
-    cap = Capture(0.05, 0.064, 0.0, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    cap = _yawing(0.064, 0.0, 0.113, rate=10.0, log_hz=10000)
     assert warp_samples(cap) >= 384
 
 
@@ -228,14 +219,7 @@ def test_sample_count_sees_a_turn_between_the_probe_rows_of_a_short_exposure():
     rows 7-41 only, by up to 6 px at f = 300: between the first two of five evenly spread
     probe rows, rows 0 and 60, which saw nothing (8 samples, steps of 0.84 px). The count
     keeps every row's steps under 0.5 px."""
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-
-    t = np.arange(0.0, 0.2, 0.001)
-    w = np.zeros((t.size, 3))
-    w[(t >= 0.054) & (t <= 0.055), 1] = 20.0
-    cap = Capture(0.05, 0.001, 0.04, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    cap = _yawing(0.001, 0.04, 0.054, 0.0555, rate=20.0)
     steps = _row_steps(cap, warp_samples(cap))
     still = (np.arange(240) < 5) | (np.arange(240) > 45)
     assert steps.max() > 0.1 and steps[still].max() < 1e-9
@@ -247,14 +231,7 @@ def test_sample_count_sees_a_jolt_shorter_than_its_probes_step():
     within one of the 64 steps of a probe timed by the exposure alone: that probe reads
     its turn as spread over the step and takes too few samples (steps of 0.8 px). Timed
     by the log's samples as well, every step stays under 0.5 px."""
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-
-    t = np.arange(0.0, 0.2, 1 / 10000)
-    w = np.zeros((t.size, 3))
-    w[(t >= 0.0803) & (t < 0.0807), 1] = 30.0
-    cap = Capture(0.05, 0.064, 0.0, Camera.centred(320, 240, 300.0), GyroLog(t, w))
+    cap = _yawing(0.064, 0.0, 0.0803, 0.0807, rate=30.0, log_hz=10000)
     assert _row_steps(cap, warp_samples(cap)).max() <= 0.5
 
 

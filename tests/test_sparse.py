@@ -581,6 +581,29 @@ def test_a_white_area_under_a_one_sided_blur_is_not_taken_for_a_light():
     assert clipping.lights is None and not clipping.ignore.any()
 
 
+def _stroke_with_a_light(row, cols, heavy, weight, ground, light):
+    """A stroke PSF along ``row`` over ``cols`` of a 15 or 17 px kernel (its ``heavy``
+    sample ``weight`` times the others), a point light of level ``light`` at (30, 40) on a
+    60 x 80 ``ground``, blurred and clipped at 1: the PSF, the photo, its clipped pixels
+    (at or above 0.98) and their labels. Checks that the data beside the one clipped blob
+    do not flag it (``_inconsistency`` under its threshold): only the Wiener overshoot can."""
+    import gyrodeblur.sparse as sparse_mod
+
+    size = 2 * row + 1
+    h = np.zeros((size, size), np.float32)
+    h[row, cols] = 1.0
+    h[row, heavy] = weight
+    h /= h.sum()
+    scene = np.full((60, 80), ground, np.float32)
+    scene[30, 40] = light
+    blurred = np.clip(ndi.convolve(scene, h, mode="nearest"), 0, 1)
+    sat = blurred >= 0.98
+    lab, n = ndi.label(sat)
+    assert n == 1 and sat[30, 40]
+    assert sparse_mod._inconsistency(blurred, sat, lab, n, h)[1] < sparse_mod._INCONSISTENT
+    return h, blurred, sat
+
+
 def test_a_partly_clipped_light_is_caught_by_the_wiener_overshoot():
     """Kills S13 (the Wiener overshoot test disabled: threshold x10). A light at 4x the
     clip level on mid-grey, blurred by a PSF with a heavy centre: only the centre pixel
@@ -588,17 +611,8 @@ def test_a_partly_clipped_light_is_caught_by_the_wiener_overshoot():
     (0.07), so only the Wiener estimate's overshoot (~2) marks it over-exposed."""
     import gyrodeblur.sparse as sparse_mod
 
-    h = np.zeros((15, 15), np.float32)
-    h[7, 2:13] = 1.0
-    h[7, 7] = 5.0
-    h /= h.sum()
-    scene = np.full((60, 80), 0.5, np.float32)
-    scene[30, 40] = 4.0
-    blurred = np.clip(ndi.convolve(scene, h, mode="nearest"), 0, 1)
-    sat = blurred >= 0.98
-    lab, n = ndi.label(sat)
-    assert n == 1 and sat.sum() == 1
-    assert sparse_mod._inconsistency(blurred, sat, lab, n, h)[1] < sparse_mod._INCONSISTENT
+    h, blurred, sat = _stroke_with_a_light(7, slice(2, 13), 7, 5.0, 0.5, 4.0)
+    assert sat.sum() == 1
     clipping = sparse_mod._clipping(blurred[None], 0.98, 1, h)
     assert clipping.lights is not None and clipping.lights[30, 40]
 
@@ -767,17 +781,8 @@ def test_a_streak_that_rings_below_one_is_still_judged_by_its_overshoot():
     1 beside ripples below it. The mean *overshoot* (0.22) marks it over-exposed; the plain
     mean of ``u - 1`` (0.0: the ripples cancel the spike) would not, and the data beside it
     do not either (``_inconsistency`` 0.18)."""
-    h = np.zeros((17, 17), np.float32)
-    h[8, 1:16] = 1.0
-    h[8, 8] = 2.0
-    h /= h.sum()
-    scene = np.full((60, 80), 0.55, np.float32)
-    scene[30, 40] = 10.0
-    blurred = np.clip(ndi.convolve(scene, h, mode="nearest"), 0, 1)
-    sat = blurred >= 0.98
-    lab, n = ndi.label(sat)
-    assert n == 1 and sat.sum() == 15
-    assert sparse_mod._inconsistency(blurred, sat, lab, n, h)[1] < sparse_mod._INCONSISTENT
+    h, blurred, sat = _stroke_with_a_light(8, slice(1, 16), 8, 2.0, 0.55, 10.0)
+    assert sat.sum() == 15
     c = sparse_mod._clipping(blurred[None], 0.98, 1, h)
     assert c.lights is not None and c.lights[30, 40]
 
@@ -788,17 +793,8 @@ def test_the_overshoot_test_deconvolves_a_one_sided_psf():
     pixel's estimate overshoots to 1.55, an over-exposed light; with H in place of conj(H)
     (blurring the other way, unseen with the symmetric PSFs above) it is 1.06, kept as
     data."""
-    h = np.zeros((15, 15), np.float32)
-    h[7, 7:14] = 1.0
-    h[7, 7] = 5.0
-    h /= h.sum()
-    scene = np.full((60, 80), 0.5, np.float32)
-    scene[30, 40] = 4.0
-    blurred = np.clip(ndi.convolve(scene, h, mode="nearest"), 0, 1)
-    sat = blurred >= 0.98
-    lab, n = ndi.label(sat)
-    assert n == 1 and sat[30, 40] and sat.sum() == 1
-    assert sparse_mod._inconsistency(blurred, sat, lab, n, h)[1] < sparse_mod._INCONSISTENT
+    h, blurred, sat = _stroke_with_a_light(7, slice(7, 14), 7, 5.0, 0.5, 4.0)
+    assert sat.sum() == 1
     c = sparse_mod._clipping(blurred[None], 0.98, 1, h)
     assert c.lights is not None and c.lights[30, 40]
 
