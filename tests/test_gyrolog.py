@@ -619,3 +619,9 @@ def test_five_unnamed_columns_are_not_guessed(tmp_path, trace):
     p.write_text(_csv_text("t_s,c1,c2,c3,c4", trace.t, [wx, wy, wz, wx]))
     with pytest.raises(InputError, match="imu.csv: the column names .* do not say which three"):
         read_gyro_log(p)
+
+
+def test_the_sample_interval_is_the_median_step_a_gap_left_out():
+    """200 Hz with one 25 ms gap: 5 ms, as if the gap were not there."""
+    t = np.r_[np.arange(0.0, 0.5, 0.005), 0.525 + np.arange(0.0, 0.5, 0.005)]
+    assert GyroLog(t, np.zeros((t.size, 3))).sample_interval == pytest.approx(0.005)

@@ -857,8 +857,7 @@ def _gyro_noise_level(captures) -> float:
     (:func:`gyrodeblur.gyrolog.rate_noise`) is scaled by ``sqrt(200 Hz / its rate)``."""
     levels = []
     for log, _ in logs_with_captures(captures):
-        dt = float(np.median(np.diff(log.t))) if log.t.size > 1 else np.nan
-        levels.append(rate_noise(log) * np.sqrt(_TYPICAL_GYRO_RATE * dt))
+        levels.append(rate_noise(log) * np.sqrt(_TYPICAL_GYRO_RATE * log.sample_interval))
     levels = [v for v in levels if np.isfinite(v)]
     return max(levels) if levels else float("nan")
 

@@ -130,6 +130,12 @@ class GyroLog:
         return len(self.t)
 
     @property
+    def sample_interval(self) -> float:
+        """The median time between samples (s): one over the log's rate, its gaps left
+        out (a log has at least two samples)."""
+        return float(np.median(np.diff(self.t)))
+
+    @property
     def in_device_axes(self) -> bool:
         """Whether the rates are in a phone's device axes (x right, y up, z out of the
         screen) by the log's own format: an Android sensor dump, or a phone app's CSV

@@ -134,8 +134,8 @@ def warp_samples(capture: Capture, max_step: float = MAX_STEP_PX) -> int:
     64th of the exposure)."""
     cam = capture.camera
     T = capture.exposure_time
-    gyro_dt = float(np.median(np.diff(capture.log.t))) if capture.log.t.size > 1 else T
-    n0 = int(np.clip(np.ceil(2 * T / gyro_dt), _PROBE_STEPS, _MAX_PROBE_STEPS))
+    n0 = int(np.clip(np.ceil(2 * T / capture.log.sample_interval), _PROBE_STEPS,
+                     _MAX_PROBE_STEPS))
     n_rows = int(np.clip(np.ceil(capture.readout_time / T) + 1, _PROBE_ROWS, _MAX_PROBE_ROWS))
     xs = np.linspace(0, cam.width - 1, 5)
     ys = np.linspace(0, cam.height - 1, n_rows)
