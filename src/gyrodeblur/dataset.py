@@ -210,9 +210,9 @@ def read_sharp(path: str | os.PathLike, max_size: int | None = None) -> np.ndarr
 
 
 def find_gaps(log: GyroLog, factor: float = GAP_FACTOR) -> np.ndarray:
-    """Indices ``i`` where ``t[i+1] - t[i]`` exceeds ``factor`` times the median step."""
-    dt = np.diff(log.t)
-    return np.nonzero(dt > factor * np.median(dt))[0]
+    """Indices ``i`` where ``t[i+1] - t[i]`` exceeds ``factor`` times the median step
+    (:attr:`GyroLog.sample_interval`)."""
+    return np.nonzero(np.diff(log.t) > factor * log.sample_interval)[0]
 
 
 def draw_window(log: GyroLog, duration: float, rng: np.random.Generator, *,
