@@ -309,6 +309,22 @@ def test_coverage_and_gaps():
         check_coverage(log, -0.05, 0.02)
 
 
+def test_a_coarse_log_is_told_its_rate_and_the_limit_is_inclusive():
+    """A 20 Hz log (steps of 50 ms, as read from text: not exactly 0.05) meets a 50 ms
+    limit; under a 40 ms limit it is refused for its rate, not for a gap it does not
+    have. A real gap in a 200 Hz log is still a gap."""
+    t = np.arange(40) * 0.05
+    log = GyroLog(t, np.zeros((t.size, 3)), "slow.csv")
+    assert np.diff(t).max() > 0.05                          # the float steps
+    check_coverage(log, 0.5, 0.6, max_gap=0.05)
+    with pytest.raises(InputError, match=r"slow.csv.*only every 50.0 ms \(20 Hz\)") as e:
+        check_coverage(log, 0.5, 0.6, max_gap=0.04)
+    assert "gap of" not in str(e.value)
+    t = np.concatenate([np.arange(0, 0.5, 0.005), np.arange(0.56, 1.0, 0.005)])
+    with pytest.raises(InputError, match="g.csv.*gap of 65.0 ms"):
+        check_coverage(GyroLog(t, np.zeros((t.size, 3)), "g.csv"), 0.45, 0.6)
+
+
 def test_rate_noise_measures_white_noise_not_hand_motion():
     from gyrodeblur.gyrolog import rate_noise
 

@@ -185,6 +185,10 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
                                  "hand-held camera; are the rates in deg/s? (set the rate unit)")
 
 
+#: s: times that differ by less are equal (a 20 Hz log's 0.05 s steps read from text)
+_TIME_TOLERANCE = 1e-9
+
+
 def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
                    what: str = "exposure") -> None:
     """Check that ``log`` covers ``[t0, t1]`` (seconds, the log's clock) without big gaps.
@@ -193,7 +197,8 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
     ------
     InputError
         If the first sample is after ``t0``, the last before ``t1``, or two consecutive
-        samples that bracket part of the window are more than ``max_gap`` seconds apart.
+        samples that bracket part of the window are more than ``max_gap`` seconds apart
+        (a log sampled that coarsely throughout is told so, not said to have a gap).
     """
     src = log.source
     if log.t[0] > t0 or log.t[-1] < t1:
@@ -211,12 +216,17 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(log.t, t1, side="left")), len(log.t) - 1)
     gaps = np.diff(log.t[i0:i1 + 1])
-    if gaps.size and gaps.max() > max_gap:
+    if gaps.size and gaps.max() > max_gap + _TIME_TOLERANCE:
         j = i0 + int(np.argmax(gaps))
+        limit = (f"(limit {max_gap * 1e3:.0f} ms; gyro.max_gap or --max-gap raises it, at "
+                 f"the cost of interpolating across the gap)")
+        step = log.sample_interval
+        if gaps.max() <= 1.5 * step:       # no gap: the log's own rate is that coarse
+            raise InputError(src, f"the gyro log has a sample only every {step * 1e3:.1f} ms "
+                                  f"({1 / step:.3g} Hz), too few for the motion within the "
+                                  f"{what}: log the gyro at 100 Hz or more {limit}")
         raise InputError(src, f"gap of {gaps.max() * 1e3:.1f} ms in the gyro log at "
-                              f"{log.t[j]:.6f} s, inside the {what} (limit "
-                              f"{max_gap * 1e3:.0f} ms; gyro.max_gap or --max-gap raises "
-                              f"it, at the cost of interpolating across the gap)")
+                              f"{log.t[j]:.6f} s, inside the {what} {limit}")
 
 
 def _secs(t: float) -> str:
