@@ -328,3 +328,32 @@ def test_the_softness_of_a_photo_is_not_taken_for_motion_blur():
                      [(0, 120.0, 150.0), (0, 280.0, 150.0)], 1.0, 64)
     for length in (3, 6, 12):
         assert (p.psf_gain_over_no_blur(_streak(length)) < 5).all(), length
+
+
+def test_a_rolls_kernel_changes_across_the_patch_by_half_its_arc():
+    """Physics: a camera rolling at a constant rate w about its optical axis (global
+    shutter) leaves the principal point unblurred, and moves a point ``a`` from it along
+    an arc of ``|a| w T``; with the kernel's mean position left out, its ends lie half of
+    that from the centre. The farthest of :meth:`PatchSpectra.kernel_change`'s points
+    from the centre is a corner, ``0.15 sqrt 2`` of the patch side away. A yaw moves
+    every point of a patch nearly alike (perspective: a change under 5 % of the roll's)."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import Corrections, PatchSpectra
+
+    t = np.arange(0.0, 1.0, 0.005)
+    img = np.clip(0.5 + 0.1 * np.random.default_rng(0).normal(size=(300, 400)), 0, 1)
+    th = Corrections(axes=np.eye(3))
+    change = {}
+    for axis in (1, 2):
+        w = np.zeros((t.size, 3))
+        w[:, axis] = 4.0
+        cap = Capture(0.5, 0.02, 0.0, Camera.centred(400, 300, 1000.0), GyroLog(t, w))
+        p = PatchSpectra([CalibrationPhoto(img, cap, "linear", 0)], [(0, 199.5, 149.5)],
+                         1.0, 64, n_samples=128)
+        change[axis] = p.kernel_change(th)
+    want = 0.15 * np.sqrt(2) * 64 * 4.0 * 0.02 * (127 / 128) / 2
+    assert change[2] == pytest.approx(want, rel=0.02), (change[2], want)
+    assert change[1] < 0.05 * want, change[1]
