@@ -347,3 +347,160 @@ def test_patch_grid_ties_go_to_the_smaller_window():
     patches = patch_grid((63, 64), (4, 1), 0.25)
     assert patches[0].shape[0] == 18
     assert [p.y0 for p in patches] == [0, 15, 30, 45]
+
+
+# ------------------------------------------------ from a mutation audit (session 47)
+
+def test_a_window_of_exactly_min_window_pixels_is_accepted_along_either_kind_of_axis():
+    """Kills T6 and T9 (``< MIN_WINDOW`` made ``<=``, for several windows along an axis and
+    for one). ``MIN_WINDOW`` is the smallest side accepted, not the first one refused: 32
+    rows in two windows without overlap are two 16 px windows, and 16 columns are one."""
+    patches = patch_grid((2 * MIN_WINDOW, MIN_WINDOW), (2, 1), 0.0)
+    assert [(p.y0, p.y1, p.x0, p.x1) for p in patches] == [
+        (0, MIN_WINDOW, 0, MIN_WINDOW), (MIN_WINDOW, 2 * MIN_WINDOW, 0, MIN_WINDOW)]
+
+
+def test_a_grid_crowded_past_three_quarters_is_refused_and_three_quarters_is_not():
+    """Kills T7 (the crowding limit made exclusive), T8 (no crowding check) and T10 (the
+    limit raised to 90 %). 20 windows across 92 rows can be no smaller than 16 px, which
+    overlap by 12 px: exactly 75 %, accepted. Across 95 rows the smallest are 19 px
+    overlapping by 15 (79 %), where each row lies in five windows: refused as too many,
+    rather than met with windows far more overlapped than asked."""
+    patches = patch_grid((92, 64), (20, 1), 0.25)
+    assert patches[0].shape == (16, 64) and patches[1].y0 == 4 and patches[-1].y1 == 92
+    with pytest.raises(InputError, match=r"--grid: 20 patches across 95 rows are too many: "
+                                         r"they would overlap by 79 %"):
+        patch_grid((95, 64), (20, 1), 0.25)
+
+
+def test_a_row_grid_with_a_gap_is_refused_rather_than_left_black():
+    """Kills T12 (``_normalised_axis_weights`` without its coverage check). Two full-width
+    windows with rows 10-19 between them form a row/column grid, so the separable weights
+    would be used, and they leave the gap at zero: a black band in the output. The gap is
+    refused instead, named by its first row."""
+    patches = [Patch(0, 10, 0, 64), Patch(20, 64, 0, 64)]
+    with pytest.raises(ValueError, match=r"leave image rows uncovered \(first: 10\)"):
+        blend_weights(patches, (64, 64))
+    with pytest.raises(ValueError, match="uncovered"):
+        deconvolve_patchwise(np.full((64, 64), 0.5, np.float32), patches,
+                             [np.ones((1, 1))] * 2, lambda s, p: s)
+
+
+def test_a_window_listed_twice_does_not_make_a_grid():
+    """Kills T13 (the grid test counting windows, not distinct windows). Four windows over
+    two row and two column intervals, one of them twice and the cell (rows 30-64, columns
+    0-50) missing: no separable weights sum to one there, so ``blend_weights`` refuses it,
+    and blending it with the weight map finds the missing cell uncovered (rather than the
+    doubled window shining twice as bright and the missing one black)."""
+    a, b = (0, 40), (30, 64)
+    c, d = (0, 50), (40, 80)
+    patches = [Patch(*a, *c), Patch(*a, *c), Patch(*b, *d), Patch(*a, *d)]
+    with pytest.raises(ValueError, match="do not form a row/column grid"):
+        blend_weights(patches, (64, 80))
+    with pytest.raises(ValueError, match="uncovered"):
+        deconvolve_patchwise(np.full((64, 80), 0.5, np.float32), patches,
+                             [np.ones((1, 1))] * 4, lambda s, p: s)
+
+
+def test_a_deconvolver_returning_a_larger_array_is_refused():
+    """Kills T19 (no check of the deconvolver's result shape). A result padded by a row and
+    a column can still be cropped to the window, one pixel off, without any error from
+    NumPy; the contract is a result of the sub-image's shape, and anything else is named."""
+    img = _scene((64, 64))
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    with pytest.raises(ValueError, match=r"deconvolve returned shape \(\d+, \d+\) for a "
+                                         r"sub-image of shape"):
+        deconvolve_patchwise(img, patches, [np.ones((1, 1))] * 4,
+                             lambda s, p: np.pad(s, ((1, 0), (1, 0))))
+
+
+def test_the_large_psf_warning_names_the_longest_blur_and_spares_one_as_long_as_the_window():
+    """Kills T22 (a blur as long as the window's smaller side warned about) and T23 (the
+    warning naming the shortest of the blurs that are too long). The docstring warns when
+    the extent *exceeds* the smaller side; the message gives the worst extent, which is
+    what decides how much coarser the grid should be."""
+    img = _scene((120, 160))
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    side = min(patches[0].shape)
+
+    def streak(n):                      # a horizontal streak of n samples: extent n
+        psf = np.zeros((3, 2 * n + 1))
+        psf[1, n:2 * n] = 1.0 / n
+        return psf
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        deconvolve_patchwise(img, patches, [streak(side)] * 4, lambda s, p: s, margin=0)
+    psfs = [streak(3), streak(side + 2), streak(side + 9), streak(side + 5)]
+    with pytest.warns(UserWarning, match=rf"PSF extent up to {side + 9} px exceeds the patch "
+                                         rf"window .* in 3 of 4 patches"):
+        deconvolve_patchwise(img, patches, psfs, lambda s, p: s, margin=0)
+
+
+@pytest.mark.parametrize("flag", [False, True, np.bool_(False)])
+def test_a_flag_is_not_an_overlap(flag):
+    """Kills T29 (``check_overlap`` without its ``bool`` test). ``False`` is the number 0
+    to Python, but an overlap given as a flag is a mistake, refused like the other
+    arguments the library checks (:mod:`gyrodeblur.arguments`)."""
+    with pytest.raises(InputError, match="--overlap"):
+        patch_grid((480, 640), overlap=flag)
+
+
+@pytest.mark.parametrize("patch", [Patch(10, 10, 0, 64), Patch(0, 64, 30, 30),
+                                   Patch(0, 64, 0, 65)])
+def test_an_empty_window_or_one_past_the_right_edge_is_refused(patch):
+    """Kills T30 (empty windows accepted) and T31 (a window one column past the right
+    edge accepted). ``check_patches`` refuses a window that is empty or leaves the image,
+    along the columns as along the rows."""
+    img = np.zeros((64, 64), np.float32)
+    with pytest.raises(ValueError, match="is empty or leaves the 64x64 image"):
+        deconvolve_patchwise(img, [Patch(0, 64, 0, 64), patch], [np.ones((1, 1))] * 2,
+                             lambda s, p: s)
+
+
+def test_a_non_grid_layout_is_blended_with_hamming_windows():
+    """Kills T34 (the weight-map path blending with other windows). Two windows that do not
+    form a grid, each "deconvolved" to a constant: where both cover a pixel the output is
+    the mean of the two constants weighted by each window's separable Hamming weight at
+    that pixel, as for a grid (sec. 6.5.2), and 1 and 2 where only one window covers it."""
+    patches = [Patch(0, 40, 0, 48), Patch(24, 64, 16, 64)]    # not a grid; plus the rest:
+    patches += [Patch(0, 24, 48, 64), Patch(40, 64, 0, 16)]
+    consts = [1.0, 2.0, 3.0, 4.0]
+    psfs = [np.full((1, 1), c) for c in consts]
+    out = deconvolve_patchwise(np.zeros((64, 64), np.float32), patches, psfs,
+                               lambda s, p: np.full(s.shape, p[0, 0], np.float32))
+    num = np.zeros((64, 64))
+    den = np.zeros((64, 64))
+    for p, c in zip(patches, consts):
+        w = np.outer(np.hamming(p.y1 - p.y0), np.hamming(p.x1 - p.x0))
+        num[p.y0:p.y1, p.x0:p.x1] += c * w
+        den[p.y0:p.y1, p.x0:p.x1] += w
+    np.testing.assert_allclose(out, num / den, rtol=1e-5)
+    assert out[5, 5] == pytest.approx(1.0) and out[60, 60] == pytest.approx(2.0)
+    assert 1.0 < out[30, 30] < 2.0
+
+
+def test_patchwise_arguments_are_checked_by_name():
+    """Kills T35 (a negative margin accepted), T36 (an empty patch list refused only by
+    accident, as "rows uncovered"), T38 (a 3-D PSF accepted) and T39 (a 4-D image accepted
+    until a reshape fails). Each is refused before any work with a message that says
+    what is wrong."""
+    img = np.zeros((64, 64), np.float32)
+    patches = patch_grid(img.shape, (2, 2), 0.25)
+    psfs = [np.ones((3, 3)) / 9] * 4
+    work = []
+
+    def deconvolve(s, p):
+        work.append(1)
+        return s
+
+    for margin in (-1, 2.0, True):
+        with pytest.raises(ValueError, match="margin must be a non-negative integer"):
+            deconvolve_patchwise(img, patches, psfs, deconvolve, margin=margin)
+    with pytest.raises(ValueError, match="no patches given"):
+        deconvolve_patchwise(img, [], [], deconvolve)
+    with pytest.raises(ValueError, match="every PSF must be 2-D"):
+        deconvolve_patchwise(img, patches, psfs[:3] + [np.ones((3, 3, 1)) / 9], deconvolve)
+    with pytest.raises(ValueError, match=r"image must have shape \(H, W\) or \(H, W, C\)"):
+        deconvolve_patchwise(img[..., None, None], patches, psfs, deconvolve)
+    assert work == []
