@@ -347,3 +347,140 @@ def test_a_signal_to_the_process_group_stops_a_batch_cleanly(tmp_path, how):
         finally:
             if child.poll() is None:
                 os.killpg(child.pid, signal.SIGKILL)
+
+
+# ------------------------------------------------ from a mutation audit (session 47)
+
+class _WarmSpectra(_Spectra):
+    """A criterion with a warm start: part of the state handed back, and cleared by
+    ``start_afresh`` (as :class:`PatchSpectra`'s noise-ratio warm starts are)."""
+
+    def __init__(self):
+        super().__init__()
+        self.warm = "the caller's warm start"
+
+    def held_state(self):
+        return (self.E, self.evaluations, self.warm)
+
+    def restore(self, state):
+        self.E, self.evaluations, self.warm = state
+
+    def start_afresh(self):
+        self.warm = None
+
+
+class _WarmFit(_Fit):
+    def __init__(self):
+        super().__init__()
+        self.fine, self.coarse = _WarmSpectra(), _WarmSpectra()
+
+    def warm_step(self, k):
+        seen = (self.fine.warm, self.coarse.warm, self.fine.fft_threads, os.getpid())
+        self.fine.warm = self.coarse.warm = f"warmed by step {k}"
+        self.fine.evaluations += k
+        return seen
+
+    def fail_in_a_worker(self, parent, k):
+        if os.getpid() != parent:
+            raise ValueError("a step that only fails in a worker")
+        return k
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_every_step_starts_from_fresh_warm_starts_and_the_caller_s_come_back(workers):
+    """Kills C6 and C7 (the fine or the coarse criterion's warm starts not cleared before
+    a step) and C14 (a worker's FFTs not limited to one thread). Every step starts from
+    the same state whatever ran before it, which is what makes one worker and several
+    give the same figures; afterwards the caller's warm starts are as they were. In a
+    worker the FFTs use one thread (the workers share the CPUs), the caller's own setting
+    untouched."""
+    fit = _WarmFit()
+    fit.fine.warm = "the caller's fine warm start"
+    seen = StepRunner(fit, workers).map("warm_step", [(1,), (2,), (3,)])
+    assert [s[:2] for s in seen] == [(None, None)] * 3
+    assert (fit.fine.warm, fit.coarse.warm) == ("the caller's fine warm start",
+                                                "the caller's warm start")
+    in_workers = [s[2] for s in seen if s[3] != os.getpid()]
+    assert [s[2] for s in seen if s[3] == os.getpid()] == [2] * (3 - len(in_workers))
+    assert in_workers == [1] * len(in_workers)
+    if workers == 2 and sys.platform.startswith("linux"):
+        assert in_workers                       # the worker case was seen
+    assert fit.fine.fft_threads == 2
+
+
+@forks
+def test_a_step_that_fails_in_a_worker_is_run_again_in_the_caller():
+    """Kills C24 (a worker's error raised in the caller as it stands). A step that failed
+    or died in a worker is run again here, so that an error is raised as it would be
+    without workers (with its own traceback, and not at all when the failure was the
+    worker's, as here)."""
+    steps = [(os.getpid(), 1), (os.getpid(), 2)]
+    assert StepRunner(_WarmFit(), 2).map("fail_in_a_worker", steps) == [1, 2]
+
+
+@forks
+def test_one_worker_or_a_batch_of_one_step_forks_nothing(monkeypatch):
+    """Kills C25 (a pool forked for one worker) and C26 (a pool of two forked for one
+    step). ``workers=1`` runs every step in this process, as documented, and a batch of
+    one step has nothing to run beside it."""
+    def no_pool(*args, **kwargs):
+        raise AssertionError("a pool was made")
+
+    monkeypatch.setattr(cw, "ProcessPoolExecutor", no_pool)
+    for workers, steps in ((1, [(1,), (2,), (3,)]), (2, [(5,)]), (4, [(6,)])):
+        fit = _Fit()
+        assert StepRunner(fit, workers).map("step", steps) == [k * k for (k,) in steps]
+        assert {int(m.split(" in ")[1]) for m in fit.said} == {os.getpid()}
+
+
+@forks
+def test_the_batch_is_let_go_after_it_has_run(tmp_path):
+    """Kills C27 (``_BATCH`` left holding the last batch). The batch holds the fit, and
+    with it the photos' patches: it is let go when the batch is done, failed or not."""
+    StepRunner(_Fit(), 2).map("step", [(1,), (2,)])
+    assert cw._BATCH is None
+    with pytest.raises(InputError):
+        StepRunner(_Fit(), 2).map("fail", [("a.png",), ("b.png",)])
+    assert cw._BATCH is None
+
+
+def _steps_in_a_daemon(queue):
+    fit = _Fit()
+    try:
+        out = StepRunner(fit, 2).map("step", [(1,), (2,), (3,)])
+        queue.put((out, {int(m.split(" in ")[1]) for m in fit.said}, os.getpid()))
+    except BaseException as exc:          # noqa: BLE001 - reported to the test
+        queue.put(repr(exc))
+
+
+@forks
+def test_where_workers_cannot_be_forked_the_steps_run_here(monkeypatch):
+    """Kills C4 (no test for a daemonic process) and C5 (no test for the platform). A
+    daemonic process may not have children (a batch of calibrations in a multiprocessing
+    pool), and other systems do not fork: there the steps run one after another in the
+    caller, with the same results."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_steps_in_a_daemon, args=(queue,), daemon=True)
+    proc.start()
+    got = queue.get(timeout=30)
+    proc.join(timeout=10)
+    assert not isinstance(got, str), got
+    out, pids, daemon = got
+    assert out == [1, 4, 9] and pids == {daemon}
+    monkeypatch.setattr(sys, "platform", "darwin")
+    fit = _Fit()
+    assert StepRunner(fit, 2).map("step", [(1,), (2,)]) == [1, 4]
+    assert {int(m.split(" in ")[1]) for m in fit.said} == {os.getpid()}
+
+
+@pytest.mark.parametrize("cpus, expected", [(3, 3), (16, MAX_WORKERS), (None, 1)])
+def test_without_cpu_affinity_the_cpu_count_is_used(monkeypatch, cpus, expected):
+    """Kills C2 (an unknown CPU count not read as one). Where ``os.sched_getaffinity`` does
+    not exist (macOS, Windows) the CPU count is used, capped the same way, and a count
+    the system cannot tell (``None``) is one CPU."""
+    monkeypatch.delattr(os, "sched_getaffinity", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: cpus)
+    assert available_workers() == expected
