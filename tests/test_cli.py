@@ -952,6 +952,17 @@ def test_the_demo_runs_to_the_end(tmp_path, capsys):
                           for line in text.splitlines()
                           if line.strip().startswith(("blurred ", "deblurred ")))
     assert deblurred > blurred + 8, text                  # 14.9 -> 28.7 dB at session 38
+    # (mutation audit, session 47: D8, D10, D20) the folder holds what the demo says it
+    # writes and its marker, nothing else; the comparison is blurred | deblurred | sharp
+    import gyrodeblur.demo as demo
+
+    assert sorted(p.name for p in out.iterdir()) == sorted(demo.OUTPUTS + (demo.MARKER,))
+    side = read_photo(out / "comparison.png").pixels
+    parts = [read_photo(out / name).pixels for name in ("blurred.png", "deblurred.png",
+                                                         "sharp.png")]
+    w = parts[0].shape[1]
+    for k, part in enumerate(parts):
+        np.testing.assert_array_equal(side[:, k * (w + 8):k * (w + 8) + w], part)
 
 
 def test_overlap_with_one_patch_is_refused_however_the_grid_is_spelt(capture_dir, capsys):
@@ -1016,13 +1027,14 @@ def test_the_demo_writes_through_no_link(tmp_path, capsys):
     (out / demo.MARKER).write_text("")
     victim = tmp_path / "victim.txt"
     victim.write_text("mine")
-    for name in ("metrics.json", demo.MARKER):
+    for name in ("metrics.json", "deblurred.png", demo.MARKER):
         if (out / name).exists():
             (out / name).unlink()
         (out / name).symlink_to(victim)
     assert main(["demo", "--out", str(out)]) == 0
     assert victim.read_text() == "mine"
     assert not (out / "metrics.json").is_symlink() and "psnr" in (out / "metrics.json").read_text()
+    assert not (out / "deblurred.png").is_symlink()     # (audit, session 47: D14)
 
 
 def test_an_empty_capture_name_is_named_as_such(capture_dir, capsys):
@@ -1614,3 +1626,57 @@ def test_calibrate_tells_each_photo_of_its_own_rotation(capture_dir, capsys, mon
                       str(d / "o.json")], capsys)
     assert "p2.png" in msg and "turned by 90 degrees" in msg, msg
     assert "leave the option out" not in msg and calls == []
+
+
+# ------------------------------------------------ from a mutation audit (session 47)
+
+def _demo_that_must_not_start(monkeypatch):
+    """The demo with its work replaced by a failure: a refusal must come before it."""
+    import gyrodeblur.demo as demo
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the demo started its work")
+
+    monkeypatch.setattr(demo, "simulate_blur", no_work)
+    return demo
+
+
+def test_the_demo_refuses_a_file_or_an_unwritable_place_for_its_folder_before_any_work(
+        tmp_path, capsys, monkeypatch):
+    """Kills D2 (``--out`` naming a file let through, to fail after the work) and D4 (a
+    folder that cannot be made where it is asked for, found only after the work: /sys
+    takes no new entries, even from root)."""
+    _demo_that_must_not_start(monkeypatch)
+    (tmp_path / "afile").write_text("x")
+    msg = _run_error(["demo", "--out", str(tmp_path / "afile")], capsys)
+    assert msg.endswith("afile: exists and is not a folder"), msg
+    assert (tmp_path / "afile").read_text() == "x"
+    msg = _run_error(["demo", "--out", "/sys/gyrodeblur-demo"], capsys)
+    assert "/sys/gyrodeblur-demo: cannot write in folder /sys" in msg, msg
+
+
+def test_the_demo_takes_a_dangling_link_in_a_user_s_folder_for_the_user_s(tmp_path, capsys,
+                                                                           monkeypatch):
+    """Kills D7 (the outputs looked for with ``exists``, which a link to nowhere fails).
+    A link of an output's name is the user's, wherever it points: refused unless
+    ``--overwrite``, like a file."""
+    _demo_that_must_not_start(monkeypatch)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "metrics.json").symlink_to(tmp_path / "not-yet-written.json")
+    msg = _run_error(["demo", "--out", str(mine)], capsys)
+    assert "already holds metrics.json, not written by the demo" in msg, msg
+    assert (mine / "metrics.json").is_symlink()
+
+
+def test_the_demo_capture_is_the_one_its_docstring_describes():
+    """Kills D13 (another focal length). ``demo_capture``: 512 x 512, f = 0.8 x width,
+    40 ms exposure, 20 ms readout, and the bundled gyro log."""
+    from gyrodeblur.demo import demo_capture
+
+    cap = demo_capture()
+    cam = cap.camera
+    assert (cam.width, cam.height) == (512, 512)
+    assert cam.fx == pytest.approx(0.8 * 512) and cam.fy == pytest.approx(0.8 * 512)
+    assert (cap.exposure_time, cap.readout_time) == (0.04, 0.02)
+    assert cap.gyro_spec["path"].endswith("demo_gyro.gcsv") and cap.gyro_spec["format"] == "gcsv"
