@@ -543,9 +543,10 @@ class PatchSpectra:
         envelope fitted to it: near zero or below, the patch shows none of that blur.
         Where the kernel changes across a patch by more than :data:`_KERNEL_CHANGE`
         (:meth:`kernel_change`), its ``|H|^2`` is averaged over the patch (``spread``
-        of :meth:`spectra`): under a 1.5 rad/s roll the centre's kernel alone made a
-        true capture score 46-123 nats worse than no blur. (The search's cost keeps the
-        centre's kernel: averaging costs 25 kernels a patch.)"""
+        of :meth:`spectra`): under a 1.5-3 rad/s roll the centre's kernel alone made a
+        true capture score 46-160 nats worse than no blur. (The search's cost keeps the
+        centre's kernel: averaged alike, even over 5 points, it moved the real Shield
+        capture's focal length away from its hand value; BENCHMARKS.md section 4.)"""
         S_blur = self.spectra(theta, spread=self.kernel_change(theta) > _KERNEL_CHANGE)
         H0 = self.otf(np.zeros((len(self.points), 1, 2)))
         S_none = self.model((H0.real ** 2 + H0.imag ** 2).astype(np.float32))
