@@ -442,7 +442,7 @@ def _plain_numeric_rows(lines: list[str], columns: list[int], sep: str | None,
     once (a 10-minute 4 kHz log: 2.4 M lines); ``None`` for anything else (text, empty
     cells, quotes, a decimal comma, a ragged or cut line), which
     :func:`_numeric_rows_one_by_one` reads and, where it must, refuses by line."""
-    if sep not in (",", None) or any('"' in line for line in lines):
+    if sep not in (",", None):          # (a quote, never part of a number, fails the parse)
         return None
     data = [line for line in lines if line.strip()]
     if not data:
