@@ -339,8 +339,7 @@ class PatchSpectra:
             o = np.asarray(_SPREAD_OFFSETS)
             w = np.cos(np.pi * o) ** 4
             rw = np.outer(w, w).ravel() / w.sum() ** 2
-            items = [(i, x + c * F, y + r * F, y + r * F, tau) for tau in tl
-                     for (i, x, y) in self.points for r in o for c in o]
+            items = self._points_across(o, tl)
         else:
             items = [(i, x, y, y + r * F, tau)
                      for tau in tl for (i, x, y) in self.points for r in rows]
@@ -353,6 +352,14 @@ class PatchSpectra:
             return S, H.reshape(len(tl) * len(self.points), len(rw), *H.shape[1:])[:, mid]
         return S
 
+    def _points_across(self, offsets, taus) -> list:
+        """Items ``(photo, x, y, row, tau)`` of :meth:`displacements` at the points of each
+        patch ``offsets`` (x the patch side) from its centre in y and in x, each read at its
+        own row's time, for each time shift of ``taus``: rows of points, a row per y."""
+        F = self.F
+        return [(i, x + c * F, y + r * F, y + r * F, tau) for tau in taus
+                for (i, x, y) in self.points for r in offsets for c in offsets]
+
     def kernel_change(self, theta: Corrections) -> float:
         """The largest change (working-scale px, the kernel's mean position left out)
         between a patch's kernel at its centre and at the 8 points 0.15 of the patch side
@@ -360,9 +367,7 @@ class PatchSpectra:
         kernel vary across a patch, which the centre's kernel alone does not model."""
         if not self.points:
             return 0.0
-        o, F = (-0.15, 0.0, 0.15), self.F
-        items = [(i, x + c * F, y + r * F, y + r * F, 0.0)
-                 for (i, x, y) in self.points for r in o for c in o]
+        items = self._points_across((-0.15, 0.0, 0.15), [0.0])
         d = self.displacements(theta, items).reshape(len(self.points), 9, self.n, 2)
         d = d - d.mean(axis=2, keepdims=True)
         return float(np.hypot(*np.moveaxis(d - d[:, 4:5], -1, 0)).max())
