@@ -467,13 +467,14 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress):
     photo (:func:`gyrodeblur.spacevariant.refine_globally`), with the patch-wise solver's
     own prior weight and clipped-pixel handling."""
     from .sparse import SparseSettings, _clipping
-    from .spacevariant import DEFAULT_OUTER, InterpolatedBlur, refine_globally
+    from .spacevariant import InterpolatedBlur, refine_globally, refinement_budget
     if not isinstance(deconvolve, SparseSettings):
         raise TypeError("the global model needs the sparse method's deconvolver "
                         f"(gyrodeblur.sparse.SparseSettings), got {deconvolve!r}")
     settings = deconvolve
     channels = 1 if img.ndim == 2 else img.shape[2]
-    total = len(patches) + DEFAULT_OUTER * channels
+    outer, _ = refinement_budget(max(psf_extent(k) for k in psfs))
+    total = len(patches) + outer * channels
     report = None if progress is None else (lambda done, _: progress(done, total))
     start = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=report,
                                  unknown=unknown)

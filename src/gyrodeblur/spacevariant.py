@@ -28,11 +28,13 @@ import numpy as np
 
 from .arguments import is_whole
 from .fftutils import FFT_WORKERS, fast_shape
+from .psf import psf_extent
 from .sparse import _BETA_MAX as _SPARSE_BETA_MAX
 from .sparse import _dx, _dx_t_set, _dy, _dy_t_add, _shrink_residual
 from .tiling import Patch, blend_weights
 
-__all__ = ["InterpolatedBlur", "refine_globally", "DEFAULT_OUTER", "DEFAULT_CG_STEPS"]
+__all__ = ["InterpolatedBlur", "refine_globally", "refinement_budget", "DEFAULT_OUTER",
+           "DEFAULT_CG_STEPS"]
 
 #: ADMM iterations of :func:`refine_globally` (each one shrinkage and one u-step).
 #: Outer iterations buy more than CG steps: from the same patch-wise start (session 29,
@@ -42,6 +44,19 @@ __all__ = ["InterpolatedBlur", "refine_globally", "DEFAULT_OUTER", "DEFAULT_CG_S
 DEFAULT_OUTER = 6
 #: Conjugate-gradient steps per u-step (each costs two batched FFT pairs of all patches).
 DEFAULT_CG_STEPS = 5
+#: Longest PSF extent (px) for which :func:`refinement_budget` gives the base budget
+#: above; beyond it both counts grow in proportion to the extent, up to
+#: ``_MAX_BUDGET_SCALE`` times from 64 px, as the patch-wise solver's iterations do
+#: (:func:`gyrodeblur.sparse.default_iterations`). A long PSF's u-step converges slowly,
+#: and the first iterates, started from the patch-wise result with no dual, leave it: on a
+#: 0.2 s exposure of a dark scene (95 px) the base budget ended 1.35 dB below its start,
+#: twice it 0.07 above, 24 x 15 steps 3.0 above (session 48, BENCHMARKS section 2). On 24
+#: long exposures of the benchmark's photos and log (80-200 ms, 640 px, 16-73 px at the
+#: centre) this rule gained +0.25 dB on average (20 better, worst -0.03) for 1.8x the
+#: time; on the 36 benchmark cases +0.02 (6 better, worst -0.14) for 1.13x. A cap of 3
+#: gained more on blurs over 90 px but took 4.5x as long on the Shield frames (131-165 px).
+_BUDGET_FROM_PX = 32
+_MAX_BUDGET_SCALE = 2.0
 #: Penalty of the gradient split: ``beta * weight``, x1.5 per iteration, at most 64. It
 #: starts where the patch-wise solve (:mod:`gyrodeblur.sparse`) ends its continuation at
 #: its default iterations (3 or more; 1 or 2 end lower), whose result it refines:
@@ -70,6 +85,14 @@ class InterpolatedBlur:
         One odd-sized PSF per patch (each normalised to sum 1 here).
     shape : (H, W)
         The photo's rows and columns.
+
+    Attributes
+    ----------
+    pad : int
+        Pixels by which the unknown extends the photo on every side.
+    extent : int
+        The longest PSF's extent, px (:func:`gyrodeblur.psf.psf_extent`): it sets
+        :func:`refine_globally`'s default budget.
 
     Notes
     -----
@@ -107,6 +130,7 @@ class InterpolatedBlur:
             self.otf[i, oy:oy + k.shape[0], ox:ox + k.shape[1]] = k / k.sum()
             cv2.dft(self.otf[i], dst=self.otf[i])
         self.weights = [np.outer(wy, wx).astype(np.float32) for wy, wx in weights]
+        self.extent = max(psf_extent(k) for k in psfs)
         self._buf = np.zeros_like(self.otf)
         self._threads = max(1, min(FFT_WORKERS, _MAX_THREADS, len(patches)))
         self._chunks = [range(t, len(patches), self._threads) for t in range(self._threads)]
@@ -208,9 +232,20 @@ def _add_grad_t_grad(v: np.ndarray, rho: float, out: np.ndarray, scratch: np.nda
     cv2.scaleAdd(scratch, float(rho), out, dst=out)
 
 
+def refinement_budget(extent: float) -> tuple[int, int]:
+    """The ADMM iterations and CG steps per iteration that :func:`refine_globally` runs
+    by default for PSFs whose longest extent (:func:`gyrodeblur.psf.psf_extent`) is
+    ``extent`` px: :data:`DEFAULT_OUTER` x :data:`DEFAULT_CG_STEPS` up to 32 px, both in
+    proportion to the extent beyond, at most twice (12 x 10 from 64 px)."""
+    if not (np.isfinite(extent) and extent > 0):
+        raise ValueError(f"extent must be a positive number of pixels, got {extent!r}")
+    scale = min(_MAX_BUDGET_SCALE, max(1.0, float(extent) / _BUDGET_FROM_PX))
+    return int(round(DEFAULT_OUTER * scale)), int(round(DEFAULT_CG_STEPS * scale))
+
+
 def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur, *,
-                    weight: float, exponent: float = 1.0, outer: int = DEFAULT_OUTER,
-                    cg_steps: int = DEFAULT_CG_STEPS, ignore: np.ndarray | None = None,
+                    weight: float, exponent: float = 1.0, outer: int | None = None,
+                    cg_steps: int | None = None, ignore: np.ndarray | None = None,
                     at_least: np.ndarray | None = None, fixed: np.ndarray | None = None,
                     progress=None) -> np.ndarray:
     """Refine ``start`` towards ``argmin_u 1/2 |M (A u - g)|^2 + weight sum |grad u|^p``.
@@ -228,8 +263,9 @@ def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur
         noise: the patch-wise solver's own).
     exponent : float
         Prior exponent ``p`` in (0, 1] (1: total variation).
-    outer, cg_steps : int
-        ADMM iterations, and conjugate-gradient steps in each one's u-step.
+    outer, cg_steps : int, optional
+        ADMM iterations, and conjugate-gradient steps in each one's u-step. Default
+        :func:`refinement_budget` of the model's longest PSF (``blur.extent``).
     ignore : ndarray of bool (H, W), optional
         Pixels with no data term (over-exposed lights, samples from outside the photo).
     at_least : ndarray of bool (H, W) or (H, W, C), optional
@@ -250,6 +286,9 @@ def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur
     u0 = np.asarray(start, np.float32)
     if g.shape != u0.shape or g.shape[:2] != blur.shape:
         raise ValueError(f"image {g.shape}, start {u0.shape} and model {blur.shape} differ")
+    default_outer, default_steps = refinement_budget(blur.extent)
+    outer = default_outer if outer is None else outer
+    cg_steps = default_steps if cg_steps is None else cg_steps
     for name, v in (("outer", outer), ("cg_steps", cg_steps)):
         if not (is_whole(v) and v >= 1):
             raise ValueError(f"{name} must be a positive whole number, got {v!r}")
