@@ -20,6 +20,7 @@ Convolution convention as in :mod:`gyrodeblur.fftutils`: ``(k * u)(x) = sum_s k(
 
 from __future__ import annotations
 
+import numbers
 from concurrent.futures import ThreadPoolExecutor
 from typing import Sequence
 
@@ -237,7 +238,8 @@ def refinement_budget(extent: float) -> tuple[int, int]:
     by default for PSFs whose longest extent (:func:`gyrodeblur.psf.psf_extent`) is
     ``extent`` px: :data:`DEFAULT_OUTER` x :data:`DEFAULT_CG_STEPS` up to 32 px, both in
     proportion to the extent beyond, at most twice (12 x 10 from 64 px)."""
-    if not (np.isfinite(extent) and extent > 0):
+    if (isinstance(extent, bool) or not isinstance(extent, numbers.Real)
+            or not (np.isfinite(extent) and extent > 0)):
         raise ValueError(f"extent must be a positive number of pixels, got {extent!r}")
     scale = min(_MAX_BUDGET_SCALE, max(1.0, float(extent) / _BUDGET_FROM_PX))
     return int(round(DEFAULT_OUTER * scale)), int(round(DEFAULT_CG_STEPS * scale))
