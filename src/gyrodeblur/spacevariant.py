@@ -55,7 +55,8 @@ DEFAULT_CG_STEPS = 5
 #: long exposures of the benchmark's photos and log (80-200 ms, 640 px, 16-73 px at the
 #: centre) this rule gained +0.25 dB on average (20 better, worst -0.03) for 1.8x the
 #: time; on the 36 benchmark cases +0.02 (6 better, worst -0.14) for 1.13x. A cap of 3
-#: gained more on blurs over 90 px but took 4.5x as long on the Shield frames (131-165 px).
+#: gained more on blurs over 90 px but took 4.5x as long on a Shield frame (131-165 px),
+#: against 2.0x.
 _BUDGET_FROM_PX = 32
 _MAX_BUDGET_SCALE = 2.0
 #: Penalty of the gradient split: ``beta * weight``, x1.5 per iteration, at most 64. It
