@@ -535,3 +535,25 @@ def test_blind_sizes_count_each_patch_s_share_of_max_pixels():
         check_blind_sizes((200, 200), 31, (2, 2), max_pixels=10_000)
     assert err.value.source == "--kernel-size"
     assert len(check_blind_sizes((200, 200), 23, (2, 2), max_pixels=10_000)) == 4
+
+
+def test_a_dropout_inside_the_exposure_is_warned_of_and_one_beside_it_is_not(make_capture):
+    """The capture's exposure window is 0.05-0.09 s of the log's clock (30 ms exposure, 10
+    ms readout); a 30 ms dropout inside it is named, the same dropout after it is not."""
+    import dataclasses
+    cap = make_capture((0.0, 0.3, 0.0), readout=0.01)
+    t = cap.log.t
+    rng = np.random.default_rng(2)
+    image = rng.random((cap.camera.height, cap.camera.width)).astype(np.float32)
+
+    def dropped(after):                               # a 30 ms step from the sample at `after`
+        keep = ~((t > after + 1e-6) & (t < after + 0.03 - 1e-6))
+        return dataclasses.replace(cap, log=GyroLog(t[keep], cap.log.omega[keep]))
+
+    with pytest.warns(UserWarning, match=r"gap of 30\.0 ms in the gyro log at 0\.060000 s, "
+                                         r"inside the exposure"):
+        deblur(image, dropped(0.06), mode="invariant", method="wiener")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        deblur(image, dropped(0.1), mode="invariant", method="wiener")
+        deblur(image, cap, mode="invariant", method="wiener")

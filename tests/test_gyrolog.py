@@ -676,3 +676,30 @@ def test_a_plain_numeric_log_is_read_at_once_to_the_same_bits_as_line_by_line(tm
     assert plain(rows[:250] + ["1.0,,0,0"], [0, 1, 2, 3], ",", head.split(",")) is None
     with pytest.warns(UserWarning, match="1 sample"):
         assert len(read_gyro_log(tmp_path / "c.csv")) == 500
+
+
+def test_a_step_between_samples_inside_the_exposure_is_told_as_a_gap_or_a_rate():
+    """``step_warning``: silent for a 200 Hz log and for a dropout outside the window; a
+    dropout inside it is named with its length and time; a 40 Hz log by its rate."""
+    from gyrodeblur.gyrolog import INTERPOLATED_STEP, largest_step, step_warning
+
+    t = np.arange(0.0, 1.0, 0.005)
+    full = GyroLog(t, np.zeros((t.size, 3)))
+    assert step_warning(full, 0.4, 0.46) is None
+    keep = np.ones(t.size, bool)
+    keep[83:88] = False                                   # 0.410 -> 0.440: a 30 ms step
+    holed = GyroLog(t[keep], np.zeros((keep.sum(), 3)))
+    gap, at = largest_step(holed, 0.4, 0.46)
+    assert gap == pytest.approx(0.03) and at == pytest.approx(0.41)
+    said = step_warning(holed, 0.4, 0.46)
+    assert said.startswith("gap of 30.0 ms in the gyro log at 0.410000 s, inside the exposure")
+    assert step_warning(holed, 0.5, 0.56) is None         # the hole lies before the window
+    assert step_warning(holed, 0.3, 0.4101) is not None   # a window that enters the hole
+    edge = np.ones(t.size, bool)
+    edge[83:85] = False                                   # 0.410 -> 0.425: the limit, passes
+    assert INTERPOLATED_STEP == pytest.approx(0.015)
+    assert step_warning(GyroLog(t[edge], np.zeros((edge.sum(), 3))), 0.4, 0.46) is None
+    t40 = np.arange(0.0, 1.0, 0.025)
+    coarse = step_warning(GyroLog(t40, np.zeros((t40.size, 3))), 0.4, 0.46)
+    assert coarse.startswith("the gyro log has a sample only every 25.0 ms (40 Hz)")
+    assert largest_step(full, 2.0, 3.0) == (0.0, 2.0)     # no two samples around it

@@ -24,6 +24,7 @@ import numpy as np
 from .arguments import check_callback, check_flag
 from .capture import Capture, check_capture
 from .errors import InputError
+from .gyrolog import step_warning
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
 from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_variation,
                   render_psf)
@@ -585,6 +586,13 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     ndarray float32 like ``image`` (and a DeblurReport if asked). The result is
     referenced to the camera's orientation at ``capture.exposure_start``: it aligns
     with the scene as the first row saw it, free of rolling-shutter skew.
+
+    Warns
+    -----
+    UserWarning
+        Where the gyro log steps more than 15 ms between two samples inside the exposure
+        (:func:`gyrodeblur.gyrolog.step_warning`: a dropout, or a log that coarse): the
+        motion across it is interpolated, and the result less sharp.
     """
     t0 = time.perf_counter()
     image = check_image(image, "photo", max_value=PHOTO_MAX,
@@ -595,6 +603,10 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     return_report = check_flag(return_report, "return_report")
     check_callback(progress, "progress")
     get_transfer_curve(transfer)                   # refused before the PSFs are rendered
+    w0, w1 = capture.window
+    coarse = step_warning(capture.log, w0 - capture.time_offset, w1 - capture.time_offset)
+    if coarse is not None:
+        warnings.warn(f"{capture.log.source or 'gyro log'}: {coarse}", stacklevel=2)
     if align is not None:
         align = check_flag(align, "align")
     method = method or DEFAULT_METHOD
