@@ -384,8 +384,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if len(psfs) != len(patches):
         raise InputError(None, f"{len(psfs)} PSFs for {len(patches)} patches: give one each")
     side = max(checked.shape[:2])
+    longest = 0
     for i, k in enumerate(psfs):      # checked here, before any work; used as given
         extent = psf_extent(check_psf(k, f"PSF {i + 1}"))
+        longest = max(longest, extent)
         if extent > side + 2 * LANCZOS_A:   # longer than any blur a capture may give
             # (psf.check_blur_span), lobes included: no photo is left to restore from
             raise InputError(None, f"PSF {i + 1} spreads light over {extent} px, more than the "
@@ -414,7 +416,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         if progress:
             progress(1, 1)
     elif model == "global":
-        out = _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress)
+        out = _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress,
+                                   longest)
     else:
         out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
                                    unknown=unknown,
@@ -463,10 +466,11 @@ def _check_model(model, method: str, patches, shape) -> str:
     return model if len(patches) > 1 else "patches"
 
 
-def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress):
+def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress, extent):
     """The patch-wise sparse result refined under the interpolated-PSF model of the whole
     photo (:func:`gyrodeblur.spacevariant.refine_globally`), with the patch-wise solver's
-    own prior weight and clipped-pixel handling."""
+    own prior weight and clipped-pixel handling, for the budget of the longest PSF's
+    ``extent`` (px; one budget for the run and the progress it announces)."""
     from .sparse import SparseSettings, _clipping
     from .spacevariant import InterpolatedBlur, refine_globally, refinement_budget
     if not isinstance(deconvolve, SparseSettings):
@@ -474,7 +478,7 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress):
                         f"(gyrodeblur.sparse.SparseSettings), got {deconvolve!r}")
     settings = deconvolve
     channels = 1 if img.ndim == 2 else img.shape[2]
-    outer, _ = refinement_budget(max(psf_extent(k) for k in psfs))
+    outer, cg_steps = refinement_budget(extent)
     total = len(patches) + outer * channels
     report = None if progress is None else (lambda done, _: progress(done, total))
     start = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=report,
@@ -500,7 +504,7 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress):
             at_least = np.moveaxis(sat.at_least, 0, 2) if img.ndim == 3 else sat.at_least[0]
         step = None if progress is None else (
             lambda done: progress(len(patches) + done, total))
-        return refine_globally(img, start, blur,
+        return refine_globally(img, start, blur, outer=outer, cg_steps=cg_steps,
                                weight=settings.weight, exponent=settings.exponent, ignore=ignore,
                                at_least=at_least, fixed=lights, progress=step)
 
