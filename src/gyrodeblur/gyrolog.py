@@ -220,13 +220,22 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
     if gap > max_gap + _TIME_TOLERANCE:
         limit = (f"(limit {max_gap * 1e3:.0f} ms; gyro.max_gap or --max-gap raises it, at "
                  f"the cost of interpolating across the gap)")
-        step = log.sample_interval
-        if gap <= 1.5 * step:              # no gap: the log's own rate is that coarse
-            raise InputError(src, f"the gyro log has a sample only every {step * 1e3:.1f} ms "
-                                  f"({1 / step:.3g} Hz), too few for the motion within the "
-                                  f"{what}: log the gyro at 100 Hz or more {limit}")
-        raise InputError(src, f"gap of {gap * 1e3:.1f} ms in the gyro log at "
-                              f"{at:.6f} s, inside the {what} {limit}")
+        coarse, said = _long_step(log, gap, at, what)
+        if coarse:
+            raise InputError(src, f"{said}, too few for the motion within the {what}: log "
+                                  f"the gyro at 100 Hz or more {limit}")
+        raise InputError(src, f"{said} {limit}")
+
+
+def _long_step(log: GyroLog, gap: float, at: float, what: str) -> tuple[bool, str]:
+    """Whether a long step ``gap`` (s) between samples, the first at ``at`` (s), is the
+    log's own rate (no step of it is much shorter) rather than a gap in it, and how to say
+    which, for :func:`check_coverage` and :func:`step_warning`."""
+    step = log.sample_interval
+    if gap <= 1.5 * step:
+        return True, (f"the gyro log has a sample only every {step * 1e3:.1f} ms "
+                      f"({1 / step:.3g} Hz)")
+    return False, f"gap of {gap * 1e3:.1f} ms in the gyro log at {at:.6f} s, inside the {what}"
 
 
 def largest_step(log: GyroLog, t0: float, t1: float) -> tuple[float, float]:
@@ -260,12 +269,8 @@ def step_warning(log: GyroLog, t0: float, t1: float, *, what: str = "exposure") 
         return None
     cost = ("the motion between samples is interpolated, and the result will be less sharp "
             "than the log could make it")
-    step = log.sample_interval
-    if gap <= 1.5 * step:
-        return (f"the gyro log has a sample only every {step * 1e3:.1f} ms "
-                f"({1 / step:.3g} Hz): {cost}; log the gyro at 100 Hz or more")
-    return (f"gap of {gap * 1e3:.1f} ms in the gyro log at {at:.6f} s, inside the {what}: "
-            f"{cost}")
+    coarse, said = _long_step(log, gap, at, what)
+    return f"{said}: {cost}; log the gyro at 100 Hz or more" if coarse else f"{said}: {cost}"
 
 
 def _secs(t: float) -> str:
