@@ -67,3 +67,15 @@ def test_named_mappings_are_the_rotations_their_names_say():
                                   parse_axes("android-back-camera-90"))
     np.testing.assert_array_equal(parse_axes("android-back-camera-0"), parse_axes("Xyz"))
     np.testing.assert_array_equal(parse_axes("identity"), np.eye(3))
+
+
+def test_an_iphones_back_camera_from_its_geometry():
+    """Core Motion's device axes are Android's (x right, y up, z out of the screen, in
+    portrait). An iPhone's sensor image is upright with the phone turned a quarter anticlockwise,
+    its bottom on the right (EXIF orientation 1; a portrait photo is tagged 6). Turned so,
+    the device's top points to the image's left and its right side up: camera x = -device
+    y, camera y (down) = -device x; the back camera looks away from the screen."""
+    m = parse_axes("ios-back-camera")
+    np.testing.assert_array_equal(m @ [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(m @ [1.0, 0.0, 0.0], [0.0, -1.0, 0.0])
+    np.testing.assert_array_equal(m @ [0.0, 0.0, 1.0], [0.0, 0.0, -1.0])

@@ -32,7 +32,10 @@ __all__ = ["parse_axes", "axes_to_letters", "PROPER_AXIS_LETTERS", "NAMED_AXES"]
 #: camera's ``SENSOR_ORIENTATION`` θ (the clockwise turn, degrees, that shows the sensor's
 #: image upright in the natural orientation). 0: the sensor's rows run along the device's
 #: x axis; 90, most phones' (and the Shield tablet's): its x axis is the device's -y.
-#: ``android-back-camera`` is the 90 of most phones.
+#: ``android-back-camera`` is the 90 of most phones. ``ios-back-camera``: Core Motion's
+#: device axes (the same as Android's) to an iPhone's or iPad's back camera, whose sensor
+#: image is upright with the device turned so that its bottom (the home button) is on the
+#: right (EXIF orientation 1 there, 6 for a portrait photo): the sensor orientation 90.
 NAMED_AXES = {
     "identity": "XYZ",
     "android-back-camera-0": "Xyz",
@@ -40,6 +43,7 @@ NAMED_AXES = {
     "android-back-camera-180": "xYz",
     "android-back-camera-270": "YXz",
     "android-back-camera": "yxz",
+    "ios-back-camera": "yxz",
 }
 
 

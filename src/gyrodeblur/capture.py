@@ -700,8 +700,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         warnings.warn(f"{src}: {what} is in the device's axes (x right, y "
                       f"up, z out of the screen); with no gyro.orientation (--orientation) "
                       f"given, it is read as android-back-camera (yxz: a back camera of "
-                      f"SENSOR_ORIENTATION 90, as most phones', its photo in the sensor's "
-                      f"layout; android-back-camera-0, -180 or -270 for others; calibrate "
+                      f"SENSOR_ORIENTATION 90, as most phones' and iPhones' "
+                      f"(ios-back-camera), its photo in the sensor's layout; "
+                      f"android-back-camera-0, -180 or -270 for others; calibrate "
                       f"and deblur --refine try all 24 mappings)", stacklevel=2)
     axes = parse_axes(orientation, source=f"{src} (gyro.orientation)")
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0

@@ -91,7 +91,7 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
                    help="log axes -> camera axes: three letters, e.g. XYZ or yxz (lowercase "
                         "= negated), or a name: identity, android-back-camera (a phone's "
                         "back camera, sensor orientation 90), android-back-camera-0/-90/"
-                        "-180/-270")
+                        "-180/-270, ios-back-camera (an iPhone's or iPad's back camera)")
     g.add_argument("--time-offset", type=float, metavar="S",
                    help="seconds: camera_time = gyro_time + offset")
     g.add_argument("--bias", metavar="auto|bx,by,bz",
