@@ -20,14 +20,13 @@ Convolution convention as in :mod:`gyrodeblur.fftutils`: ``(k * u)(x) = sum_s k(
 
 from __future__ import annotations
 
-import numbers
 from concurrent.futures import ThreadPoolExecutor
 from typing import Sequence
 
 import cv2
 import numpy as np
 
-from .arguments import is_whole
+from .arguments import check_real, is_whole
 from .fftutils import FFT_WORKERS, fast_shape
 from .psf import psf_extent
 from .sparse import _BETA_MAX as _SPARSE_BETA_MAX
@@ -238,9 +237,10 @@ def refinement_budget(extent: float) -> tuple[int, int]:
     """The ADMM iterations and CG steps per iteration that :func:`refine_globally` runs
     by default for PSFs whose longest extent (:func:`gyrodeblur.psf.psf_extent`) is
     ``extent`` px: :data:`DEFAULT_OUTER` x :data:`DEFAULT_CG_STEPS` up to 32 px, both in
-    proportion to the extent beyond, at most twice (12 x 10 from 64 px)."""
-    if (isinstance(extent, bool) or not isinstance(extent, numbers.Real)
-            or not (np.isfinite(extent) and extent > 0)):
+    proportion to the extent beyond, at most twice (12 x 10 from 64 px). A ``TypeError``
+    for a non-number (:func:`gyrodeblur.arguments.check_real`), a ``ValueError`` for one
+    that is not finite and positive."""
+    if check_real(extent, "extent") <= 0:
         raise ValueError(f"extent must be a positive number of pixels, got {extent!r}")
     scale = min(_MAX_BUDGET_SCALE, max(1.0, float(extent) / _BUDGET_FROM_PX))
     return int(round(DEFAULT_OUTER * scale)), int(round(DEFAULT_CG_STEPS * scale))
