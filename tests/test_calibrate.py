@@ -923,6 +923,20 @@ def test_cli_calibrate_reads_per_photo_options_as_deblur_does(cli_dir, capsys, m
     assert not seen and not (d / "out" / "a.json").exists()
 
 
+def test_a_comma_separated_list_of_files_drops_the_spaces_after_its_commas():
+    """``-o "a.jpg, b.jpg"`` (as a list is usually typed) names b.jpg: the second photo's
+    result was written to " b.jpg", a file whose name starts with a space; a value
+    repeated, or one photo's, stays as written."""
+    from gyrodeblur.calibrate_cli import per_photo_values
+    assert per_photo_values("a.jpg, b.jpg", 2, "-o", (2,), "output") == ["a.jpg", "b.jpg"]
+    assert per_photo_values(" a.json ,\tb.json ", 2, "--capture", (1, 2),
+                            "capture description") == ["a.json", "b.json"]
+    assert per_photo_values(["a.jpg", " b.jpg"], 2, "-o", (2,), "output") == ["a.jpg", " b.jpg"]
+    assert per_photo_values([" a, b.jpg"], 1, "-o", (1,), "output") == [" a, b.jpg"]
+    with pytest.raises(InputError, match="1 output for 2 photos"):
+        per_photo_values("a.jpg, ", 2, "-o", (2,), "output")
+
+
 def test_cli_a_photo_without_texture_is_named_in_the_error(cli_dir, capsys):
     """A problem with the photo itself (nothing textured to calibrate on) names the photo,
     in calibrate and in deblur --refine, and writes nothing."""

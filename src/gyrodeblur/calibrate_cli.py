@@ -177,9 +177,10 @@ def per_photo_values(values, n: int, option: str, allowed: tuple[int, ...], what
                      read: bool = False, hint: str = "") -> list:
     """The values of a repeatable option for ``n`` photos, as ``calibrate`` and ``deblur``
     read them. One photo's are taken as given (a file name may hold a comma); for
-    several, an option given once is a list split at its commas (unless ``read``, files
-    the command reads, and it names an existing file), one repeated gives a value each
-    time. The count must be one of ``allowed``; ``hint`` ends the message when not."""
+    several, an option given once is a list split at its commas, each item without the
+    spaces around it (``a.jpg, b.jpg`` names ``b.jpg``, not `` b.jpg``), unless ``read``,
+    files the command reads, and it names an existing file; one repeated gives a value
+    each time. The count must be one of ``allowed``; ``hint`` ends the message when not."""
     given = values if isinstance(values, list) else ([] if values is None else [values])
     if n == 1:
         if len(given) > 1:
@@ -187,7 +188,7 @@ def per_photo_values(values, n: int, option: str, allowed: tuple[int, ...], what
         return given
     vals = given
     if len(given) == 1 and not (read and os.path.isfile(os.fspath(given[0]))):
-        vals = [v for v in os.fspath(given[0]).split(",") if v]
+        vals = [v.strip() for v in os.fspath(given[0]).split(",") if v.strip()]
     if len(vals) not in allowed:
         spelt = " or ".join(str(k) for k in allowed if k)
         raise InputError(option, f"{len(vals)} {what}{'s' * (len(vals) != 1)} for {n} photos: "
