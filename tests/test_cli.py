@@ -227,6 +227,27 @@ def test_a_gyro_deblur_warns_when_the_logs_blur_does_not_fit_the_photo(capture_d
             assert "run calibrate (or deblur --refine) first" in err
 
 
+def test_the_blur_check_names_the_focal_length_among_its_suspects(capture_dir, capsys):
+    """A focal length five times too long (a phone's full-resolution fx given for a photo
+    shrunk to a fifth, without camera.width and height) makes the PSFs five times too
+    long: the check warns, and its list of likely causes names the focal length (it named
+    only the time offset, exposure start, axis mapping and log)."""
+    d = capture_dir
+    doc = json.loads((d / "cap.json").read_text())
+    doc["camera"]["fx"] = doc["camera"]["fy"] = 450.0          # about 10 px of blur
+    doc["exposure_time"] = 0.05
+    (d / "long.json").write_text(json.dumps(doc))
+    cap = str(d / "long.json")
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o",
+                 str(d / "b.png"), "--snr-db", "40", "--seed", "2"]) == 0
+    capsys.readouterr()
+    assert main(["deblur", str(d / "b.png"), "--capture", cap, "--fx", "2250", "--fy",
+                 "2250", "-o", str(d / "o.png"), "--model", "patches"]) == 0
+    err = capsys.readouterr().err
+    assert "the blur the gyro log implies does not fit the photo" in err
+    assert "the focal length (one in the pixels of another resolution)" in err
+
+
 def test_a_blur_check_that_fails_does_not_cost_the_deblur(capture_dir, capsys, monkeypatch):
     """The check runs after the deblur: an error inside it is said, and the photo is still
     written (exit 0)."""

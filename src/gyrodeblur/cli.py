@@ -321,8 +321,8 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve) -> None:
     """Warn where no blur at all explains the photo better than the capture's PSFs do, by
     :data:`~gyrodeblur.blur_evidence.WRONG_BLUR_MARGIN`
     (:func:`~gyrodeblur.blur_evidence.capture_gain_over_no_blur`): a time offset, exposure
-    start, axis mapping or log that are not the photo's (or a sharp photo), which the
-    deblur cannot see and which make the photo worse."""
+    start, axis mapping, focal length or log that are not the photo's (or a sharp photo),
+    which the deblur cannot see and which make the photo worse."""
     from .blur_evidence import WRONG_BLUR_MARGIN, capture_gain_over_no_blur
     try:                              # a check only: it must not cost the finished deblur
         gain = capture_gain_over_no_blur(image, cap, transfer=curve)
@@ -333,8 +333,9 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve) -> None:
     if gain < WRONG_BLUR_MARGIN:
         warnings.warn(f"the blur the gyro log implies does not fit the photo: no blur at all "
                       f"explains its most textured windows better ({gain:+.1f} nats per 9 "
-                      f"windows). The time offset, the exposure start, the axis mapping or the "
-                      f"log is likely not the photo's, and the result is then worse than the "
+                      f"windows). The time offset, the exposure start, the axis mapping, the "
+                      f"focal length (one in the pixels of another resolution) or the log is "
+                      f"likely not the photo's, and the result is then worse than the "
                       f"input: run calibrate (or deblur --refine) first. A sharp photo, or one "
                       f"softer than its pixels (upscaled, digitally zoomed, heavily denoised), "
                       f"also gives this (--no-blur-check skips the check)", stacklevel=2)
