@@ -79,3 +79,15 @@ def test_an_iphones_back_camera_from_its_geometry():
     np.testing.assert_array_equal(m @ [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0])
     np.testing.assert_array_equal(m @ [1.0, 0.0, 0.0], [0.0, -1.0, 0.0])
     np.testing.assert_array_equal(m @ [0.0, 0.0, 1.0], [0.0, 0.0, -1.0])
+
+
+def test_a_misspelt_name_is_told_the_names():
+    """A spec that is not three letters lists the names accepted as well (a misspelt
+    'android_back_camera' was told only of letters); three wrong letters are told of
+    letters."""
+    with pytest.raises(InputError, match="or a name: identity, android-back-camera-0, "
+                                         ".*android-back-camera-270, android-back-camera, ios-back-camera$"):
+        parse_axes("android_back_camera")
+    with pytest.raises(InputError) as exc:
+        parse_axes("XQZ")
+    assert exc.value.problem.endswith("must be three letters from X, Y, Z (lowercase = negated)")

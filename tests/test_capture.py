@@ -490,6 +490,21 @@ def test_the_gcsv_readout_direction_is_read_as_a_number(tmp_path, direction, rea
         assert load_capture(tmp_path / "c.json").readout_time == pytest.approx(readout)
 
 
+def test_a_bad_mapping_from_the_option_names_the_option(capture_files):
+    """--orientation's bad value is the option's, not the file's: the error named the
+    capture's gyro.orientation, which held a good one (as --fx's names --fx)."""
+    d, _ = capture_files
+    with pytest.raises(InputError) as exc:
+        load_capture(d / "cap.json", overrides={"orientation": "android-front-camera"})
+    assert exc.value.source == "--orientation"
+    doc = json.loads((d / "cap.json").read_text())
+    doc["gyro"]["orientation"] = "android_back_camera"
+    (d / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError) as exc:                 # the file's own: the file's key
+        load_capture(d / "bad.json")
+    assert exc.value.source.endswith("bad.json (gyro.orientation)")
+
+
 def test_an_android_log_given_no_mapping_is_read_as_the_back_camera(tmp_path):
     """Not as camera axes: the named android-back-camera, and a warning that says so."""
     from gyrodeblur.axes import parse_axes

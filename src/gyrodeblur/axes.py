@@ -49,7 +49,8 @@ NAMED_AXES = {
 
 def _letters_matrix(spec: str) -> tuple[np.ndarray | None, str | None]:
     if len(spec) != 3 or any(c not in "XYZxyz" for c in spec):
-        return None, "must be three letters from X, Y, Z (lowercase = negated)"
+        return None, ("must be three letters from X, Y, Z (lowercase = negated)"
+                      + ("" if len(spec) == 3 else f" or a name: {', '.join(NAMED_AXES)}"))
     if len({c.upper() for c in spec}) != 3:
         return None, "must name each of X, Y, Z exactly once"
     m = np.zeros((3, 3))

@@ -704,7 +704,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       f"(ios-back-camera), its photo in the sensor's layout; "
                       f"android-back-camera-0, -180 or -270 for others; calibrate "
                       f"and deblur --refine try all 24 mappings)", stacklevel=2)
-    axes = parse_axes(orientation, source=f"{src} (gyro.orientation)")
+    axes = parse_axes(orientation, source=("--orientation" if "orientation" in ov
+                                           else f"{src} (gyro.orientation)"))
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     from_exif = data.get("exposure_start") is None and "capture_time_text" in hints
     exposure_time = _get(data, "exposure_time", src)
