@@ -86,7 +86,8 @@ def test_a_misspelt_name_is_told_the_names():
     'android_back_camera' was told only of letters); three wrong letters are told of
     letters."""
     with pytest.raises(InputError, match="or a name: identity, android-back-camera-0, "
-                                         ".*android-back-camera-270, android-back-camera, ios-back-camera$"):
+                                         ".*android-back-camera-270, android-back-camera, "
+                                         "ios-back-camera$"):
         parse_axes("android_back_camera")
     with pytest.raises(InputError) as exc:
         parse_axes("XQZ")
