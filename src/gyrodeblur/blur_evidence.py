@@ -58,7 +58,7 @@ def kernel_gain_over_no_blur(image: np.ndarray, psf: np.ndarray, *, transfer="sr
     Parameters
     ----------
     image : ndarray (H, W) or (H, W, C)
-        The blurred photo, float in [0, 1] (a fourth channel is alpha, ignored).
+        The blurred photo, float in [0, 1] (a last channel of 2 or 4 is alpha, ignored).
     psf : ndarray (k, k)
         The kernel, odd square, centred, at the photo's resolution (pixels).
     transfer : str or TransferCurve
@@ -104,7 +104,7 @@ def capture_gain_over_no_blur(image: np.ndarray, capture, *, transfer="srgb",
     Parameters
     ----------
     image : ndarray (H, W) or (H, W, C)
-        The blurred photo, float in [0, 1] (a fourth channel is alpha, ignored).
+        The blurred photo, float in [0, 1] (a last channel of 2 or 4 is alpha, ignored).
     capture : Capture
         Its capture (scaled to the photo's size when it is another).
     transfer : str or TransferCurve

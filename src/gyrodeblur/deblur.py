@@ -335,8 +335,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     Parameters
     ----------
     image : ndarray (H, W) or (H, W, C), float in [0, 1]
-        A fourth channel is alpha, a mask: passed through untouched, and the colours
-        are deblurred as without it.
+        A last channel of 2 or 4 (grey + alpha, RGBA) is alpha, a mask: passed through
+        untouched, and the colours are deblurred as without it.
     patches : list of Patch
     psfs : list of ndarray
         One PSF per patch (odd sides, a positive sum; each method normalises it), its
@@ -546,9 +546,9 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     ----------
     image : ndarray (H, W) or (H, W, C)
         The blurred photo, float32 in [0, 1]. Its size may differ from the capture's
-        camera by a common scale (the intrinsics are rescaled). A fourth channel is
-        alpha, passed through untouched (as :func:`~gyrodeblur.imageio.read_photo` gives
-        an RGBA file).
+        camera by a common scale (the intrinsics are rescaled). A last channel of 2 or 4
+        is alpha, passed through untouched (as :func:`~gyrodeblur.imageio.read_photo`
+        gives a grey + alpha or RGBA file): two channels are never two colours.
     capture : Capture
         Exposure timing, intrinsics and gyro log.
     mode : {"variant", "invariant"}
@@ -656,7 +656,8 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     Parameters
     ----------
     image : ndarray (H, W) or (H, W, C)
-        The blurred photo, float32 in [0, 1] (a fourth channel is alpha, passed through).
+        The blurred photo, float32 in [0, 1] (a last channel of 2 or 4 is alpha, passed
+        through).
     kernel_size : int
         Side of the kernel support, px (odd; a little more than the blur's extent).
     grid : (rows, cols)
