@@ -40,7 +40,7 @@ def own_method():
 
 def test_photos_far_below_black_are_refused(scene, make_capture):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
-    blurred = simulate_blur(scene, cap)
+    blurred = simulate_blur(scene, cap, transfer="linear")
     for bad in (blurred - 0.5, -255 * blurred):
         with pytest.raises(InputError, match="values down to .*below black"):
             deblur(bad, cap)
@@ -63,19 +63,21 @@ def test_metrics_refuse_0_255_floats_and_leave_alpha_out(scene):
 
 
 def test_simulate_with_the_srgb_curve_is_what_deblur_expects(scene, make_capture):
-    """``simulate_blur`` blurs light; given an sRGB photo and ``transfer="srgb"`` it
-    decodes, blurs and encodes, so the default ``deblur`` undoes it; blurring the encoded
-    values as light (the default ``"linear"`` on an sRGB photo) does not match it."""
+    """``simulate_blur`` blurs light; given an sRGB photo and ``transfer="srgb"`` (its
+    default, as ``deblur``'s) it decodes, blurs and encodes, so the default ``deblur``
+    undoes the default blur; blurring the encoded values as light (``"linear"`` on an
+    sRGB photo) does not match it."""
     from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
     cap = make_capture([0.2, 0.5, 0.1], width=128, height=96, f=120.0)
     y, x = np.mgrid[0:96, 0:128]
     scene = np.where((x // 16 + y // 16) % 2, 0.9, 0.05)                     # contrast,
     scene = ndimage.gaussian_filter(scene, 1.5).astype(np.float32)  # edges a lens passes
-    by_hand = linear_to_srgb(simulate_blur(srgb_to_linear(scene), cap))
+    by_hand = linear_to_srgb(simulate_blur(srgb_to_linear(scene), cap, transfer="linear"))
     assert np.allclose(simulate_blur(scene, cap, transfer="srgb"), by_hand, atol=1e-5)
-    matched = psnr(scene, deblur(simulate_blur(scene, cap, transfer="srgb"), cap), 12)
-    mismatched = psnr(scene, deblur(simulate_blur(scene, cap), cap), 12)
+    matched = psnr(scene, deblur(simulate_blur(scene, cap), cap), 12)       # the defaults
+    assert np.array_equal(simulate_blur(scene, cap), simulate_blur(scene, cap, transfer="srgb"))
+    mismatched = psnr(scene, deblur(simulate_blur(scene, cap, transfer="linear"), cap), 12)
     assert matched > mismatched + 1.0, (matched, mismatched)
     with pytest.raises(InputError, match="transfer"):
         simulate_blur(scene, cap, transfer="gamma 2.2")
@@ -89,7 +91,7 @@ def test_simulated_srgb_photos_hold_no_light_below_black_and_deblur_takes_them(m
     cap = make_capture([0.0, 0.5, 0.0], width=96, height=64, f=100.0)
     y, x = np.mgrid[0:64, 0:96]
     checker = ((x // 8 + y // 8) % 2).astype(np.float32)
-    linear = simulate_blur(checker, cap)
+    linear = simulate_blur(checker, cap, transfer="linear")
     assert linear.min() < -0.01                                # the spline's undershoot
     for out in (simulate_blur(checker, cap, transfer="srgb"),
                 simulate_blur(0.02 + 0.1 * checker, cap, transfer="srgb", snr_db=10, seed=1)):
@@ -102,7 +104,7 @@ def test_simulated_srgb_photos_hold_no_light_below_black_and_deblur_takes_them(m
 
 def test_a_method_of_ones_own_gets_what_it_names(scene, make_capture, own_method):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
-    blurred = simulate_blur(scene, cap)
+    blurred = simulate_blur(scene, cap, transfer="linear")
     own_method("identity", lambda image, phi=0.01: (lambda sub, psf: sub))   # no `encoded`
     out = deblur(blurred, cap, method="identity", grid=(2, 2), align=False)
     assert np.allclose(out, blurred, atol=2e-3)          # the curve's round trip only
@@ -125,7 +127,7 @@ def test_a_method_of_ones_own_gets_what_it_names(scene, make_capture, own_method
 def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
         scene, make_capture, own_method):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
-    blurred = simulate_blur(scene, cap)
+    blurred = simulate_blur(scene, cap, transfer="linear")
     busy = threading.Lock()
     overlaps = []
 
@@ -155,7 +157,7 @@ def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
 def test_options_that_do_not_apply_are_refused_and_defaults_fit_the_photo(
         scene, make_capture):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
-    blurred = simulate_blur(scene, cap)
+    blurred = simulate_blur(scene, cap, transfer="linear")
     with pytest.raises(InputError, match="grid: does not apply with mode='invariant'"):
         deblur(blurred, cap, mode="invariant", grid="bogus")
     with pytest.raises(InputError, match="overlap: does not apply"):
@@ -179,9 +181,9 @@ def test_grey_plus_alpha_keeps_its_alpha(scene, make_capture):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
     alpha = (np.indices(scene.shape).sum(0) % 2).astype(np.float32)
     la = np.dstack([scene, alpha])
-    blurred = simulate_blur(la, cap)
+    blurred = simulate_blur(la, cap, transfer="linear")
     assert np.array_equal(blurred[..., 1], alpha)
-    assert np.array_equal(blurred[..., 0], simulate_blur(scene, cap))
+    assert np.array_equal(blurred[..., 0], simulate_blur(scene, cap, transfer="linear"))
     out = deblur(blurred, cap)
     assert out.shape == la.shape and np.array_equal(out[..., 1], alpha)
     assert np.array_equal(out[..., 0], deblur(blurred[..., 0], cap))
@@ -261,7 +263,7 @@ def test_logs_captures_and_patch_windows_of_the_wrong_kind_are_named(scene, make
 
 def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_capture):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
-    blurred = simulate_blur(scene, cap)
+    blurred = simulate_blur(scene, cap, transfer="linear")
     # None is not a transfer curve (it read as "none", i.e. linear, instead of the default)
     with pytest.raises(InputError, match="transfer curve is a name"):
         deblur(blurred, cap, transfer=None)
@@ -272,7 +274,7 @@ def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_cap
         with pytest.raises(TypeError, match=f"{next(iter(kw))} must be True or False"):
             deblur(blurred, cap, **kw)
     with pytest.raises(TypeError, match="quantize must be True or False"):
-        simulate_blur(scene, cap, quantize="no")
+        simulate_blur(scene, cap, quantize="no", transfer="linear")
     calls = []
     with pytest.raises(TypeError, match="progress must be a callable"):
         deblur(blurred, cap, progress=5)
@@ -280,19 +282,20 @@ def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_cap
     assert calls and calls[-1][0] == calls[-1][1]
     # a capture left out
     from gyrodeblur.psf import render_psf, trace
-    for call in (lambda: simulate_blur(scene, None), lambda: render_psf(None, 10, 10),
+    for call in (lambda: simulate_blur(scene, None, transfer="linear"),
+                 lambda: render_psf(None, 10, 10),
                  lambda: trace(None, 10.0, 10.0, 3), lambda: deblur(blurred, {"fx": 1})):
         with pytest.raises(TypeError, match="capture must be a Capture"):
             call()
     # simulate's numbers, named
     with pytest.raises(TypeError, match="snr_db must be a number"):
-        simulate_blur(scene, cap, snr_db="abc")
+        simulate_blur(scene, cap, snr_db="abc", transfer="linear")
     with pytest.raises(TypeError, match="snr_db must be a number"):
-        simulate_blur(scene, cap, snr_db=[40])
+        simulate_blur(scene, cap, snr_db=[40], transfer="linear")
     with pytest.raises(TypeError, match="seed must be a whole number"):
-        simulate_blur(scene, cap, snr_db=40, seed="x")
-    assert np.array_equal(simulate_blur(scene, cap, snr_db=40, seed=[1, 2]),
-                          simulate_blur(scene, cap, snr_db=40, seed=[1, 2]))
+        simulate_blur(scene, cap, snr_db=40, seed="x", transfer="linear")
+    assert np.array_equal(simulate_blur(scene, cap, snr_db=40, seed=[1, 2], transfer="linear"),
+                          simulate_blur(scene, cap, snr_db=40, seed=[1, 2], transfer="linear"))
 
 
 def test_simulate_refuses_encoded_photos_that_are_offset_negated_or_unscaled(
@@ -306,10 +309,10 @@ def test_simulate_refuses_encoded_photos_that_are_offset_negated_or_unscaled(
     # linear values are blurred as they are: the warp is linear in them
     hdr = scene.copy()
     hdr[40:44, 60:64] = 20.0                 # a light far above 1
-    out = simulate_blur(hdr, cap, order=1)
+    out = simulate_blur(hdr, cap, order=1, transfer="linear")
     assert out.max() > 1.5
-    assert np.allclose(simulate_blur(scene - 0.5, cap), simulate_blur(scene, cap) - 0.5,
-                       atol=1e-5)
+    assert np.allclose(simulate_blur(scene - 0.5, cap, transfer="linear"),
+                       simulate_blur(scene, cap, transfer="linear") - 0.5, atol=1e-5)
 
 
 def test_psf_positions_and_timing_rows_are_checked(make_capture):
@@ -364,7 +367,7 @@ def test_render_psf_and_simulate_blur_check_their_options(make_capture):
     img = np.random.default_rng(1).random((48, 64)).astype(np.float32)
     for order in (3.0, True):
         with pytest.raises(ValueError, match="order"):
-            simulate_blur(img, cap, order=order)
+            simulate_blur(img, cap, order=order, transfer="linear")
     for snr in (1e308, -1e308):
         with pytest.raises(ValueError, match="snr_db"):
-            simulate_blur(img, cap, snr_db=snr)
+            simulate_blur(img, cap, snr_db=snr, transfer="linear")

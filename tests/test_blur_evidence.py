@@ -67,7 +67,7 @@ def test_a_captures_blur_is_told_from_another_stretch_of_its_log(make_capture):
                   0.1 * np.ones_like(t)], axis=1)
     cap = Capture(0.25, 0.04, 0.02, Camera.centred(512, 384, 420.0), GyroLog(t, w))
     sharp = _scene()
-    blurred = simulate_blur(sharp, cap, snr_db=45, seed=1)
+    blurred = simulate_blur(sharp, cap, snr_db=45, seed=1, transfer="linear")
     right = capture_gain_over_no_blur(blurred, cap, transfer="linear")
     wrong = capture_gain_over_no_blur(blurred, cap.replace(time_offset=0.12),
                                       transfer="linear")
@@ -138,7 +138,7 @@ def test_the_photo_is_judged_in_linear_light_through_its_transfer_curve(make_cap
     assert kernel_gain_over_no_blur(encoded, k) == pytest.approx(linear, rel=0.05)
     assert abs(kernel_gain_over_no_blur(encoded, k, transfer="linear") - linear) > 5.0
     cap = make_capture((0.3, 1.5, 0.1), width=256, height=192, f=200.0, readout=0.02)
-    blurred = simulate_blur(sharp, cap, snr_db=45, seed=1)        # a 9 px turn
+    blurred = simulate_blur(sharp, cap, snr_db=45, seed=1, transfer="linear")        # a 9 px turn
     encoded = linear_to_srgb(np.clip(blurred, 0, None))
     by_light = capture_gain_over_no_blur(blurred, cap, transfer="linear")
     assert by_light > 10 * NO_BLUR_MARGIN

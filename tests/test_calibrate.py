@@ -75,7 +75,7 @@ def _true_capture(start: float, log: GyroLog | None = None) -> Capture:
 
 
 def _blur(sharp, cap, seed=0) -> np.ndarray:
-    out = linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap))
+    out = linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap, transfer="linear"))
     return quantize_8bit(add_noise(out, 40.0, seed))
 
 

@@ -206,8 +206,8 @@ def test_a_calibration_is_the_same_with_one_worker_or_two(monkeypatch, tmp_path)
                    0.2 * np.sin(2 * np.pi * 4.3 * t + 0.7)], 1)
     true = Capture(0.5, 0.04, 0.03, Camera.centred(W, H, 1.3 * W), GyroLog(t, wc), axes="Xyz")
     sharp = transform.resize(data.astronaut(), (H, W), anti_aliasing=True).astype(np.float32)
-    blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), true)),
-                                      40.0, 0))
+    blurred = quantize_8bit(add_noise(linear_to_srgb(
+        simulate_blur(srgb_to_linear(sharp), true, transfer="linear")), 40.0, 0))
     bad = true.replace(time_offset=0.012, readout_time=0.036, bias=np.array([0.02, -0.02, 0.0]),
                        axes=parse_axes("YXz"))
     kw = dict(mappings=["Xyz", "xYz", "YXz", "yXZ"], n_patches=6)

@@ -87,7 +87,8 @@ def test_simulate_samples_by_cubic_spline_unless_told_bilinear(capture_dir, caps
                      "--bit-depth", "16"]) == 0
     cubic, bilinear = (read_photo(d / f"{s}.png").pixels for s in ("cubic", "bilinear"))
     sharp = srgb_to_linear(read_photo(d / "sharp.jpg").pixels)
-    expected = linear_to_srgb(simulate_blur(sharp, load_capture(d / "cap.json"), order=1))
+    expected = linear_to_srgb(simulate_blur(sharp, load_capture(d / "cap.json"), order=1,
+                                            transfer="linear"))
     assert np.abs(bilinear - expected).max() < 1e-4
     detail = [np.abs(np.diff(b, axis=1)).mean() for b in (cubic, bilinear)]
     assert detail[0] > detail[1], detail
@@ -656,7 +657,7 @@ def test_a_linear_photo_is_deblurred_through_the_curve_its_icc_profile_declares(
     d = capture_dir
     scene = srgb_to_linear(read_photo(d / "sharp.jpg").pixels)
     linear_icc = make_icc(curv_identity(), name="Linear Rec709")
-    blurred = simulate_blur(scene, load_capture(d / "cap.json"), snr_db=45, seed=2)
+    blurred = simulate_blur(scene, load_capture(d / "cap.json"), snr_db=45, seed=2, transfer="linear")
     write_photo(d / "lin.png", blurred, bit_depth=16,
                 like=Photo(blurred, 16, "PNG", icc_profile=linear_icc))
     assert main(["deblur", str(d / "lin.png"), "--capture", str(d / "cap.json"),
@@ -678,7 +679,8 @@ def test_a_linear_photo_is_deblurred_through_the_curve_its_icc_profile_declares(
     assert main(["simulate", str(d / "g18.png"), "--capture", str(d / "cap.json"),
                  "-o", str(d / "g18_blurred.png")]) == 0
     expected = np.clip(simulate_blur(read_photo(d / "g18.png").pixels ** gamma,
-                                     load_capture(d / "cap.json")), 0, 1) ** (1 / gamma)
+                                     load_capture(d / "cap.json"), transfer="linear"),
+                       0, 1) ** (1 / gamma)
     got = read_photo(d / "g18_blurred.png").pixels
     assert np.abs(got - expected).max() < 2e-5      # 16-bit rounding
 

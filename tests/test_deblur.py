@@ -52,8 +52,8 @@ def cases(request):
         sel = (log.t > t0 - 0.3) & (log.t < t0 + 0.4)
         cap = Capture(float(t0), exposure, 0.03, Camera.centred(W, H, 0.8 * W),
                       GyroLog(log.t[sel], log.omega[sel]), axes="Xyz")
-        blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap)),
-                                          40.0, seed=i))
+        blurred = quantize_8bit(add_noise(linear_to_srgb(
+            simulate_blur(srgb_to_linear(sharp), cap, transfer="linear")), 40.0, seed=i))
         out.append((name, sharp, blurred, cap))
     return out
 
@@ -233,7 +233,7 @@ def test_street_lights_come_back_without_ripples():
     # Bilinear synthesis: the lights are hard blocks 2000x brighter than the scene around
     # them, not a band-limited scene, and a cubic spline would ring around them below
     # zero (negative light). Noise before the clip, as on a sensor: clipped pixels are 1.
-    noisy = (linear_to_srgb(simulate_blur(scene, cap, order=1))
+    noisy = (linear_to_srgb(simulate_blur(scene, cap, order=1, transfer="linear"))
              + rng.normal(0.0, 0.01, scene.shape))
     blurred = quantize_8bit(noisy)
     sharp = linear_to_srgb(np.clip(scene, 0.0, 1.0))
@@ -335,7 +335,7 @@ def test_an_alpha_channel_is_passed_through_and_leaves_the_colours_alone(make_ca
 
     cap = make_capture([0.0, 0.4, 0.1], width=96, height=64, f=100.0)
     rng = np.random.default_rng(4)
-    rgb = simulate_blur(rng.uniform(0.1, 0.9, (64, 96, 3)).astype(np.float32), cap)
+    rgb = simulate_blur(rng.uniform(0.1, 0.9, (64, 96, 3)).astype(np.float32), cap, transfer="linear")
     alpha = np.indices((64, 96)).sum(0)[..., None] % 2 * np.float32(1.0)   # a checkerboard
     rgba = np.concatenate([rgb, alpha], axis=2)
     for run in (lambda im: deblur(im, cap, grid=(2, 2)),
@@ -377,7 +377,8 @@ def test_a_long_readout_s_displacement_is_not_counted_as_blur():
     sharp = rescale(data.astronaut()[100:374, 50:450] / 255.0, 0.5, channel_axis=2,
                     anti_aliasing=True).astype(np.float32)
     lin = srgb_to_linear(sharp)
-    blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(lin, cap)), 40, 1))
+    blurred = quantize_8bit(add_noise(linear_to_srgb(simulate_blur(lin, cap, transfer="linear")),
+                                      40, 1))
     out = deblur(blurred, cap)
     assert psnr(sharp, out, 12) > psnr(sharp, blurred, 12) + 1.0
 

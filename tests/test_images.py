@@ -57,7 +57,7 @@ def test_public_functions_refuse_integer_and_nan_images(image):
     for bad in (u8, nan):
         for call in (lambda im: deblur(im, cap, method="wiener", grid=(2, 2)),
                      lambda im: deblur_blind(im, 5),
-                     lambda im: simulate_blur(im, cap),
+                     lambda im: simulate_blur(im, cap, transfer="linear"),
                      lambda im: wiener_deconvolve(im, psf),
                      lambda im: sparse_deconvolve(im, psf, noise_sigma=0.01)):
             with pytest.raises(InputError):

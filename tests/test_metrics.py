@@ -123,6 +123,6 @@ def test_deblurred_demo_aligns_with_the_sharp_photo():
     sharp = quantize_8bit(sharp)
     cap = demo_capture().scaled_to(256, 256)
     blurred = quantize_8bit(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap,
-                                                         snr_db=40, seed=0)))
+                                                         snr_db=40, seed=0, transfer="linear")))
     s_blur, _ = _assert_aligned(sharp, blurred, cap)
     assert np.hypot(*s_blur) > 1.0

@@ -187,7 +187,7 @@ def test_psf_is_timed_by_the_row_its_light_lands_on(make_capture):
     rng = np.random.default_rng(0)
     u = ndimage.gaussian_filter(rng.normal(size=(240, 320)), 2.0)
     u = (0.5 + 0.3 * u / u.std()).astype(np.float32)
-    g = simulate_blur(u, cap)
+    g = simulate_blur(u, cap, transfer="linear")
     for x0, y0 in [(160, 40), (160, 120), (100, 180)]:
         p = np.round(landing_pixel(cap, x0, y0)).astype(int)
         assert p[1] - y0 > 10                          # the light lands well below y0
@@ -210,7 +210,7 @@ def test_displacement_field_is_where_the_light_lands(make_capture):
     u = ndimage.gaussian_filter(rng.normal(size=(240, 320)), 2.0)
     u = (0.5 + 0.3 * u / u.std()).astype(np.float32)
     field = displacement_field(cap)
-    warped = warp_by_displacement(simulate_blur(u, cap), field)
+    warped = warp_by_displacement(simulate_blur(u, cap, transfer="linear"), field)
     for x, y in [(100, 60), (200, 120), (160, 170)]:
         psf = render_psf(cap, x, y, centred=True)
         model = fftconvolve(u, psf, mode="same")
@@ -243,7 +243,7 @@ def test_a_fold_falls_back_to_the_points_own_row_and_a_fast_counter_tilt_does_no
     up = make_capture([-4.0, 0.0, 0.0], f=2400.0, exposure=0.002, readout=0.03)
     dot = np.zeros((240, 320), np.float32)
     dot[40, 160] = 1.0
-    g = simulate_blur(dot, up, order=1)
+    g = simulate_blur(dot, up, order=1, transfer="linear")
     g[40:] = 0                       # the copy the mirrored border sends up from below
     yy, xx = np.mgrid[:240, :320]
     light = np.array([(g * xx).sum(), (g * yy).sum()]) / g.sum()
@@ -282,7 +282,7 @@ def test_a_fast_tilt_lands_each_point_where_the_forward_model_puts_its_light(mak
         for x0, y0 in points:
             dot = np.zeros((240, 320), np.float32)
             dot[y0, x0] = 1.0
-            g = simulate_blur(dot, cap, order=1)
+            g = simulate_blur(dot, cap, order=1, transfer="linear")
             if rate[0] < 0:           # content moves up: leave out the copy that the
                 g[y0:] = 0            # mirrored border sends up from below the frame
             light = np.array([(g * xx).sum(), (g * yy).sum()]) / g.sum()

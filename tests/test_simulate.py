@@ -35,7 +35,7 @@ def _psf_for_pixel(cap, x, y):
 
 def test_simulate_matches_psf_convolution_with_roll(make_capture, scene):
     cap = make_capture([-0.3, 0.5, 2.0], readout=0.02)       # strong roll + rolling shutter
-    blurred = simulate_blur(scene, cap)
+    blurred = simulate_blur(scene, cap, transfer="linear")
     rng = np.random.default_rng(0)
     errs, effect = [], []
     for x, y in rng.integers([40, 40], [280, 200], size=(40, 2)):
@@ -57,16 +57,16 @@ def test_row_bands_in_threads_give_the_single_thread_result(make_capture, scene,
     cap = make_capture([-0.3, 0.5, 2.0], readout=0.02)
     for order in (1, 3):
         monkeypatch.setattr(bands, "FFT_WORKERS", 3)      # 3 bands of 80 rows
-        threaded = simulate_blur(scene, cap, order=order)
+        threaded = simulate_blur(scene, cap, order=order, transfer="linear")
         monkeypatch.setattr(bands, "FFT_WORKERS", 1)
-        single = simulate_blur(scene, cap, order=order)
+        single = simulate_blur(scene, cap, order=order, transfer="linear")
         assert np.array_equal(threaded, single)
         assert np.abs(threaded - scene).max() > 0.1       # and it did blur
 
 
 def test_zero_motion_is_identity(make_capture, scene):
     cap = make_capture([0, 0, 0])
-    assert np.abs(simulate_blur(scene, cap) - scene).max() < 1e-5
+    assert np.abs(simulate_blur(scene, cap, transfer="linear") - scene).max() < 1e-5
 
 
 def test_sample_count_follows_speed(make_capture):
@@ -93,10 +93,10 @@ def test_alpha_is_not_blurred_and_bad_arguments_are_refused(make_capture, scene)
     alpha = np.zeros((240, 320, 1), np.float32)
     alpha[:, 160:] = 1.0
     out = simulate_blur(np.concatenate([scene, alpha], axis=2), cap, snr_db=30, seed=2,
-                        quantize=True)
+                        quantize=True, transfer="linear")
     assert np.array_equal(out[..., 3:], alpha)
     assert np.array_equal(out[..., :3], simulate_blur(scene, cap, snr_db=30, seed=2,
-                                                      quantize=True))
+                                                      quantize=True, transfer="linear"))
     for bad in ({"n_samples": -3}, {"n_samples": 0}, {"n_samples": 2.5}, {"n_samples": True},
                 {"snr_db": float("nan")}):
         with pytest.raises(ValueError, match=f"{next(iter(bad))} must be"):
@@ -153,7 +153,7 @@ def test_simulate_is_the_mean_of_map_coordinates_warps(make_capture, order):
                     ref += warped / n
                 else:
                     ref[..., c] += warped / n
-        out = simulate_blur(img, cap, n_samples=n, order=order)
+        out = simulate_blur(img, cap, n_samples=n, order=order, transfer="linear")
         assert out.shape == img.shape and out.dtype == np.float32
         np.testing.assert_allclose(out, ref, rtol=0, atol=1e-5)
         assert np.abs(out - img).max() > 0.05                   # and it did blur
@@ -244,7 +244,7 @@ def test_a_blur_longer_than_the_frame_is_refused_before_the_work(make_capture):
     with pytest.raises(InputError, match="across the frame"):
         warp_samples(cap)
     with pytest.raises(InputError, match="across the frame"):
-        simulate_blur(np.zeros((240, 320), np.float32), cap)
+        simulate_blur(np.zeros((240, 320), np.float32), cap, transfer="linear")
 
 
 def test_quantisation_rounds_to_the_nearest_level():
@@ -261,11 +261,12 @@ def test_synthesis_quantises_when_asked_and_is_linear_in_linear_light(make_captu
     cap = make_capture([-0.4, 0.6, 1.5], width=64, height=48, f=60.0, readout=0.02)
     rng = np.random.default_rng(4)
     img = ndimage.gaussian_filter(rng.random((48, 64)), 1).astype(np.float32)
-    plain = simulate_blur(img, cap, n_samples=5)
-    q = simulate_blur(img, cap, n_samples=5, quantize=True)
+    plain = simulate_blur(img, cap, n_samples=5, transfer="linear")
+    q = simulate_blur(img, cap, n_samples=5, quantize=True, transfer="linear")
     np.testing.assert_array_equal(q * 255, np.round(q * 255))
     assert np.abs(q - plain).max() <= 0.5 / 255 + 1e-6
     zero_mean = img - img.mean()
-    out = simulate_blur(zero_mean, cap, n_samples=5)
+    out = simulate_blur(zero_mean, cap, n_samples=5, transfer="linear")
     assert out.min() < -0.05
-    np.testing.assert_allclose(simulate_blur(-zero_mean, cap, n_samples=5), -out, atol=1e-6)
+    np.testing.assert_allclose(simulate_blur(-zero_mean, cap, n_samples=5, transfer="linear"),
+                               -out, atol=1e-6)

@@ -328,7 +328,7 @@ def render_case(name: str, sharp: np.ndarray, capture: Capture, meta: dict, *,
     noise at ``snr_db`` (seed ``meta["noise_seed"]``), 8-bit levels."""
     lin = srgb_to_linear(sharp) if linear is None else linear
     n = warp_samples(capture, max_step=sim_step_px)
-    blurred = linear_to_srgb(simulate_blur(lin, capture, n_samples=n, order=3))
+    blurred = linear_to_srgb(simulate_blur(lin, capture, n_samples=n, order=3, transfer="linear"))
     if snr_db is not None:
         blurred = add_noise(blurred, snr_db, meta.get("noise_seed"))
     meta = {**meta, "snr_db": snr_db, "sim_samples": n, "sim_step_px": sim_step_px,

@@ -570,8 +570,8 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
         Deconvolution method, a key of :data:`METHODS`.
     transfer : {"srgb", "linear"} or TransferCurve
         Transfer curve of the photo's values (default sRGB, as a photo file holds them;
-        :func:`gyrodeblur.simulate.simulate_blur` makes such a photo with
-        ``transfer="srgb"``); deconvolution runs in linear light
+        :func:`gyrodeblur.simulate.simulate_blur` makes such a photo by default);
+        deconvolution runs in linear light
         (:func:`gyrodeblur.icc.photo_transfer_curve` gives the one a photo's ICC profile
         declares).
     clip : bool

@@ -85,7 +85,7 @@ def run_demo(out_dir: str = "gyrodeblur-demo", *, say=print, overwrite: bool = F
     sharp = data.astronaut().astype(np.float32) / 255.0
     cap = demo_capture()
     blurred = quantize_8bit(linear_to_srgb(simulate_blur(srgb_to_linear(sharp), cap,
-                                                         snr_db=40.0, seed=0)))
+                                                         snr_db=40.0, seed=0, transfer="linear")))
     restored, report = deblur(blurred, cap, return_report=True, progress=progress)
     invariant = deblur(blurred, cap, mode="invariant")
     border = default_border(sharp.shape)
