@@ -381,6 +381,12 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     said.clear()
     load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s"}, report=said.append)
     assert said == []
+    # several photos' captures sharing the log: it is read, and its unit told, once
+    logs: dict = {}
+    for _ in range(3):
+        load_capture(tmp_path / "c.json", report=said.append, logs=logs)
+    assert len(said) == 1 and len(logs) == 1, said
+    said.clear()
     assert not load_capture(tmp_path / "c.json").readout_time_unknown
     # a readout time left out is 0 marked unknown (calibrate searches it), and said
     del doc["readout_time"]

@@ -546,11 +546,12 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         the gyro log runs on Unix time and covers the exposure from it (the capture's
         ``exposure_start_from_exif`` then says so).
     report : callable(str), optional
-        Told which values came from EXIF.
+        Told which values came from EXIF, and the units a log was read in where its
+        column names do not say them.
     logs : dict, optional
         Gyro logs already read, by file and reading options: a log found there is shared,
-        not read again, and one read is added (several photos' captures naming one long
-        log then hold one copy).
+        not read again nor its units told again, and one read is added (several photos'
+        captures naming one long log then hold one copy).
     """
     data: dict = {}
     base = "."
@@ -681,14 +682,15 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         csv_opts["rate_columns"] = tuple(rc)
     key = (os.path.realpath(gpath), fmt, repr(sorted(csv_opts.items())))
     log = None if logs is None else logs.get(key)
-    if log is None:
+    read_here = log is None     # a log shared by several captures is read, and told of, once
+    if read_here:
         log = read_gyro_log(gpath, fmt, **csv_opts)
         if logs is not None:
             logs[key] = log
-    if "time_unit_from" in log.meta and report:
+    if "time_unit_from" in log.meta and report and read_here:
         report(f"gyro log times read in {log.meta['time_unit']} (from "
                f"{log.meta['time_unit_from']}; give --time-unit if that is wrong)")
-    if "rate_unit_from" in log.meta and report:
+    if "rate_unit_from" in log.meta and report and read_here:
         report("gyro rates read in rad/s (the column names state no unit; give --rate-unit "
                "deg/s if they are degrees)")
     orientation = gyro_d.get("orientation", "XYZ")
