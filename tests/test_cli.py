@@ -1703,3 +1703,27 @@ def test_the_demo_capture_is_the_one_its_docstring_describes():
     assert cam.fx == pytest.approx(0.8 * 512) and cam.fy == pytest.approx(0.8 * 512)
     assert (cap.exposure_time, cap.readout_time) == (0.04, 0.02)
     assert cap.gyro_spec["path"].endswith("demo_gyro.gcsv") and cap.gyro_spec["format"] == "gcsv"
+
+
+def test_the_wiener_method_says_when_it_raises_its_phi(capture_dir, capsys):
+    """``--method wiener`` on a noisy photo says the phi it uses (the photo's own
+    noise-to-signal ratio) and writes what the library gives with that phi; ``--phi``
+    keeps the value given, silently; a clean photo keeps the chapter's 0.01, silently."""
+    from gyrodeblur.wiener import photo_phi
+    d = capture_dir
+    for snr, name in ((12, "noisy.png"), (45, "clean.png")):
+        assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / name), "--snr-db", str(snr), "--seed", "2"]) == 0
+    capsys.readouterr()
+    phi = photo_phi(read_photo(d / "noisy.png").pixels)
+    assert phi > 0.03
+    assert main(["deblur", str(d / "noisy.png"), "--capture", str(d / "cap.json"),
+                 "--method", "wiener", "-o", str(d / "auto.png")]) == 0
+    assert f"Wiener filter: phi {phi:.3g}, this photo's own" in capsys.readouterr().out
+    assert main(["deblur", str(d / "noisy.png"), "--capture", str(d / "cap.json"),
+                 "--method", "wiener", "--phi", f"{phi!r}", "-o", str(d / "given.png")]) == 0
+    assert "Wiener filter: phi" not in capsys.readouterr().out
+    assert np.array_equal(read_photo(d / "auto.png").pixels, read_photo(d / "given.png").pixels)
+    assert main(["deblur", str(d / "clean.png"), "--capture", str(d / "cap.json"),
+                 "--method", "wiener", "-o", str(d / "clean_out.png")]) == 0
+    assert "Wiener filter: phi" not in capsys.readouterr().out

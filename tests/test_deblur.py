@@ -558,3 +558,23 @@ def test_a_dropout_inside_the_exposure_is_warned_of_and_one_beside_it_is_not(mak
         warnings.simplefilter("error")
         deblur(image, dropped(0.1), mode="invariant", method="wiener")
         deblur(image, cap, mode="invariant", method="wiener")
+
+
+def test_the_wiener_method_raises_its_phi_for_a_dark_noisy_photo(make_capture):
+    """A dark photo (a quarter of the light) with shot noise, blurred by warping: the
+    chapter's phi = 0.01 amplifies the noise below the blurred photo's PSNR; the default,
+    the photo's own noise-to-signal ratio, beats it (measured: 23.6 dB against 15.8,
+    blurred 20.6)."""
+    from skimage import data
+    from skimage.transform import resize
+
+    sharp = resize(data.coffee(), (120, 160), anti_aliasing=True).astype(np.float32)
+    dark = linear_to_srgb(0.25 * srgb_to_linear(sharp)).astype(np.float32)
+    cap = make_capture((0.3, 1.0, 0.1), width=160, height=120, f=200.0, exposure=0.03)
+    light = srgb_to_linear(simulate_blur(dark, cap))
+    rng = np.random.default_rng(0)
+    light = light + rng.normal(size=light.shape) * np.sqrt(0.01 * np.clip(light, 0, None) + 1e-4)
+    blurred = quantize_8bit(linear_to_srgb(np.clip(light, 0, 1)))
+    chapter = psnr(dark, deblur(blurred, cap, method="wiener", phi=0.01), 12)
+    default = psnr(dark, deblur(blurred, cap, method="wiener"), 12)
+    assert chapter < psnr(dark, blurred, 12) < default - 2.0, (chapter, default)

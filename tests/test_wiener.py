@@ -290,3 +290,19 @@ def test_shapes_that_do_not_fit_are_refused():
     for shape in ((4, 9), (9, 4)):
         with pytest.raises(ValueError, match="does not fit"):
             psf_to_otf(np.ones((5, 5)) / 25, shape)
+
+
+def test_a_photos_phi_is_the_chapters_unless_its_noise_asks_for_more():
+    """``photo_phi``: 0.01 for a clean photo and a flat one; for a noisy photo three
+    times its noise-to-signal ratio, the noise measured on the photo itself."""
+    from gyrodeblur.wiener import DEFAULT_PHI, PHOTO_PHI_FACTOR, photo_phi
+
+    clean = _texture((96, 128))
+    assert photo_phi(clean) == DEFAULT_PHI
+    assert photo_phi(np.full((32, 32), 0.4, np.float32)) == DEFAULT_PHI
+    rng = np.random.default_rng(3)
+    sigma = 0.05
+    noisy = (clean + rng.normal(0.0, sigma, clean.shape)).astype(np.float32)
+    expected = PHOTO_PHI_FACTOR * sigma ** 2 / float(np.var(noisy))
+    assert expected > 5 * DEFAULT_PHI
+    assert photo_phi(noisy) == pytest.approx(expected, rel=0.15)

@@ -708,8 +708,10 @@ class _PhotoDeblur:
         self.given = self.photo = self.colour = self.alpha = None
 
     def _jpeg_noise(self) -> None:
-        """For a JPEG, the sparse method's noise level raised for its compression error
-        (said at the photo's turn, once every photo's inputs are known to be good)."""
+        """For a JPEG, the sparse method's noise level raised for its compression error;
+        for the Wiener method, its phi raised for a noisy photo
+        (:func:`gyrodeblur.wiener.photo_phi`). Said at the photo's turn, once every
+        photo's inputs are known to be good."""
         photo, options = self.photo, self.options
         self.noise_note = ""
         if self.method == "sparse" and "noise_sigma" not in options and photo.quantization:
@@ -720,6 +722,14 @@ class _PhotoDeblur:
                                f"{255 * options['noise_sigma']:.2f} levels (its pixels show "
                                f"{255 * shown:.2f}; the compression's error counts as noise "
                                "too; --noise-sigma sets it)")
+        if self.method == "wiener" and "phi" not in options:
+            from .wiener import DEFAULT_PHI, photo_phi
+            phi = photo_phi(self.colour)
+            if phi > DEFAULT_PHI:
+                options["phi"] = phi
+                self.noise_note = (f"Wiener filter: phi {phi:.3g}, this photo's own "
+                                   f"noise-to-signal ratio, as the chapter's {DEFAULT_PHI:g} "
+                                   "would amplify its noise (--phi sets it)")
 
     def calibrate_alone(self) -> None:
         """``--refine`` for this photo alone: its capture replaced by the calibrated one."""
@@ -918,7 +928,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "deconvolves each patch alone and blends them (the chapter's design; "
                         "default above 4 MP; see BENCHMARKS.md)")
     s.add_argument("--phi", type=float, default=None,
-                   help="Wiener inverse SNR (default 0.01, the chapter's)")
+                   help="Wiener inverse SNR (default 0.01, the chapter's, or the photo's "
+                        "own noise-to-signal ratio where that is larger: a dark, noisy photo)")
     s.add_argument("--iterations", type=int, default=None,
                    help="sparse method: ADMM iterations per patch (default 6, up to 12 for PSFs longer "
                         "than 32 px, which converge slowly; fewer is faster, see BENCHMARKS.md "

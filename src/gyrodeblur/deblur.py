@@ -32,7 +32,7 @@ from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, chec
                      check_patches, deconvolve_patchwise, patch_grid)
 from .tonecurve import TransferCurve, get_transfer_curve
 from .warp import CLIPPED, LIGHT_AREA, warp_by_displacement
-from .wiener import DEFAULT_PHI, check_phi, wiener_deconvolve
+from .wiener import check_phi, photo_phi, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
            "DEFAULT_METHOD", "register_method", "plan_psf_field", "MODELS",
@@ -43,12 +43,15 @@ Deconvolver = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 def _wiener_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
                     **options) -> Deconvolver:
-    """The chapter's Wiener filter (eq. 6.18); its one option is ``phi``."""
+    """The chapter's Wiener filter (eq. 6.18); its one option is ``phi``, by default
+    :func:`gyrodeblur.wiener.photo_phi` of the photo as encoded."""
     unknown = sorted(set(options) - {"phi"})
     if unknown:                      # e.g. the sparse method's noise_sigma
         raise TypeError(f"unknown option(s) {', '.join(unknown)} for method 'wiener' "
                         "(known: phi)")
-    return partial(wiener_deconvolve, phi=check_phi(options.get("phi", DEFAULT_PHI)))
+    phi = options.get("phi")
+    phi = photo_phi(image if encoded is None else encoded) if phi is None else check_phi(phi)
+    return partial(wiener_deconvolve, phi=phi)
 
 
 def _sparse_factory(image: np.ndarray, *, encoded: np.ndarray | None = None,
@@ -580,8 +583,10 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     return_report : bool
         Also return a :class:`DeblurReport`.
     **options
-        Method options: ``phi`` for ``"wiener"``; ``iterations``, ``noise_sigma``, ``weight``,
-        ``exponent`` for ``"sparse"`` (see :func:`gyrodeblur.sparse.sparse_deconvolve`);
+        Method options: ``phi`` for ``"wiener"`` (default
+        :func:`gyrodeblur.wiener.photo_phi`: the chapter's 0.01, raised for a noisy
+        photo); ``iterations``, ``noise_sigma``, ``weight``, ``exponent`` for ``"sparse"``
+        (see :func:`gyrodeblur.sparse.sparse_deconvolve`);
         ``model`` (``"global"`` or ``"patches"``, see :func:`deblur_with_psfs`: by default
         global for ``"sparse"`` up to :data:`GLOBAL_DEFAULT_MAX_PIXELS`).
 
