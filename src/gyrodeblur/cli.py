@@ -683,11 +683,11 @@ class _PhotoDeblur:
         if args.several:        # one photo alone: the deblur's own check, before any output
             _check_blur_fits_the_frame(cap)
         if cap.exposure_start_from_exif and not args.refine:
-            raise InputError("--refine", "the exposure start is the photo's EXIF time, known "
-                                         "only to tens of milliseconds or worse, and the "
-                                         "PSFs need it to well under one: add --refine (it "
-                                         "searches a second either way), calibrate first, or "
-                                         "give exposure_start")
+            raise InputError(args.capture or args.photo,  # the file without exposure_start
+                             "the exposure start is the photo's EXIF time, known only to "
+                             "tens of milliseconds or worse, and the PSFs need it to well "
+                             "under one: add --refine (it searches a second either way), "
+                             "calibrate first, or give exposure_start")
         self._jpeg_noise()
 
     def load(self) -> None:
