@@ -151,7 +151,15 @@ def test_colour_input_is_estimated_on_luminance(sharp, levin):
     assert np.abs(rgb[..., 1] - g).max() > 0.1 and np.abs(rgb.mean(axis=2) - g).max() > 0.1
     a = estimate_kernel(rgb, 17, levels=2, iterations=2)
     b = estimate_kernel(g, 17, levels=2, iterations=2)
-    np.testing.assert_allclose(a, b, atol=1e-4)
+    # the luma is g only to a unit in the last place (numpy 2.4's float32 matmul rounds
+    # some pixels the other way), and the estimator's discrete steps can turn such a
+    # difference into up to 6e-4 (seen: 1-ulp changes of 30 % of g's pixels moved one of
+    # four trials that far, the others 2e-6); an estimate from the green channel or the
+    # channel mean is 0.06-0.07 away
+    np.testing.assert_allclose(a, b, atol=2e-3)
+    for wrong in (rgb[..., 1], rgb.mean(axis=2)):
+        other_estimate = estimate_kernel(np.clip(wrong, 0, 1), 17, levels=2, iterations=2)
+        assert np.abs(other_estimate - b).max() > 10 * 2e-3
 
 
 def test_estimated_kernel_is_recentred(sharp, levin):
