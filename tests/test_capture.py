@@ -104,6 +104,31 @@ def test_exif_hints_fill_gaps(capture_files):
                      exif_hints={"exposure_time": 0.02, "focal_length_mm": 4.25, "fx": 9.0})
 
 
+def test_a_description_far_from_the_photos_exif_is_warned_of(capture_files):
+    """A focal length or exposure time the user gives more than 1.5x off the photo's
+    EXIF values (intrinsics for another resolution, milliseconds for seconds) is warned
+    of, naming where it came from; a mild difference and a photo without EXIF pass
+    silently, and the given values are used either way."""
+    import warnings
+    d, doc = capture_files                  # fx 819.2 px at 1024 x 764, 30 ms
+    close = {"exposure_time": 0.025, "fx": 0.5 * 819.2 * 1.2}     # a photo at half size
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_capture(d / "cap.json", image_size=(512, 382), exif_hints=close)
+        load_capture(d / "cap.json", image_size=(512, 382))
+    full_size = {"exposure_time": 0.03, "fx": 5 * 0.5 * 819.2}    # 5x: another resolution
+    with pytest.warns(UserWarning, match=r"cap.json: camera.fx is 819 px, but the photo's "
+                                         r"EXIF focal length gives 4096 px at 1024 px wide "
+                                         r"\(5 times off\): intrinsics for another resolution"):
+        cap = load_capture(d / "cap.json", image_size=(512, 382), exif_hints=full_size)
+    assert cap.camera.fx == 819.2
+    with pytest.warns(UserWarning, match=r"cap.json with --exposure-time: exposure_time is 0.3 "
+                                         r"s, but the photo's EXIF ExposureTime is 0.03 s"):
+        cap = load_capture(d / "cap.json", overrides={"exposure_time": 0.3},
+                           image_size=(512, 382), exif_hints={"exposure_time": 0.03})
+    assert cap.exposure_time == 0.3
+
+
 def test_readout_time_from_the_gcsv_header(capture_files):
     """Gyroflow's gcsv header states the frame readout time (ms): without one in the
     capture, it is used (and said), rather than a global shutter."""

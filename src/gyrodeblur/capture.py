@@ -450,6 +450,41 @@ def _warn_unknown_keys(data: dict, source: str) -> None:
                           + (f"; {', '.join(moved)}" if moved else "") + ")", stacklevel=3)
 
 
+#: A description's ``fx`` or ``exposure_time`` this many times the photo's EXIF value, or
+#: less than its inverse, is warned of (:func:`load_capture`).
+EXIF_DISAGREEMENT = 1.5
+
+
+def _warn_where_exif_disagrees(camera: Camera, exposure_time: float, hints: dict,
+                               image_size, origin, *, fx_given: bool,
+                               exposure_given: bool) -> None:
+    """Warn where the description's focal length or exposure time, given by the user,
+    differs from the photo's EXIF value by more than :data:`EXIF_DISAGREEMENT` times:
+    intrinsics for another resolution (the blur's length follows ``fx``, and calibrate
+    searches it only within about 10 %), a time in milliseconds, another photo's
+    description. A mild difference (a crop, a rounded value) passes silently."""
+    def ratio(a, b):
+        return max(a / b, b / a) if a > 0 and b > 0 else 1.0
+
+    if fx_given and "fx" in hints and image_size is not None:
+        exif_fx = hints["fx"] * camera.width / image_size[0]
+        r = ratio(camera.fx, exif_fx)
+        if r > EXIF_DISAGREEMENT:
+            warnings.warn(f"{origin(('fx',))}: camera.fx is {camera.fx:.0f} px, but the "
+                          f"photo's EXIF focal length gives {exif_fx:.0f} px at "
+                          f"{camera.width} px wide ({r:.2g} times off): intrinsics for "
+                          f"another resolution (give camera.width and height with them), "
+                          f"or a digitally zoomed or cropped photo? The blur's length "
+                          f"follows fx", stacklevel=3)
+    if exposure_given and "exposure_time" in hints:
+        r = ratio(exposure_time, hints["exposure_time"])
+        if r > EXIF_DISAGREEMENT:
+            warnings.warn(f"{origin(('exposure_time',))}: exposure_time is "
+                          f"{exposure_time:.4g} s, but the photo's EXIF ExposureTime is "
+                          f"{hints['exposure_time']:.4g} s ({r:.2g} times off): milliseconds "
+                          f"for seconds, or another photo's description?", stacklevel=3)
+
+
 def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bool) -> None:
     """Refuse intrinsics no pinhole photo has, and warn of unlikely ones: the values enter
     here, as typed by a person or written by another tool (a focal length in mm, a principal
@@ -608,6 +643,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                 if "gyro_format" not in ov:   # the file's format said nothing of another
                     gyro_d.pop("format", None)
     hints = exif_hints or {}
+    exposure_given = "exposure_time" in data
     if "exposure_time" not in data and "exposure_time" in hints:
         data["exposure_time"] = hints["exposure_time"]
         if report:
@@ -660,6 +696,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise InputError(origin(keys), f"{exc.source}: {exc.problem}") from None
     _check_intrinsics(camera, origin, from_exif=not ({"fx", "fy"} & (json_cam | set(ov))),
                       size_given=bool({"width", "height"} & (json_cam | set(ov))))
+    _warn_where_exif_disagrees(camera, _get(data, "exposure_time", src), hints, image_size,
+                               origin, fx_given="fx" in (json_cam | set(ov)),
+                               exposure_given=exposure_given)
 
     if "path" not in gyro_d:
         raise InputError(src, "missing gyro.path (or --gyro)")
