@@ -480,3 +480,19 @@ def test_a_field_picture_keeps_the_frame_s_aspect_and_draws_each_psf_at_its_poin
         assert np.allclose(centre, (2 * y, 2 * x), atol=1.5), (x, y, centre)
     frames = (img == (70, 110, 160)).all(axis=2)
     assert ndimage.label(frames, np.ones((3, 3)))[1] == 4          # no two boxes touch
+
+
+def test_a_psf_fields_grid_must_hold_its_points(make_capture):
+    """``psf_field(points, grid=)``: the grid's rows x columns are the points' count (a
+    grid that did not fit was stored as given, and a plot or a patch layout read from it
+    went wrong later)."""
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.psf import psf_field
+
+    cap = make_capture([0.0, 0.3, 0.0], width=64, height=48, f=60.0)
+    pts = [(x, y) for y in (10.0, 30.0) for x in (10.0, 30.0, 50.0)]
+    assert psf_field(cap, pts, grid=(2, 3)).grid == (2, 3)
+    assert psf_field(cap, pts).grid is None
+    for bad in ((3, 3), (6,), (2.5, 3), "2x3", (0, 6), (2, 3, 1)):
+        with pytest.raises(InputError, match="grid must be"):
+            psf_field(cap, pts, grid=bad)

@@ -458,7 +458,9 @@ def psf_extent(psf: np.ndarray, rel_threshold: float = 1e-3) -> int:
 
 def psf_field(capture: Capture, points, *, grid: tuple | None = None,
               max_step: float = MAX_STEP_PX) -> PSFField:
-    """PSFs at ``points`` (``(N, 2)`` x, y pixels). See :func:`render_psf`."""
+    """PSFs at ``points`` (``(N, 2)`` x, y pixels). See :func:`render_psf`. ``grid``,
+    when the points are a grid's in row-major order, is its ``(rows, columns)``: their
+    product must be ``N``."""
     try:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
@@ -467,6 +469,16 @@ def psf_field(capture: Capture, points, *, grid: tuple | None = None,
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise InputError(None, f"points must be (N, 2) pixel positions (x, y), got shape "
                                f"{pts.shape}")
+    if grid is not None:
+        try:
+            rows, cols = grid
+        except (TypeError, ValueError):
+            rows = cols = None
+        if not (is_whole(rows) and is_whole(cols) and rows >= 1 and cols >= 1
+                and rows * cols == len(pts)):
+            raise InputError(None, f"grid must be (rows, columns) of the {len(pts)} points, "
+                                   f"got {grid!r}")
+        grid = (int(rows), int(cols))
     return PSFField(pts, [render_psf(capture, x, y, max_step=max_step) for x, y in pts], grid)
 
 
