@@ -877,7 +877,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overlap", type=float, default=None,
                    help=f"patch overlap fraction, with --grid (default {DEFAULT_OVERLAP:g})")
     s.add_argument("-o", "--output", required=True, metavar="OUT.npy|OUT.png")
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write over an existing output file (never over an input)")
     _add_capture_options(s)
     s.set_defaults(func=cmd_psf)
 
@@ -897,7 +898,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_transfer_option(s)
     s.add_argument("--bit-depth", type=int, choices=(8, 16), help="output bit depth (default: the input's)")
     _add_rotation_option(s)
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write over an existing output file (never over an input)")
     _add_capture_options(s)
     s.set_defaults(func=cmd_simulate)
 
@@ -913,7 +915,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, metavar="OUT", action="append",
                    help="the deblurred photo; for several photos one per photo, in their "
                         "order: comma-separated or the option repeated")
-    s.add_argument("--mode", choices=("variant", "invariant"), default="variant")
+    s.add_argument("--mode", choices=("variant", "invariant"), default="variant",
+                   help="'variant' (default): a PSF per patch, as the blur changes across the "
+                        "photo; 'invariant': one PSF, the principal point's, for the whole "
+                        "photo")
     s.add_argument("--grid", default=None, metavar="RxC|auto",
                    help="patch grid; default: 6x8 (the chapter's) for --method wiener, 'auto' "
                         "(patches small enough that the PSF changes < 0.5 px across one) otherwise; "
@@ -969,7 +974,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "second calibration (several photos: the first photo's, or one per "
                         "photo)")
     _add_rotation_option(s, per_photo=True)
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write over an existing output file (never over an input)")
     s.add_argument("--quiet", action="store_true", help="no progress bar (none is drawn where stderr is not a terminal)")
     _add_capture_options(s, per_photo=True)
     s.set_defaults(func=cmd_deblur)
@@ -1003,7 +1009,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=OFFSET_RANGE_HELP)
     _add_transfer_option(s)
     _add_rotation_option(s, per_photo=True)
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="write over an existing output file (never over an input)")
     _add_capture_options(s, required=True, per_photo=True)
     s.set_defaults(func=cmd_calibrate)
     return p
