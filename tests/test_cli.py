@@ -283,6 +283,8 @@ def test_bad_inputs_exit_2_and_write_nothing(capture_dir, capsys):
     assert "sharp.jpg" in msg and "input photo" in msg
     assert "--grid" in _run_error(["deblur", str(d / "sharp.jpg"), "--capture", cap, "--grid", "0x3",
                                    "-o", str(d / "o.png")], capsys)
+    assert "an output file's name is empty ('')" in _run_error(
+        ["deblur", str(d / "sharp.jpg"), "--capture", cap, "-o", ""], capsys)
     assert {p.name: p.read_bytes() for p in d.iterdir()} == before    # nothing written or changed
 
 

@@ -899,6 +899,8 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
         ``like`` has an alpha channel or ``bit_depth`` is 16.
     """
     path = os.fspath(path)
+    if not path.strip():
+        raise InputError(None, f"an output file's name is empty ({path!r}): name a file")
     if os.path.isdir(path):
         raise InputError(path, "is a folder; name the output file")
     if image:
