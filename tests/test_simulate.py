@@ -270,3 +270,18 @@ def test_synthesis_quantises_when_asked_and_is_linear_in_linear_light(make_captu
     assert out.min() < -0.05
     np.testing.assert_allclose(simulate_blur(-zero_mean, cap, n_samples=5, transfer="linear"),
                                -out, atol=1e-6)
+
+
+def test_a_photo_at_another_scale_is_blurred_by_the_capture_rescaled(make_capture):
+    """As ``deblur`` does: a scene at half the camera's size is blurred by the capture's
+    intrinsics halved (the same result as ``capture.scaled_to``), and one of another
+    aspect ratio is refused, naming the sharp image."""
+    from gyrodeblur.errors import InputError
+
+    cap = make_capture([0.1, 0.4, 0.2], width=128, height=96, f=120.0, readout=0.01)
+    small = transform.resize(data.camera(), (48, 64), anti_aliasing=True).astype(np.float32)
+    got = simulate_blur(small, cap, transfer="linear")
+    assert np.array_equal(got, simulate_blur(small, cap.scaled_to(64, 48), transfer="linear"))
+    assert np.abs(got - small).max() > 0.05                    # it did blur
+    with pytest.raises(InputError, match="sharp image: .*aspect ratio differs"):
+        simulate_blur(small[:, :60], cap, transfer="linear")

@@ -163,8 +163,9 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     sharp : ndarray (H, W) or (H, W, C)
         The scene as seen at the reference orientation, float in [0, 1], an **sRGB**
         photo by default (see ``transfer``; in linear light, values above 1 are allowed,
-        e.g. for light sources that saturate only after blurring). Its size must match
-        ``capture.camera`` (use ``capture.scaled_to``). A last channel of 2 or 4 is alpha,
+        e.g. for light sources that saturate only after blurring). Its size may differ
+        from ``capture.camera``'s by a common scale (the intrinsics are rescaled, as
+        :func:`gyrodeblur.deblur.deblur` does). A last channel of 2 or 4 is alpha,
         a mask: returned untouched (not blurred, noised or quantised).
     capture : Capture
     transfer : {"linear", "srgb"} or TransferCurve
@@ -211,8 +212,9 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     TypeError
         ``capture``, ``snr_db``, ``seed`` or ``quantize`` of the wrong kind.
     ValueError
-        A bad ``order``, ``n_samples`` or ``snr_db``, an image whose size is not the
-        camera's, or a rotation that carries pixels to infinity (by 90 degrees or more).
+        A bad ``order``, ``n_samples`` or ``snr_db``, an image whose aspect ratio is not
+        the camera's (an :class:`InputError`), or a rotation that carries pixels to
+        infinity (by 90 degrees or more).
 
     Notes
     -----
@@ -244,9 +246,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         max_value=np.inf if linear else PHOTO_MAX))                   # alpha: a mask, kept
     img = curve.decode(img)
     H, W = img.shape[:2]
-    cam = capture.camera
-    if (W, H) != (cam.width, cam.height):
-        raise ValueError(f"image is {W}x{H} but the capture's camera is {cam.width}x{cam.height}")
+    capture = capture.scaled_to(W, H, source="sharp image")     # as deblur does
     n = int(n_samples) if n_samples is not None else warp_samples(capture)
     planes = img.reshape(H, W, -1)
     padded = _spline_coefficients(planes, order)     # once, sampled unfiltered below
