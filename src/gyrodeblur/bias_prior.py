@@ -125,7 +125,7 @@ def log_typical_rate(captures) -> tuple[np.ndarray, np.ndarray, float]:
     for log, caps in logs_with_captures(captures):
         near = np.zeros(len(log.t), bool)
         for c in caps:
-            t0, t1 = (v - c.time_offset for v in c.window)
+            t0, t1 = c.log_window
             near |= (log.t >= t0 - _LOG_SPAN) & (log.t <= t1 + _LOG_SPAN)
         ts.append(log.t[near])
         ws.append(log.omega[near])

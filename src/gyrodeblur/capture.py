@@ -185,9 +185,7 @@ class Capture:
         if not (np.isfinite(gap) and gap > 0):
             raise InputError(src, f"max_gap must be a positive number of seconds, got {self.max_gap!r}")
         object.__setattr__(self, "max_gap", gap)
-        t0, t1 = self.window
-        check_coverage(self.log, t0 - self.time_offset, t1 - self.time_offset,
-                       max_gap=self.max_gap)
+        check_coverage(self.log, *self.log_window, max_gap=self.max_gap)
 
     # -- timing -------------------------------------------------------------------------
     @property
@@ -195,6 +193,13 @@ class Capture:
         """Camera-clock seconds from the first row's start to the last row's end."""
         return (self.exposure_start,
                 self.exposure_start + self.readout_time + self.exposure_time)
+
+    @property
+    def log_window(self) -> tuple[float, float]:
+        """:attr:`window` on the gyro log's clock (s; camera time = gyro time +
+        ``time_offset``)."""
+        t0, t1 = self.window
+        return t0 - self.time_offset, t1 - self.time_offset
 
     def row_start(self, y) -> np.ndarray:
         """Camera-clock start time (s) of row ``y`` (float rows allowed)."""

@@ -612,8 +612,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     return_report = check_flag(return_report, "return_report")
     check_callback(progress, "progress")
     get_transfer_curve(transfer)                   # refused before the PSFs are rendered
-    w0, w1 = capture.window
-    coarse = step_warning(capture.log, w0 - capture.time_offset, w1 - capture.time_offset)
+    coarse = step_warning(capture.log, *capture.log_window)
     if coarse is not None:
         warnings.warn(f"{capture.log.source or 'gyro log'}: {coarse}", stacklevel=2)
     if align is not None:
