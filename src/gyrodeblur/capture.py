@@ -701,9 +701,6 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise InputError(origin(keys), f"{exc.source}: {exc.problem}") from None
     _check_intrinsics(camera, origin, from_exif=not ({"fx", "fy"} & (json_cam | set(ov))),
                       size_given=bool({"width", "height"} & (json_cam | set(ov))))
-    _warn_where_exif_disagrees(camera, _get(data, "exposure_time", src), hints, image_size,
-                               origin, fx_given="fx" in (json_cam | set(ov)),
-                               exposure_given=exposure_given)
 
     if "path" not in gyro_d:
         raise InputError(src, "missing gyro.path (or --gyro)")
@@ -755,6 +752,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     from_exif = data.get("exposure_start") is None and "capture_time_text" in hints
     exposure_time = _get(data, "exposure_time", src)
+    _warn_where_exif_disagrees(camera, exposure_time, hints, image_size, origin,
+                               fx_given="fx" in (json_cam | set(ov)),
+                               exposure_given=exposure_given)
     readout = _get(data, "readout_time", src, required=False)
     direction = _readout_direction(log.meta.get("frame_readout_direction", "0"), gpath)
     if readout is None and "frame_readout_time" in log.meta and direction != 0:
