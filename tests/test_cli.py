@@ -310,6 +310,11 @@ def test_missing_log_and_unknown_format(capture_dir, capsys):
     d = capture_dir
     assert "not found" in _run_error(["psf", "--capture", str(d / "cap.json"), "--gyro",
                                       str(d / "nope.csv"), "--at", "5,5", "-o", str(d / "p.npy")], capsys)
+    for bad, flag in ((["--at", "five,5"], "--at"), (["--grid", "3xq"], "--grid"),
+                      (["--at", "5,5", "-o", str(d / "p.txt")], "p.txt")):
+        msg = _run_error(["psf", "--capture", str(d / "cap.json"), "--gyro", str(d / "nope.csv"),
+                          "-o", str(d / "p.npy"), *bad], capsys)   # the options are checked
+        assert flag in msg and "nope.csv" not in msg, msg          # before the log is read
     assert "/dev/null: not a regular file" in _run_error(
         ["psf", "--capture", str(d / "cap.json"), "--gyro", "/dev/null", "--at", "5,5", "-o",
          str(d / "p.npy")], capsys)

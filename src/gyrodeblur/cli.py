@@ -346,8 +346,6 @@ def cmd_psf(args, say) -> None:
     from .psf import render_psf
     from .psfplot import field_image, psf_image
 
-    cap = _load_capture(args, say=say)
-    _check_not_over_capture(cap, args.overwrite, args.output)
     if (args.at is None) == (args.grid is None):
         raise InputError("--at/--grid", "give exactly one of --at X,Y or --grid RxC")
     if args.at is not None and args.overlap is not None:
@@ -356,8 +354,12 @@ def cmd_psf(args, say) -> None:
     if not out.lower().endswith((".npy", ".png")):
         raise InputError(out, "output must end in .npy or .png")
     _check_output(out, None, args.overwrite, image=out.lower().endswith(".png"))
-    if args.at is not None:
-        x, y = _pair(args.at, "--at", float, sep=",")
+    at = None if args.at is None else _pair(args.at, "--at", float, sep=",")
+    grid = None if args.grid is None else _pair(args.grid, "--grid")
+    cap = _load_capture(args, say=say)          # reads the log: after the cheap checks
+    _check_not_over_capture(cap, args.overwrite, args.output)
+    if at is not None:
+        x, y = at
         cam = cap.camera
         if not (0 <= x <= cam.width - 1 and 0 <= y <= cam.height - 1):
             raise InputError("--at", f"({x:g}, {y:g}) is not a pixel of the {cam.width}x"
@@ -369,7 +371,6 @@ def cmd_psf(args, say) -> None:
             _write_picture(out, psf_image(psf), args.overwrite)
         say(f"PSF at ({x:g}, {y:g}): {psf.shape[0]}x{psf.shape[1]} px -> {out}")
         return
-    grid = _pair(args.grid, "--grid")
     cam = cap.camera
     _, field, notes = plan_psf_field(cap, (cam.height, cam.width), grid=grid,
                                      overlap=DEFAULT_OVERLAP if args.overlap is None
