@@ -35,3 +35,16 @@ def constant_rate_capture(rate, *, width=320, height=240, f=300.0, exposure=0.03
 @pytest.fixture
 def make_capture():
     return constant_rate_capture
+
+
+@pytest.fixture(autouse=True)
+def _calibrations_in_one_process_per_xdist_worker(monkeypatch):
+    """Under pytest-xdist (``-n auto``) every core already runs a test: a calibration that
+    forked a worker per core besides would only crowd them, and would fork beside
+    execnet's reader thread, which :func:`gyrodeblur.calibration_workers._can_fork`
+    cannot see (a fork beside scipy's FFT threads hung one such run, session 50). So
+    ``calibrate`` takes one process there; a calibration's figures do not depend on its
+    worker count (``test_calibration_workers.py``, which still forks, asks it)."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        import gyrodeblur.calibrate
+        monkeypatch.setattr(gyrodeblur.calibrate, "available_workers", lambda: 1)

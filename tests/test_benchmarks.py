@@ -1,6 +1,9 @@
 """Every benchmark runs in its --quick mode and writes sane JSON, so the code cannot rot.
 
-The full runs are not part of the test suite (see BENCHMARKS.md).
+The full runs are not part of the test suite (see BENCHMARKS.md). The calibration runs
+that ask only about the calibration deblur their photos with the Wiener filter
+(``--method wiener``): the default method's three deblurs per photo cost 11 s at 512 px,
+a third of such a test's time, and test_compare_methods_quick runs every method.
 """
 
 import importlib.util
@@ -187,7 +190,8 @@ def test_calibration_sessions_quick(tmp_path):
     """Two photos of one session share the injected errors and are calibrated together."""
     _need_shared()
     out = tmp_path / "cal.json"
-    assert _load("calibration").main(["--quick", "--sessions", "--out", str(out)]) == 0
+    assert _load("calibration").main(["--quick", "--sessions", "--method", "wiener",
+                                      "--out", str(out)]) == 0
     r = json.loads(out.read_text())
     rows = r["cases"]
     assert r["mode"] == "sessions" and r["summary"]["sessions"] == 1 and len(rows) == 2
@@ -201,15 +205,16 @@ def test_calibration_sessions_quick(tmp_path):
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_calibration_of_true_captures_with_long_logs_quick(tmp_path):
-    """--no-errors calibrates the true captures; --log-seconds 10 gives them 10 s of the
+    """--no-errors calibrates a true capture; --log-seconds 10 gives it 10 s of the
     source trace either side, which calibrate reads (the typical-rate note) and which
-    bears their bias out: the capture stays (nearly) where it was."""
+    bears its bias out: the capture stays (nearly) where it was."""
     _need_shared()
     out = tmp_path / "cal.json"
-    assert _load("calibration").main(["--quick", "--no-errors", "--log-seconds", "10",
+    assert _load("calibration").main(["--quick", "--cases", "1", "--no-errors",
+                                      "--log-seconds", "10", "--method", "wiener",
                                       "--out", str(out)]) == 0
     r = json.loads(out.read_text())
-    assert r["no_errors"] and r["log_seconds"] == 10
+    assert r["no_errors"] and r["log_seconds"] == 10 and len(r["cases"]) == 1
     for row in r["cases"]:
         assert row["injected"]["offset_ms"] == 0 and row["injected"]["bias"] == [0, 0, 0]
         assert any("typical rate over" in note for note in row["notes"]), row["notes"]
@@ -224,7 +229,7 @@ def test_calibration_burst_quick(tmp_path):
     _need_shared()
     out = tmp_path / "cal.json"
     assert _load("calibration").main(["--quick", "--burst", "--cases", "1",
-                                      "--out", str(out)]) == 0
+                                      "--method", "wiener", "--out", str(out)]) == 0
     r = json.loads(out.read_text())
     first, nxt = r["cases"]
     assert r["mode"] == "bursts" and r["summary"]["sessions"] == 1
@@ -685,7 +690,8 @@ def test_calibration_with_clocks_known_only_roughly_quick(tmp_path):
     _need_shared()
     cal = _load("calibration")
     out = tmp_path / "cal.json"
-    assert cal.main(["--quick", "--cases", "1", "--offset-range", "0.3", "--out", str(out)]) == 0
+    assert cal.main(["--quick", "--cases", "1", "--offset-range", "0.3", "--method", "wiener",
+                     "--out", str(out)]) == 0
     r = json.loads(out.read_text())
     assert r["offset_range"] == 0.3 and r["log_seconds"] == pytest.approx(0.95)
     import _common

@@ -166,9 +166,10 @@ def test_a_sharp_photo_given_a_shaken_log_is_said_to_show_no_blur(case):
     assert res.blur_gain < 1.0
     assert any("the photo shows little of the blur the gyro log implies" in n
                for n in res.notes)
-    # in a session, the sharp one among blurred photos is named (not outweighed by them)
+    # in a session, the sharp one among blurred photos is named (not outweighed by them;
+    # the mapping given and fixed: the search over all 24 took twice the time, same notes)
     later = _true_capture(0.8)
-    res = calibrate([_blur(sharp, true), quantize_8bit(sharp)], [true, later])
+    res = calibrate([_blur(sharp, true), quantize_8bit(sharp)], [true, later], fix={"axes"})
     assert any("photo 2 shows little of the blur" in n for n in res.notes)
     assert not any("photo 1" in n and "little of the blur" in n for n in res.notes)
 
