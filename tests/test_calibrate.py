@@ -398,13 +398,13 @@ def test_a_wide_offset_range_finds_clocks_a_quarter_second_apart(case):
     """Clocks known only roughly: a 250 ms offset lies far outside the default search
     (+-40 ms); with ``offset_range=0.3`` it is found, and where the log does not cover
     the asked range (it starts 0.25 s before the exposure as given) a note says where the
-    search stopped."""
+    search stopped. (The mapping is given and fixed: with all 24 the test took twice the
+    time; test_calibration_with_clocks_known_only_roughly_quick searches them too.)"""
     _, true, blurred = case
-    bad = _corrupt(true, offset=0.25)
+    bad = _corrupt(true, offset=0.25, axes=TRUE_AXES)
     lines = []
-    res = calibrate([blurred], bad, offset_range=0.3, say=lines.append)
+    res = calibrate([blurred], bad, offset_range=0.3, say=lines.append, fix={"axes"})
     got = res.capture
-    assert axes_to_letters(got.axes) == TRUE_AXES
     assert abs(got.time_offset - true.time_offset) < 0.003
     cut = [n for n in res.notes if "covers the exposure only for time offsets" in n]
     assert len(cut) == 1 and "asked: +-300 ms" in cut[0]
