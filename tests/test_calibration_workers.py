@@ -484,3 +484,50 @@ def test_without_cpu_affinity_the_cpu_count_is_used(monkeypatch, cpus, expected)
     monkeypatch.delattr(os, "sched_getaffinity", raising=False)
     monkeypatch.setattr(os, "cpu_count", lambda: cpus)
     assert available_workers() == expected
+
+
+@forks
+def test_settle_threads_waits_while_another_thread_runs():
+    """A thread sorting outside the GIL keeps running: settle_threads waits its whole
+    timeout and says they did not settle; once it has stopped, they settle at once."""
+    import threading
+    import time
+
+    stop = threading.Event()
+    a = np.random.default_rng(0).random(2_000_000)
+
+    def busy():
+        while not stop.is_set():
+            np.sort(a)
+
+    th = threading.Thread(target=busy)
+    th.start()
+    try:
+        time.sleep(0.05)
+        t0 = time.monotonic()
+        settled = cw.settle_threads(timeout=0.3)
+        waited = time.monotonic() - t0
+    finally:
+        stop.set()
+        th.join()
+    assert not settled and waited >= 0.3
+    t0 = time.monotonic()
+    assert cw.settle_threads(timeout=2.0)
+    assert time.monotonic() - t0 < 1.0
+
+
+@forks
+def test_each_of_a_batchs_forks_lets_the_other_threads_settle_first(monkeypatch):
+    """scipy's FFT pool stops its threads before a fork and hung on one that was just
+    going to sleep (session 50): each fork of a batch's pool (two workers: two forks)
+    first waits for the other threads to sleep; a fork outside a batch does not."""
+    seen = []
+    monkeypatch.setattr(cw, "settle_threads", lambda: seen.append(os.getpid()))
+    fit = _Fit()
+    assert StepRunner(fit, 2).map("step", [(1,), (2,), (3,)]) == [1, 4, 9]
+    assert seen == [os.getpid()] * 2
+    pid = os.fork()
+    if pid == 0:
+        os._exit(0)
+    os.waitpid(pid, 0)
+    assert seen == [os.getpid()] * 2

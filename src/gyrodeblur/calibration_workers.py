@@ -20,6 +20,14 @@ process's only Python thread: a fork beside another running thread can deadlock 
 that thread holds (scipy's FFT pool's, seen under three calibrations in three threads),
 and batches of calibrations in two threads would share the forked batch (:data:`_BATCH`).
 A pipeline that calibrates in threads gets the same figures, one step after another.
+
+Even with one Python thread the process has others: scipy's FFT pool (and OpenCV's,
+OpenBLAS's). The FFT pool stops its threads in a handler run before each fork, and that
+handler waits forever for a thread that was just going to sleep as it was told to stop (a
+lost wake-up: seen once, the calibration's pool forking its second worker right after the
+first fork had restarted the FFT threads, on a loaded machine, session 50). So before each
+of a batch's forks, :func:`settle_threads` waits (at most :data:`SETTLE_TIMEOUT`) until no
+other thread of the process is running.
 """
 
 from __future__ import annotations
@@ -29,13 +37,15 @@ import os
 import signal
 import sys
 import threading
+import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-__all__ = ["StepRunner", "available_workers", "MAX_WORKERS"]
+__all__ = ["StepRunner", "available_workers", "settle_threads", "MAX_WORKERS",
+           "SETTLE_TIMEOUT"]
 
 #: At most this many worker processes by default: a batch holds up to about seven steps
 #: (a calibration's candidates), and each step's FFTs take two threads.
@@ -44,6 +54,61 @@ MAX_WORKERS = 4
 # (fit, method name, argument tuples) of the batch being run: set before the workers are
 # forked, which is how they receive it
 _BATCH = None
+
+#: Longest wait (s) before one of a batch's forks for the process's other threads to go
+#: to sleep (:func:`settle_threads`); the fork then goes ahead.
+SETTLE_TIMEOUT = 0.1
+
+# True while a batch's pool forks its workers: the before-fork hook then settles threads
+_SETTLING = False
+
+
+def _running_threads(own: int) -> int:
+    """How many threads of this process, other than the one of native id ``own``, are
+    running or waiting for a CPU (state R in ``/proc/self/task/*/stat``); 0 where that
+    cannot be read (not Linux)."""
+    try:
+        tids = os.listdir("/proc/self/task")
+    except OSError:
+        return 0
+    n = 0
+    for tid in tids:
+        if tid == str(own):
+            continue
+        try:
+            with open(f"/proc/self/task/{tid}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:                    # the thread has ended
+            continue
+        end = stat.rfind(b")")             # the name, in parentheses, may hold anything
+        if stat[end + 2:end + 3] == b"R":
+            n += 1
+    return n
+
+
+def settle_threads(timeout: float = SETTLE_TIMEOUT) -> bool:
+    """Wait until no other thread of this process runs (two looks 0.5 ms apart), at most
+    ``timeout`` seconds; returns whether they did. A thread asleep is waiting on a lock or
+    condition it has already registered with, so a wake-up sent now reaches it."""
+    own = threading.get_native_id()
+    end = time.monotonic() + timeout
+    quiet = 0
+    while True:
+        quiet = quiet + 1 if _running_threads(own) == 0 else 0
+        if quiet >= 2:
+            return True
+        if time.monotonic() >= end:
+            return False
+        time.sleep(0.0005)
+
+
+def _before_fork() -> None:
+    if _SETTLING:
+        settle_threads()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(before=_before_fork)
 
 
 def available_workers() -> int:
@@ -182,6 +247,7 @@ class StepRunner:
         # signal to the process group), fails them as broken, and the two raced into an
         # InvalidStateError traceback before the one-line message (3 in 10 SIGTERMs of
         # calibrate, session 44). Nothing here cancels them: the pool's thread fails them.
+        global _SETTLING
         pool = None
         try:
             # The pool is made inside the deferral too: making it imports modules, and an
@@ -189,10 +255,14 @@ class StepRunner:
             # ("Exception ignored in ... _get_module_lock"), and the batch ran on (1 in
             # about 350 signals to the process group at the start of a batch, session 45).
             with _interrupts_deferred():      # the first submit forks the workers
-                pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
-                                           initializer=_start_worker,
-                                           initargs=(os.getpid(),))
-                futures = [pool.submit(_worker, k) for k in range(len(arglist))]
+                _SETTLING = True
+                try:
+                    pool = ProcessPoolExecutor(n, multiprocessing.get_context("fork"),
+                                               initializer=_start_worker,
+                                               initargs=(os.getpid(),))
+                    futures = [pool.submit(_worker, k) for k in range(len(arglist))]
+                finally:
+                    _SETTLING = False
             for k, future in enumerate(futures):
                 done[k] = future.result()
         except BrokenProcessPool:
