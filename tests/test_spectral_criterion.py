@@ -357,3 +357,50 @@ def test_a_rolls_kernel_changes_across_the_patch_by_half_its_arc():
     want = 0.15 * np.sqrt(2) * 64 * 4.0 * 0.02 * (127 / 128) / 2
     assert change[2] == pytest.approx(want, rel=0.02), (change[2], want)
     assert change[1] < 0.05 * want, change[1]
+
+
+def _rolling_or_yawing_patch(axis: int, across: bool):
+    """One 64 px patch at (120, 90) of a 400 x 300 photo taken during a 4 rad/s turn about
+    camera ``axis`` (global shutter, 20 ms, f 1000 px); ``across`` as given."""
+    from gyrodeblur.calibration_patches import CalibrationPhoto
+    from gyrodeblur.camera import Camera
+    from gyrodeblur.capture import Capture
+    from gyrodeblur.gyrolog import GyroLog
+    from gyrodeblur.spectral_criterion import PatchSpectra
+
+    t = np.arange(0.0, 1.0, 0.005)
+    img = np.clip(0.5 + 0.1 * np.random.default_rng(0).normal(size=(300, 400)), 0, 1)
+    w = np.zeros((t.size, 3))
+    w[:, axis] = 4.0
+    cap = Capture(0.5, 0.02, 0.0, Camera.centred(400, 300, 1000.0), GyroLog(t, w))
+    return PatchSpectra([CalibrationPhoto(img, cap, "linear", 0)], [(0, 120.0, 90.0)], 1.0,
+                        64, rows=(-0.15, 0.0, 0.15), n_samples=128, across=across)
+
+
+def test_the_points_across_a_patch_have_its_windows_second_moment():
+    """The 2 x 2 points sit where their second moment in x and in y is that of the patch's
+    own Hann window power (the continuous window's; the 64 px patch's discrete one has 3 %
+    more)."""
+    from gyrodeblur.spectral_criterion import _ACROSS
+
+    p = _rolling_or_yawing_patch(2, True)
+    power = p.win[p.size // 2] ** 2               # one row of the separable window, squared
+    u = (np.arange(p.size) - (p.size - 1) / 2) / p.size
+    assert _ACROSS ** 2 == pytest.approx((power * u ** 2).sum() / power.sum(), rel=0.05)
+
+
+def test_a_patch_read_across_averages_a_rolls_kernel_as_the_patch_sees_it():
+    """Under a 4 rad/s roll the kernel turns across a patch away from the principal point.
+    The blur test's 5 x 5 weighted points (``spread``) are the reference average: the 2 x 2
+    points come several times closer to it than three rows of the centre do. Under a yaw
+    (the kernel the same across the patch, up to perspective) the two readings agree."""
+    from gyrodeblur.spectral_criterion import Corrections
+
+    th = Corrections(axes=np.eye(3))
+    roll_rows, roll_across = (_rolling_or_yawing_patch(2, a) for a in (False, True))
+    ref = roll_rows.spectra(th, spread=True)
+    err_rows = np.abs(np.log(roll_rows.spectra(th) / ref)).mean()
+    err_across = np.abs(np.log(roll_across.spectra(th) / ref)).mean()
+    assert err_across < 0.35 * err_rows, (err_across, err_rows)
+    yaw_rows, yaw_across = (_rolling_or_yawing_patch(1, a) for a in (False, True))
+    assert np.abs(np.log(yaw_across.spectra(th) / yaw_rows.spectra(th))).mean() < 0.1 * err_rows

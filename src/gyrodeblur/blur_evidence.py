@@ -128,7 +128,7 @@ def capture_gain_over_no_blur(image: np.ndarray, capture, *, transfer="srgb",
     if windows is None:
         return float("nan")
     centres, scale, size = windows
-    spectra = PatchSpectra([photo], centres, scale, size, rows=FINE_ROWS,
+    spectra = PatchSpectra([photo], centres, scale, size, rows=FINE_ROWS, across=True,
                            n_samples=fine_samples(path, scale),
                            band=spectral_band(photo.blockiness()))
     return _per_9_patches(spectra.gain_over_no_blur(theta))

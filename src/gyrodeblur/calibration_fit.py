@@ -162,7 +162,7 @@ class CalibrationFit:
         self.blockiness = max(ph.blockiness() for ph in photos)
         self.band = spectral_band(self.blockiness)
         n_fine = fine_samples(path, s_f)
-        self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=FINE_ROWS,
+        self.fine = PatchSpectra(photos, centres, s_f, P_f, rows=FINE_ROWS, across=True,
                                  n_samples=n_fine, band=self.band)
         self._phase_args = (photos, per, s_f, P_f, n_fine)
         self._phase = None

@@ -26,10 +26,14 @@ patch centre's pixel, mapped by the inverse of the photo's local warp there (the
 shutter shears and stretches the patch, and its blur with it:
 :meth:`PatchSpectra.displacements`), rendered as a sum of narrow Gaussians (0.75 px): the
 cost is a smooth function of the parameters (bilinear splatting makes it jagged, because
-its low-pass changes with the PSF's sub-pixel position). A patch spans rows exposed at
-different times (rolling shutter), so ``|H|^2`` is averaged over three of its rows. The
-blur test (:meth:`PatchSpectra.gain_over_no_blur`) averages it over 5 x 5 points of a patch
-whose kernel changes across it (a roll, a fast pan at a wide angle); the search does not.
+its low-pass changes with the PSF's sub-pixel position). A patch's kernel changes across
+it: its rows are exposed at different times (rolling shutter), and a roll or a fast pan
+at a wide angle turns or stretches the trace from one side to the other. So the search's
+fine patches (``across``) average ``|H|^2`` over 2 x 2 points of the patch, each at its own
+row's time, placed where their second moments match the Hann window power's
+(:data:`_ACROSS`); other patches average it over three rows of the centre. The blur test
+(:meth:`PatchSpectra.gain_over_no_blur`) averages it over 5 x 5 points of a patch whose
+kernel changes across it by more than :data:`_KERNEL_CHANGE`.
 
 See :mod:`gyrodeblur.calibrate` for how the criterion is searched.
 """
@@ -70,6 +74,15 @@ _KERNEL_CHANGE = 0.5
 #: a second moment of 0.02 the side squared, the window power's own. 3 points a side
 #: left up to 9 nats of the gain on a 3 rad/s roll; 7 points change it by under 0.4
 _SPREAD_OFFSETS = (-0.3, -0.15, 0.0, 0.15, 0.3)
+#: offset (x the patch side) in x and in y of the 2 x 2 points at which a patch made
+#: ``across`` reads its ``|H|^2`` (weighted equally, each at its own row's time): the Hann
+#: window power's second moment, 1/12 - 5 / (8 pi^2) = 0.02 the side squared, so a kernel
+#: that changes smoothly across the patch is averaged as the window weighs it, to second
+#: order, for 4 OTFs (the three rows of the centre that they replace saw no change in x).
+#: The demo's exact capture (a 16 px blur, the kernel changing 0.52 px across its patches)
+#: scored 14 tempered nats worse than the calibration's optimum with the centre's rows,
+#: 4 with these points (session 51)
+_ACROSS = float(np.sqrt(1 / 12 - 5 / (8 * np.pi ** 2)))
 
 
 @dataclass
@@ -102,8 +115,11 @@ class PatchSpectra:
 
     def __init__(self, photos: list[CalibrationPhoto], centres, scale: float, size: int, *,
                  rows=(0.0,), n_samples: int = 128, envelope: bool = True,
-                 band: float = np.inf):
+                 band: float = np.inf, across: bool = False):
         self.photos = photos
+        #: ``|H|^2`` read at 2 x 2 points across each patch (:data:`_ACROSS`), not at ``rows``
+        #: of its centre (which a call's own ``rows`` and ``keep_otf`` still use)
+        self.across = bool(across)
         P = self.size = int(size)
         F = self.F = max(P, int(round(P / scale))) if scale < 1 else P
         self.scale = P / F
@@ -312,7 +328,8 @@ class PatchSpectra:
 
         ``spread``: each patch's ``|H|^2`` averaged over points across the patch
         (:data:`_SPREAD_OFFSETS` in x and y, each with its own row's time) rather than over
-        :attr:`rows` of its centre: for a kernel that changes across the patch.
+        :attr:`rows` of its centre (or, patches made ``across``, over their 2 x 2 points):
+        for a kernel that changes across the patch by more than those points follow.
 
         The latest call's result is kept (read-only) and returned again for the same
         arguments: the search asks for the spectra at one point several times in a row (a
@@ -340,6 +357,9 @@ class PatchSpectra:
             w = np.cos(np.pi * o) ** 4
             rw = np.outer(w, w).ravel() / w.sum() ** 2
             items = self._points_across(o, tl)
+        elif self.across and rows is self.rows and not keep_otf:
+            rw = np.full(4, 0.25)
+            items = self._points_across((-_ACROSS, _ACROSS), tl)
         else:
             items = [(i, x, y, y + r * F, tau)
                      for tau in tl for (i, x, y) in self.points for r in rows]
@@ -549,9 +569,8 @@ class PatchSpectra:
         Where the kernel changes across a patch by more than :data:`_KERNEL_CHANGE`
         (:meth:`kernel_change`), its ``|H|^2`` is averaged over the patch (``spread``
         of :meth:`spectra`): under a 1.5-3 rad/s roll the centre's kernel alone made a
-        true capture score 46-160 nats worse than no blur. (The search's cost keeps the
-        centre's kernel: averaged alike, even over 5 points, it moved the real Shield
-        capture's focal length away from its hand value; BENCHMARKS.md section 4.)"""
+        true capture score 46-160 nats worse than no blur. (The search's cost averages
+        it over 2 x 2 points, ``across``, which follow a smaller change to second order.)"""
         S_blur = self.spectra(theta, spread=self.kernel_change(theta) > _KERNEL_CHANGE)
         H0 = self.otf(np.zeros((len(self.points), 1, 2)))
         S_none = self.model((H0.real ** 2 + H0.imag ** 2).astype(np.float32))
