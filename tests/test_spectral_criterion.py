@@ -404,3 +404,38 @@ def test_a_patch_read_across_averages_a_rolls_kernel_as_the_patch_sees_it():
     assert err_across < 0.35 * err_rows, (err_across, err_rows)
     yaw_rows, yaw_across = (_rolling_or_yawing_patch(1, a) for a in (False, True))
     assert np.abs(np.log(yaw_across.spectra(th) / yaw_rows.spectra(th))).mean() < 0.1 * err_rows
+
+
+def test_an_envelope_steps_floor_is_capped_in_proportion(monkeypatch):
+    """:data:`_FLOOR_MAX_STEP`: on patches whose periodograms hold a white floor (the
+    median bin's power added) while the fit starts from a floor a million times too low,
+    the uncapped Fisher step throws the log envelope more than 10 e-folds; the capped one
+    moves it under 0.5, along the same direction (the whole step shrunk, so the envelope
+    stays a continuous function of the spectra). From the patches' own floor, a normal
+    step is not touched."""
+    import gyrodeblur.spectral_criterion as sc
+    from gyrodeblur.spectral_criterion import Corrections
+
+    th = Corrections(axes=np.eye(3))
+
+    def steps(floor_scale, white):
+        p = _patches()
+        S = p.spectra(th)
+        p.pbin = p.pbin + white * np.median(p.pbin, axis=1, keepdims=True)
+        p._prepare_fast_envelope()
+        p._noise = p._noise * floor_scale
+        start = np.log(p.fast_envelope(S, iters=0))
+        capped = np.log(p.fast_envelope(S, iters=1)) - start
+        monkeypatch.setattr(sc, "_FLOOR_MAX_STEP", 1e9)
+        free = np.log(p.fast_envelope(S, iters=1)) - start
+        monkeypatch.undo()
+        return capped, free
+
+    capped, free = steps(1e-6, 1.0)
+    assert (np.abs(free).max(axis=1) > 10).all(), np.abs(free).max(axis=1)
+    assert (np.abs(capped).max(axis=1) < 0.5).all(), np.abs(capped).max(axis=1)
+    for c, f in zip(capped, free):
+        k = (c @ f) / (f @ f)
+        np.testing.assert_allclose(c, k * f, atol=1e-9 * np.abs(f).max())
+    capped, free = steps(1.0, 0.0)
+    np.testing.assert_array_equal(capped, free)
