@@ -114,9 +114,12 @@ def test_the_search_never_ends_worse_than_the_given_parameters(shared_data):
         assert abs(scale - 1) < abs(0.9574 - 1) / 2, scale
 
 
-def _tilting_patch(rate, axis: int):
-    """The centre patch of a 400 x 300 photo (f 400 px, exposure 20 ms, readout 30 ms)
-    taken while the camera turns at a constant ``rate`` (rad/s) about camera ``axis``."""
+def _tilting_patch(rate, axis: int, *, focal: float = 400.0, readout: float = 0.03,
+                   centre=(199.5, 149.5), **spectra_options):
+    """A 64 px patch at ``centre`` (the middle by default) of a 400 x 300 photo (f
+    ``focal`` px, exposure 20 ms, ``readout`` s) taken while the camera turns at a
+    constant ``rate`` (rad/s) about camera ``axis``; ``spectra_options`` go to
+    :class:`PatchSpectra`."""
     from gyrodeblur.calibration_patches import CalibrationPhoto
     from gyrodeblur.camera import Camera
     from gyrodeblur.capture import Capture
@@ -126,10 +129,10 @@ def _tilting_patch(rate, axis: int):
     t = np.arange(0.0, 1.0, 0.005)
     w = np.zeros((t.size, 3))
     w[:, axis] = rate
-    cap = Capture(0.5, 0.02, 0.03, Camera.centred(400, 300, 400.0), GyroLog(t, w))
+    cap = Capture(0.5, 0.02, readout, Camera.centred(400, 300, focal), GyroLog(t, w))
     img = 0.5 + 0.1 * np.random.default_rng(0).normal(size=(300, 400))
     photo = CalibrationPhoto(np.clip(img, 0, 1), cap, "linear", 0)
-    return PatchSpectra([photo], [(0, 199.5, 149.5)], 1.0, 64)
+    return PatchSpectra([photo], [(0, *centre)], 1.0, 64, **spectra_options)
 
 
 def test_the_kernel_is_seen_through_the_rolling_shutters_stretch():
@@ -360,21 +363,10 @@ def test_a_rolls_kernel_changes_across_the_patch_by_half_its_arc():
 
 
 def _rolling_or_yawing_patch(axis: int, across: bool):
-    """One 64 px patch at (120, 90) of a 400 x 300 photo taken during a 4 rad/s turn about
-    camera ``axis`` (global shutter, 20 ms, f 1000 px); ``across`` as given."""
-    from gyrodeblur.calibration_patches import CalibrationPhoto
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-    from gyrodeblur.spectral_criterion import PatchSpectra
-
-    t = np.arange(0.0, 1.0, 0.005)
-    img = np.clip(0.5 + 0.1 * np.random.default_rng(0).normal(size=(300, 400)), 0, 1)
-    w = np.zeros((t.size, 3))
-    w[:, axis] = 4.0
-    cap = Capture(0.5, 0.02, 0.0, Camera.centred(400, 300, 1000.0), GyroLog(t, w))
-    return PatchSpectra([CalibrationPhoto(img, cap, "linear", 0)], [(0, 120.0, 90.0)], 1.0,
-                        64, rows=(-0.15, 0.0, 0.15), n_samples=128, across=across)
+    """The patch at (120, 90) of :func:`_tilting_patch` turning at 4 rad/s about camera
+    ``axis`` (global shutter, f 1000 px), read at three rows or ``across``."""
+    return _tilting_patch(4.0, axis, focal=1000.0, readout=0.0, centre=(120.0, 90.0),
+                          rows=(-0.15, 0.0, 0.15), across=across)
 
 
 def test_the_points_across_a_patch_have_its_windows_second_moment():
