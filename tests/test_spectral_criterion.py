@@ -340,23 +340,11 @@ def test_a_rolls_kernel_changes_across_the_patch_by_half_its_arc():
     that from the centre. The farthest of :meth:`PatchSpectra.kernel_change`'s points
     from the centre is a corner, ``0.15 sqrt 2`` of the patch side away. A yaw moves
     every point of a patch nearly alike (perspective: a change under 5 % of the roll's)."""
-    from gyrodeblur.calibration_patches import CalibrationPhoto
-    from gyrodeblur.camera import Camera
-    from gyrodeblur.capture import Capture
-    from gyrodeblur.gyrolog import GyroLog
-    from gyrodeblur.spectral_criterion import Corrections, PatchSpectra
+    from gyrodeblur.spectral_criterion import Corrections
 
-    t = np.arange(0.0, 1.0, 0.005)
-    img = np.clip(0.5 + 0.1 * np.random.default_rng(0).normal(size=(300, 400)), 0, 1)
     th = Corrections(axes=np.eye(3))
-    change = {}
-    for axis in (1, 2):
-        w = np.zeros((t.size, 3))
-        w[:, axis] = 4.0
-        cap = Capture(0.5, 0.02, 0.0, Camera.centred(400, 300, 1000.0), GyroLog(t, w))
-        p = PatchSpectra([CalibrationPhoto(img, cap, "linear", 0)], [(0, 199.5, 149.5)],
-                         1.0, 64, n_samples=128)
-        change[axis] = p.kernel_change(th)
+    change = {axis: _tilting_patch(4.0, axis, focal=1000.0, readout=0.0).kernel_change(th)
+              for axis in (1, 2)}
     want = 0.15 * np.sqrt(2) * 64 * 4.0 * 0.02 * (127 / 128) / 2
     assert change[2] == pytest.approx(want, rel=0.02), (change[2], want)
     assert change[1] < 0.05 * want, change[1]
