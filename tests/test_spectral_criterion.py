@@ -158,6 +158,23 @@ def test_the_kernel_is_seen_through_the_rolling_shutters_stretch():
         assert np.ptp(d[:, 1]) < 0.01, np.ptp(d[:, 1])   # a transposed map would tilt it
 
 
+def test_kernels_asked_together_are_each_as_asked_alone():
+    """Items that share a row and a time shift share their rotations (made once per pair):
+    each kernel of a mixed batch (points across a row, other rows, two time shifts, in no
+    order) equals the kernel asked for alone."""
+    from gyrodeblur.spectral_criterion import Corrections
+
+    p = _tilting_patch(0.8, axis=2, readout=0.02)          # a roll: every pixel differs
+    th = Corrections(axes=np.eye(3))
+    items = [(0, 180.0, 140.0, 140.0, 0.004), (0, 220.0, 140.0, 140.0, 0.0),
+             (0, 180.0, 140.0, 140.0, 0.0), (0, 220.0, 160.0, 160.0, 0.0),
+             (0, 200.0, 90.0, 90.0, -0.003), (0, 220.0, 140.0, 140.0, 0.004)]
+    together = p.displacements(th, items)
+    alone = np.concatenate([p.displacements(th, [it]) for it in items])
+    assert np.allclose(together, alone, rtol=0, atol=1e-9)
+    assert np.abs(together[1] - together[2]).max() > 0.3    # one row, two kernels
+
+
 def test_the_focal_length_alone_is_found_on_a_rolling_shutter_photo(shared_data):
     """A benchmark photo (lai_manmade_01, its second shake window, 15 px of blur, a 30 ms
     readout) with everything but the focal length true and fixed, given 5 % short: the

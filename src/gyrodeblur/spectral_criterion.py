@@ -110,6 +110,14 @@ class Corrections:
                            readout_time_unknown=False, exif_time_to_the_second=False)
 
 
+def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray],
+                                                           np.ndarray]:
+    """The distinct pairs ``(a[k], b[k])`` (two arrays) and, for each ``k``, the index of
+    its pair among them."""
+    u, back = np.unique(np.stack([a, b], axis=1), axis=0, return_inverse=True)
+    return (u[:, 0], u[:, 1]), back.ravel()
+
+
 class PatchSpectra:
     """Patches of the photos at one working scale, and the cost of a parameter set."""
 
@@ -242,12 +250,15 @@ class PatchSpectra:
             B = len(idx)
             cap = self.photos[i].cap
             readout = max(0.0, cap.readout_time + theta.readout)
-            t_row = cap.exposure_start + readout * row / cap.camera.height        # (B,)
+            # items on one row with one time shift (a patch's points across it in x) share
+            # their rotations: each pair's made once
+            (row_u, tau_u), back = _unique_pairs(row, tau)
+            t_row = cap.exposure_start + readout * row_u / cap.camera.height      # (U,)
             T = np.concatenate([
                 t_row[:, None] + cap.exposure_time * s,
                 (t_row[:, None, None] + readout * rows_w[:, None] / cap.camera.height
-                 + cap.exposure_time * sw).reshape(B, 3 * m)], axis=1)
-            R = self._rotations(theta, i, T, tau)
+                 + cap.exposure_time * sw).reshape(len(t_row), 3 * m)], axis=1)
+            R = self._rotations(theta, i, T, tau_u)[back]
             cam = cap.camera.with_focal_scale(theta.focal)
             # p - x0_p(t) of the pixel and of its four neighbours (full-resolution px)
             o = offsets_under_rotation(cam, R[:, :n], x, y)
@@ -289,8 +300,8 @@ class PatchSpectra:
         iy = (cy.astype(np.int64)[..., None] + offs) % P
         idx = (np.arange(B) * P * P)[:, None, None, None] + iy[..., :, None] * P + ix[..., None, :]
         w = wy[..., :, None] * wx[..., None, :]
+        w /= np.maximum(w.sum(axis=(1, 2, 3)), 1e-30)[:, None, None, None]   # sum 1 each
         k = np.bincount(idx.ravel(), w.ravel(), minlength=B * P * P).reshape(B, P, P)
-        k /= np.maximum(k.sum(axis=(1, 2), keepdims=True), 1e-30)
         return sfft.rfft2(k.astype(np.float32), axes=(1, 2), workers=self.fft_threads)
 
     def model(self, h2: np.ndarray) -> np.ndarray:
