@@ -301,6 +301,41 @@ def test_a_streaks_otf_has_unit_gain_and_its_zero_along_the_streak():
     assert abs(H[1, 8, 0]) < 0.01 and abs(H[1, 0, 8]) == pytest.approx(gauss, abs=0.01)
 
 
+def test_the_otf_is_the_transform_of_the_splatted_taps_wherever_the_kernel_lies():
+    """The OTF, made through a box that holds the batch's kernels, equals the direct sum
+    ``sum w exp(-2 pi i f . x)`` over every sample's 5 x 5 Gaussian taps (rounded centre,
+    weights summing to 1 per kernel), phase included: for kernels of different sizes far
+    from the patch's origin, and for one longer than the patch, which wraps. ``otf_power``
+    is its ``|H|^2``."""
+    from gyrodeblur.spectral_criterion import _SPLAT_SIGMA
+
+    p = _blurred_patches(np.ones((1, 1)), 1.0)
+    P = p.size
+    rng = np.random.default_rng(3)
+    n = 40
+    s = np.linspace(0, 1, n)[:, None]
+    disp = np.stack([np.hstack([3 * s, -2 * s ** 2]) + [-20.4, 7.7],
+                     np.hstack([11 * np.sin(3 * s), 9 * s]) + [5.2, -30.6],
+                     np.hstack([90 * s, 20 * s]) + [-45.0, 0.3]])   # 90 px on 64 px
+    disp = disp + rng.normal(0, 0.3, disp.shape)
+    fy = np.fft.fftfreq(P)[:, None]
+    fx = np.fft.rfftfreq(P)[None, :]
+    offs = np.arange(-2, 3)
+    want = np.zeros((3, P, P // 2 + 1), complex)
+    for b in range(3):
+        total = 0.0
+        for x, y in disp[b]:
+            cx, cy = np.floor(x + 0.5), np.floor(y + 0.5)
+            for oy in offs:
+                for ox in offs:
+                    w = np.exp(-((cx + ox - x) ** 2 + (cy + oy - y) ** 2) / (2 * _SPLAT_SIGMA ** 2))
+                    want[b] += w * np.exp(-2j * np.pi * (fy * (cy + oy) + fx * (cx + ox)))
+                    total += w
+        want[b] /= total
+    np.testing.assert_allclose(p.otf(disp), want, atol=2e-6)
+    np.testing.assert_allclose(p.otf_power(disp), np.abs(want) ** 2, atol=4e-6)
+
+
 @pytest.mark.parametrize("scale", [1.0, 0.5])
 def test_the_true_kernel_explains_blurred_patches_best(scale):
     """Patches of a texture blurred by a horizontal box of 12 photo px: that kernel gains

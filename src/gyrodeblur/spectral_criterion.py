@@ -286,23 +286,56 @@ class PatchSpectra:
         return quat_to_matrix(quat_multiply(qref[:, None, :], q))
 
     def otf(self, disp: np.ndarray) -> np.ndarray:
-        """Complex OTF ``(B, P, P//2+1)`` of Gaussian-splatted traces (sum 1)."""
+        """Complex OTF ``(B, P, P//2+1)`` of Gaussian-splatted traces ``disp``
+        ``(B, n, 2)`` (px; each kernel sums to 1, its origin at the patch's origin)."""
+        P = self.size
+        H, corner = self._box_transform(disp)
+        fy = sfft.fftfreq(P)
+        fx = sfft.rfftfreq(P)
+        ramp_y = np.exp(-2j * np.pi * corner[:, 1, None] * fy).astype(np.complex64)
+        ramp_x = np.exp(-2j * np.pi * corner[:, 0, None] * fx).astype(np.complex64)
+        return H * ramp_y[:, :, None] * ramp_x[:, None, :]
+
+    def otf_power(self, disp: np.ndarray) -> np.ndarray:
+        """``|H|^2`` ``(B, P, P//2+1)`` (float32) of :meth:`otf`'s kernels, which does not
+        depend on where a kernel lies (the phase ramp of :meth:`otf` left out)."""
+        H, _ = self._box_transform(disp)
+        return H.real ** 2 + H.imag ** 2
+
+    def _box_transform(self, disp: np.ndarray):
+        """The transform ``(B, P, P//2+1)`` of each splatted trace moved (circularly) to
+        the corner of the smallest box that holds every kernel of the batch, and the
+        corner ``(B, 2)`` (x, y; integer px) it was moved from.
+
+        A 5 x 5 Gaussian splat is an outer product of 5 weights in y and 5 in x, so a
+        kernel is ``Wy^T Wx`` (``Wy``: ``(n, box rows)``, ``Wx``: ``(n, box columns)``,
+        5 weights in each of the trace's ``n`` rows), made by a small matrix product rather
+        than a histogram of ``25 n`` taps; only the box's rows are transformed along x
+        (zero-padded to ``P``) before the full transform along y. A kernel wider than the
+        patch wraps, as the circular transform sees it."""
         P = self.size
         B, n, _ = disp.shape
+        if B == 0:
+            return np.zeros((0, P, P // 2 + 1), np.complex64), np.zeros((0, 2), np.int64)
         R = 2
         offs = np.arange(-R, R + 1)
-        cx = np.floor(disp[..., 0] + 0.5)
-        cy = np.floor(disp[..., 1] + 0.5)
-        k2 = -0.5 / _SPLAT_SIGMA ** 2
-        wx = np.exp(k2 * ((cx[..., None] + offs) - disp[..., 0, None]) ** 2)
-        wy = np.exp(k2 * ((cy[..., None] + offs) - disp[..., 1, None]) ** 2)
-        ix = (cx.astype(np.int64)[..., None] + offs) % P
-        iy = (cy.astype(np.int64)[..., None] + offs) % P
-        idx = (np.arange(B) * P * P)[:, None, None, None] + iy[..., :, None] * P + ix[..., None, :]
-        w = wy[..., :, None] * wx[..., None, :]
-        w /= np.maximum(w.sum(axis=(1, 2, 3)), 1e-30)[:, None, None, None]   # sum 1 each
-        k = np.bincount(idx.ravel(), w.ravel(), minlength=B * P * P).reshape(B, P, P)
-        return sfft.rfft2(k.astype(np.float32), axes=(1, 2), workers=self.fft_threads)
+        c = np.floor(disp + 0.5)
+        g = np.exp((-0.5 / _SPLAT_SIGMA ** 2) * ((c[..., None] + offs) - disp[..., None]) ** 2)
+        ic = c.astype(np.int64)
+        corner = ic.min(axis=1) - R                                      # (B, 2)
+        ic -= corner[:, None, :]
+        hx, hy = np.minimum(ic.max(axis=(0, 1)) + R + 1, P)
+        # each kernel sums to 1: the y weights carry the normalisation
+        tot = (g[..., 0, :].sum(-1) * g[..., 1, :].sum(-1)).sum(1)        # (B,)
+        gy = g[..., 1, :] / np.maximum(tot, 1e-30)[:, None, None]
+        base = np.arange(B * n).reshape(B, n, 1)
+        Wx = np.zeros(B * n * hx, np.float32)
+        Wx[(base * hx + (ic[..., 0, None] + offs) % P).ravel()] = g[..., 0, :].ravel()
+        Wy = np.zeros(B * n * hy, np.float32)
+        Wy[(base * hy + (ic[..., 1, None] + offs) % P).ravel()] = gy.ravel()
+        k = np.matmul(Wy.reshape(B, n, hy).transpose(0, 2, 1), Wx.reshape(B, n, hx))
+        X = sfft.rfft(k, n=P, axis=2, workers=self.fft_threads)
+        return sfft.fft(X, n=P, axis=1, workers=self.fft_threads), corner
 
     def model(self, h2: np.ndarray) -> np.ndarray:
         """``|H|^2 |A|^2 / |D|^2`` smoothed by the Hann window's power kernel, masked:
@@ -374,8 +407,13 @@ class PatchSpectra:
         else:
             items = [(i, x, y, y + r * F, tau)
                      for tau in tl for (i, x, y) in self.points for r in rows]
-        H = self.otf(self.displacements(theta, items))
-        h2 = (H.real ** 2 + H.imag ** 2).reshape(len(tl) * len(self.points), len(rw), *H.shape[1:])
+        disp = self.displacements(theta, items)
+        if keep_otf:
+            H = self.otf(disp)
+            h2 = H.real ** 2 + H.imag ** 2
+        else:
+            h2 = self.otf_power(disp)
+        h2 = h2.reshape(len(tl) * len(self.points), len(rw), *h2.shape[1:])
         h2 = np.tensordot(rw.astype(np.float32), h2, axes=([0], [1]))
         S = self.model(h2)
         if keep_otf:
