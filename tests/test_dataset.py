@@ -134,6 +134,24 @@ def test_write_case_roundtrip_single(cases, tmp_path):
     assert back.name == cases[0].name and np.array_equal(back.blurred, cases[0].blurred)
 
 
+def test_a_case_without_its_sharp_photo_is_written_and_read_back_without_one(cases, tmp_path):
+    """A case read from a folder without ``sharp.png`` writes without one; a ``sharp.png``
+    left from another case is removed with ``overwrite`` (else the folder would read back
+    with that case's ground truth) and refused without it."""
+    write_case(cases[0], tmp_path / "a")
+    (tmp_path / "a" / "sharp.png").unlink()
+    bare = load_case(tmp_path / "a")
+    assert bare.sharp is None
+    write_case(cases[1], tmp_path / "b")
+    with pytest.raises(InputError, match="sharp.png"):
+        write_case(bare, tmp_path / "b", overwrite=False)
+    assert (tmp_path / "b" / "sharp.png").exists()
+    write_case(bare, tmp_path / "b")
+    back = load_case(tmp_path / "b")
+    assert back.sharp is None and back.name == cases[0].name
+    assert np.array_equal(back.blurred, cases[0].blurred)
+
+
 def test_shared_log_gap_is_found_and_avoided(cases):
     log = read_gyro_log(GYRO)
     gaps = find_gaps(log)

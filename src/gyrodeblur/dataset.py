@@ -119,8 +119,9 @@ class Case:
     ----------
     name : str
         ``<photo stem>_w<k>``.
-    sharp : ndarray (H, W, 3) or (H, W), float32
-        Ground truth, sRGB-encoded, on 8-bit levels (what ``sharp.png`` holds).
+    sharp : ndarray (H, W, 3) or (H, W), float32, or None
+        Ground truth, sRGB-encoded, on 8-bit levels (what ``sharp.png`` holds); None for a
+        case read from a folder without one.
     blurred : ndarray, like ``sharp``
         The synthetic photo, sRGB, 8-bit levels (what ``blurred.png`` holds).
     capture : Capture
@@ -424,13 +425,25 @@ def build_cases(photos=None, gyro=None, *, exposure=DEFAULTS["exposure"],
 
 def write_case(case: Case, folder: str | os.PathLike, *, overwrite: bool = True) -> Path:
     """Write ``case`` as ``blurred.png``, ``gyro.gcsv``, ``capture.json``, ``sharp.png``
-    and ``case.json`` into ``folder`` (created)."""
+    and ``case.json`` into ``folder`` (created).
+
+    A case without a ground truth (``sharp`` None, as :func:`load_case` reads a folder
+    without ``sharp.png``) is written without ``sharp.png``; one left in ``folder`` from
+    another case is removed (with ``overwrite``; without it, refused), so that the folder
+    reads back as this case."""
     from .imageio import write_photo
 
     folder = Path(folder)
+    stale = folder / "sharp.png"
+    if case.sharp is None and stale.exists() and not overwrite:
+        raise InputError(str(stale), "exists, and this case has no sharp photo to write in "
+                         "its place: give overwrite=True to remove it")
     folder.mkdir(parents=True, exist_ok=True)
     write_photo(folder / "blurred.png", case.blurred, bit_depth=8, overwrite=overwrite)
-    write_photo(folder / "sharp.png", case.sharp, bit_depth=8, overwrite=overwrite)
+    if case.sharp is not None:
+        write_photo(stale, case.sharp, bit_depth=8, overwrite=overwrite)
+    elif stale.exists():
+        stale.unlink()
     write_gcsv(folder / "gyro.gcsv", case.capture.log, tscale=_TSCALE, gscale=_GSCALE)
     case.capture.save(folder / "capture.json", gyro_path="gyro.gcsv")
     with open(folder / "case.json", "w", encoding="utf-8") as fh:
