@@ -1691,3 +1691,24 @@ def test_cli_one_exposure_start_for_several_photos_is_refused(cli_dir, capsys):
     assert rc == 2 and "--exposure-start: would give every photo the same start" in \
         capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_far_estimates_threshold_is_the_chi_square_quantile():
+    """The far-estimates warning's threshold is scipy's ``chi2.ppf`` (the 95 % quantile of
+    6 degrees of freedom is 12.59), made without importing ``scipy.stats``, which costs
+    about a second of every calibrating command's start."""
+    import subprocess
+    import sys
+
+    from scipy.stats import chi2
+
+    from gyrodeblur.calibrate import _chi2_quantile
+
+    assert _chi2_quantile(0.95, 6) == pytest.approx(12.5916, abs=1e-4)
+    for dof in range(1, 9):
+        assert _chi2_quantile(0.95, dof) == pytest.approx(chi2.ppf(0.95, dof), rel=1e-12)
+    script = ("import sys, gyrodeblur.calibrate, gyrodeblur.cli; "
+              "print('scipy.stats' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
