@@ -434,16 +434,16 @@ def write_case(case: Case, folder: str | os.PathLike, *, overwrite: bool = True)
     from .imageio import write_photo
 
     folder = Path(folder)
-    stale = folder / "sharp.png"
-    if case.sharp is None and stale.exists() and not overwrite:
-        raise InputError(str(stale), "exists, and this case has no sharp photo to write in "
+    sharp_path = folder / "sharp.png"
+    if case.sharp is None and sharp_path.exists() and not overwrite:
+        raise InputError(str(sharp_path), "exists, and this case has no sharp photo to write in "
                          "its place: give overwrite=True to remove it")
     folder.mkdir(parents=True, exist_ok=True)
     write_photo(folder / "blurred.png", case.blurred, bit_depth=8, overwrite=overwrite)
     if case.sharp is not None:
-        write_photo(stale, case.sharp, bit_depth=8, overwrite=overwrite)
-    elif stale.exists():
-        stale.unlink()
+        write_photo(sharp_path, case.sharp, bit_depth=8, overwrite=overwrite)
+    elif sharp_path.exists():
+        sharp_path.unlink()
     write_gcsv(folder / "gyro.gcsv", case.capture.log, tscale=_TSCALE, gscale=_GSCALE)
     case.capture.save(folder / "capture.json", gyro_path="gyro.gcsv")
     with open(folder / "case.json", "w", encoding="utf-8") as fh:
