@@ -621,8 +621,7 @@ class PatchSpectra:
         true capture score 46-160 nats worse than no blur. (The search's cost averages
         it over 2 x 2 points, ``across``, which follow a smaller change to second order.)"""
         S_blur = self.spectra(theta, spread=self.kernel_change(theta) > _KERNEL_CHANGE)
-        H0 = self.otf(np.zeros((len(self.points), 1, 2)))
-        S_none = self.model((H0.real ** 2 + H0.imag ** 2).astype(np.float32))
+        S_none = self.model(self.otf_power(np.zeros((len(self.points), 1, 2))))
         return self._gain_over(S_none, S_blur)
 
     def psf_gain_over_no_blur(self, psf: np.ndarray) -> np.ndarray:
