@@ -446,7 +446,7 @@ def time_12mp(case, rng, *, say, megapixels: float = 12.0) -> dict:
     sharp = np.clip(resize(case.sharp, (H, W) + case.sharp.shape[2:], order=3,
                            anti_aliasing=False), 0.0, 1.0).astype(np.float32)
     true = case.capture.scaled_to(W, H)
-    big = render_case(case.name + "_12mp", sharp, true, dict(case.meta),
+    big = render_case(case.name + "_12mp", sharp, true, case.meta,
                       snr_db=case.meta.get("snr_db", 40.0)).blurred
     render_secs = time.perf_counter() - t0
     bad, injected = inject(case.capture, rng)
