@@ -456,6 +456,33 @@ def test_a_long_time_shift_grid_is_costed_in_chunks_each_shift_as_alone(case, mo
     np.testing.assert_allclose(chunked, alone, rtol=1e-6)
 
 
+def test_both_coarse_envelopes_are_costed_from_one_set_of_spectra(case, monkeypatch):
+    """The coarse ranking's flat and fitted-envelope rows of a mapping come from one
+    computation of its spectra (per chunk of time shifts), each row as that envelope's
+    own would be: the same costs, the same warm starts."""
+    import gyrodeblur.spectral_criterion as sc
+    _, true, blurred = case
+    photos = [CalibrationPhoto(blurred, true, "srgb", 0)]
+    fit = CalibrationFit(photos, SearchSpace(photos, set(), 0.04), set(),
+                         BiasPrior(np.zeros(3)), 9, 1, lambda msg: None)
+    monkeypatch.setattr(sc, "_TAU_CHUNK", 16)                # 41 shifts: 3 chunks
+    alone = []
+    for envelope in (False, True):
+        fit.coarse.start_afresh()
+        alone.append(fit.coarse_row(envelope, true.axes))
+    made, spectra = [], fit.coarse.spectra
+    monkeypatch.setattr(fit.coarse, "spectra",
+                        lambda th, tl=None, **kw: made.append(len(tl)) or spectra(th, tl, **kw))
+    fit.coarse.start_afresh()
+    before = fit.coarse.evaluations
+    both = fit.coarse_rows((False, True), true.axes)
+    assert made == [16, 16, 9]
+    assert fit.coarse.evaluations == before + 2
+    for got, want in zip(both, alone):
+        assert got[0] == want[0] and got[1:4] == want[1:4]
+    assert alone[0][0] != alone[1][0]                   # the envelopes do differ
+
+
 def test_the_offset_range_is_checked(case):
     _, true, blurred = case
     for bad in (0, -0.01, float("nan"), True, 6.0, "0.1"):

@@ -274,13 +274,12 @@ class CalibrationFit:
         (rad/s, camera frame, each added to the prior's bias; ``None``: none) each
         mapping's row is its best over them; ``stride`` > 1 takes every stride-th time
         shift of the coarse grid."""
-        jobs = [(envelope, M, b, stride) for envelope in envelopes for M in cand
-                for b in bias_steps]
-        rows = steps.map("coarse_row", jobs)
+        jobs = [(tuple(envelopes), M, b, stride) for M in cand for b in bias_steps]
+        rows = steps.map("coarse_rows", jobs)
         per = len(cand) * len(bias_steps)
         rankings = []
         for k, envelope in enumerate(envelopes):
-            mine = rows[k * per:(k + 1) * per]
+            mine = [r[k] for r in rows]
             best = [min(mine[j:j + len(bias_steps)], key=lambda r: r[0])
                     for j in range(0, per, len(bias_steps))]
             scored = sorted(best, key=lambda r: r[0])
@@ -298,17 +297,24 @@ class CalibrationFit:
         readout line, ``(score, time shift, readout error, 1.0, M, others, bias_step)``.
         ``others``: over a wide offset range (:data:`WIDE_SPAN`), the ``(time shift,
         readout error)`` of up to :data:`WIDE_MINIMA` - 1 further distinct minima; else
-        empty."""
-        self.coarse.envelope = envelope
+        empty. ``stride`` > 1 takes every stride-th time shift of the coarse grid."""
+        return self.coarse_rows((envelope,), M, bias_step, stride)[0]
+
+    def coarse_rows(self, envelopes, M, bias_step=None, stride: int = 1) -> list[tuple]:
+        """:meth:`coarse_row` under each of ``envelopes`` (``True``: fitted, ``False``:
+        flat), the coarse spectra made once for all of them (each row as
+        :meth:`coarse_row` alone makes it)."""
         taus = self.taus[::stride]
-        C = self.coarse.costs(self.theta0.copy(axes=M, bias=self.moved_bias(M, bias_step)),
-                              taus=taus)
-        tot, tau0, kap = line_fit(C, taus, self.uc, self.kappas)
-        others = ()
-        if taus[-1] - taus[0] > WIDE_SPAN:
-            minima = line_fit_minima(C, taus, self.uc, self.kappas, WIDE_MINIMA, WIDE_APART)
-            others = tuple((t, k) for _, t, k in minima if abs(t - tau0) > WIDE_APART)
-        return tot, tau0, kap, 1.0, M, others, bias_step
+        theta = self.theta0.copy(axes=M, bias=self.moved_bias(M, bias_step))
+        rows = []
+        for C in self.coarse.costs_under(envelopes, theta, taus):
+            tot, tau0, kap = line_fit(C, taus, self.uc, self.kappas)
+            others = ()
+            if taus[-1] - taus[0] > WIDE_SPAN:
+                minima = line_fit_minima(C, taus, self.uc, self.kappas, WIDE_MINIMA, WIDE_APART)
+                others = tuple((t, k) for _, t, k in minima if abs(t - tau0) > WIDE_APART)
+            rows.append((tot, tau0, kap, 1.0, M, others, bias_step))
+        return rows
 
     def candidates(self, rows, steps) -> list:
         """The coarse ``rows`` (``(score, time shift, readout error, 1.0, M, others, bias

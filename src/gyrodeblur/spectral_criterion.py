@@ -448,20 +448,38 @@ class PatchSpectra:
         spectra with their envelopes, profiled over the scale and the noise. More than
         :data:`_TAU_CHUNK` time shifts are taken that many at a time (each shift's costs
         are its own; the memory stays that of one chunk: about 1.5 MB per shift)."""
-        self.evaluations += 1
-        if taus is not None and len(taus) > _TAU_CHUNK:
-            taus = np.asarray(taus, float)
-            return np.concatenate([self._costs(theta, taus[k:k + _TAU_CHUNK], rows)
-                                   for k in range(0, len(taus), _TAU_CHUNK)])
-        c = self._costs(theta, taus, rows)
-        return c if taus is not None else c[0]
+        return self.costs_under((self.envelope,), theta, taus, rows)[0]
 
-    def _costs(self, theta: Corrections, taus, rows) -> np.ndarray:
-        """:meth:`costs` of one batch of time shifts, ``(n_tau, n_patch)``."""
-        S = self.spectra(theta, taus, rows=rows)
+    def costs_under(self, envelopes, theta: Corrections, taus=None, rows=None) -> list:
+        """:meth:`costs` under each of ``envelopes`` (``True``: fitted to each evaluation,
+        ``False``: flat; an envelope held by :meth:`set_envelope` stands for either), the
+        model spectra made once for all of them: each equals :meth:`costs` called with
+        :attr:`envelope` set to it, from the same warm starts (each envelope follows its
+        own chain of them; the last one's is kept). One evaluation per envelope."""
+        self.evaluations += len(envelopes)
+        batches = [None]
+        if taus is not None:
+            taus = np.asarray(taus, float)
+            batches = [taus[k:k + _TAU_CHUNK] for k in range(0, max(len(taus), 1), _TAU_CHUNK)]
+        chains = [dict(self._rho_warm) for _ in envelopes]
+        out: list = [[] for _ in envelopes]
+        try:
+            for tl in batches:
+                S = self.spectra(theta, tl, rows=rows)
+                for k, envelope in enumerate(envelopes):
+                    self._rho_warm = chains[k]
+                    out[k].append(self._costs_of(S, envelope))
+        finally:
+            if chains:
+                self._rho_warm = chains[-1]
+        return [np.concatenate(c) if taus is not None else c[0][0] for c in out]
+
+    def _costs_of(self, S: np.ndarray, envelope: bool) -> np.ndarray:
+        """The costs ``(n_tau, n_patch)`` of model spectra ``S`` (a batch of time shifts),
+        under the held envelopes, or with ``envelope`` fitted to them, or flat."""
         if self.E is not None:
             S = S * np.tile(self.E, (S.shape[0] // len(self.points), 1))
-        elif self.envelope:
+        elif envelope:
             S = S * self.fast_envelope(S)
         return self._whittle(S).reshape(-1, len(self.points))
 
