@@ -408,6 +408,32 @@ def test_every_step_starts_from_fresh_warm_starts_and_the_caller_s_come_back(wor
     assert fit.fine.fft_threads == 2
 
 
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+class _BlasFit(_Fit):
+    def blas_step(self, k):
+        return os.getpid(), _blas_threads()
+
+
+@forks
+def test_a_worker_makes_its_blas_calls_on_one_thread():
+    """Each worker's BLAS (OpenBLAS's threads, which spin while they wait) keeps to one
+    thread: two workers with two BLAS threads each on two cores made the coarse ranking of
+    a 12 MP photo 2.2 s instead of 1.0 (session 54). The caller's own setting stays."""
+    from threadpoolctl import threadpool_limits
+    import scipy.linalg  # noqa: F401  (scipy's BLAS loaded too)
+    with threadpool_limits(2, user_api="blas"):
+        before = _blas_threads()
+        assert before and set(before) == {2}
+        seen = StepRunner(_BlasFit(), 2).map("blas_step", [(1,), (2,), (3,)])
+        assert _blas_threads() == before
+    in_workers = [threads for pid, threads in seen if pid != os.getpid()]
+    assert in_workers and all(t and set(t) == {1} for t in in_workers)
+
+
 @forks
 def test_a_step_that_fails_in_a_worker_is_run_again_in_the_caller():
     """Kills C24 (a worker's error raised in the caller as it stands). A step that failed
