@@ -285,13 +285,13 @@ EXIF_START_OFFSET_RANGE = EXIF_START_TOLERANCE
 EXIF_WHOLE_SECOND_OFFSET_RANGE = EXIF_WHOLE_SECOND_TOLERANCE
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
-#: per second of log searched on one photo, so 5 s either side is about eight minutes
-#: (give the exposure start to a second or better).
+#: per second of log searched on one photo, so 5 s either side is about two and a half
+#: minutes on 2 cores (give the exposure start to a second or better).
 MAX_OFFSET_RANGE = 5.0
 #: Calibration seconds per second of time shifts searched beyond the default's, one photo,
-#: 2 cores (session 39, an idle VM, a 1024 x 764 photo: 17.7 s at +-40 ms, 117.6 s at
-#: +-1 s; session 31's 20 predates the second, bias-widened ranking of every photo).
-_SECONDS_PER_SPAN = 52.0
+#: 2 cores (session 54, a 1024 x 680 benchmark photo: 11.3 s at +-40 ms, 37.9 s at +-1 s;
+#: session 39 measured 52, before the workers' BLAS kept to one thread each).
+_SECONDS_PER_SPAN = 14.0
 _RANGE_SLACK = 0.001       # s: a log that cuts the asked range by less is not mentioned
 
 
@@ -320,8 +320,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         it stops); the refinement may end up to 10 ms beyond. Where the two clocks are
         known only roughly, give more. The coarse ranking scans the range every 2 ms for
         each axis mapping, and over more than 0.1 s each candidate mapping is started
-        from its three best distinct coarse minima: about 100 s more per second on each
-        side, on 2 cores (a 1024 x 764 photo: 118 s for +-1 s against 18 s for the
+        from its three best distinct coarse minima: about 30 s more per second on each
+        side, on 2 cores (a 1024 x 680 photo: 38 s for +-1 s against 11 s for the
         default). Refused with the offset fixed. Where a capture's exposure start is its
         photo's EXIF time (``exposure_start_from_exif``), the default is
         :data:`EXIF_START_OFFSET_RANGE`, 1 s (:data:`EXIF_WHOLE_SECOND_OFFSET_RANGE`,

@@ -841,7 +841,7 @@ OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (de
                      "0.04, or 1 around an exposure start taken from the photo's EXIF "
                      "time, 1.5 if that time is to the second); where the gyro and camera "
                      "clocks are known only roughly, e.g. 1: as far as the log covers it, "
-                     "about 100 s more per second on each side on 2 cores")
+                     "about 30 s more per second on each side on 2 cores")
 WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
                 "(Linux; default: the CPUs available, up to 4; 1: none); the result is the "
                 "same for any number")
