@@ -21,7 +21,7 @@ def pytest_configure(config):
     """Under pytest-xdist (``-n auto``) every core already runs a test, so each worker's
     BLAS keeps to one thread: OpenBLAS starts a thread per core, and its threads spin
     while they wait, so two workers' four threads on 2 cores fought for the CPUs
-    (``tests/test_calibrate.py`` on 2 cores: 320 s, and 226 s with one BLAS thread each;
+    (``tests/test_calibrate.py`` on 2 cores: 320 s, and 205 s with one BLAS thread each;
     session 54)."""
     if os.environ.get("PYTEST_XDIST_WORKER"):
         threadpool_limits(1, user_api="blas")
