@@ -434,6 +434,41 @@ def test_a_worker_makes_its_blas_calls_on_one_thread():
     assert in_workers and all(t and set(t) == {1} for t in in_workers)
 
 
+def test_a_calibration_keeps_blas_to_one_thread_and_gives_the_setting_back(monkeypatch):
+    """The search's BLAS calls are small, and OpenBLAS's idle threads spin: ``calibrate``
+    runs on one BLAS thread and restores the caller's setting after (also when it fails);
+    beside another Python thread, whose BLAS shares the setting, it leaves it alone."""
+    import threading
+
+    import gyrodeblur.calibrate as cal
+    from threadpoolctl import threadpool_limits
+    import scipy.linalg  # noqa: F401  (scipy's BLAS loaded too)
+    seen = []
+
+    def search_space(*args, **kwargs):
+        seen.append(_blas_threads())
+        raise InputError(None, "stopped here")
+
+    monkeypatch.setattr(cal, "SearchSpace", search_space)
+    image = np.full((64, 64), 0.5, np.float32)
+    capture = Capture(0.05, 0.03, 0.0, Camera.centred(64, 64, 60.0),
+                      GyroLog(np.arange(0.0, 0.2, 0.005), np.zeros((40, 3))))
+    with threadpool_limits(2, user_api="blas"):
+        with pytest.raises(InputError, match="stopped here"):
+            calibrate([image], capture)
+        assert set(seen.pop()) == {1} and set(_blas_threads()) == {2}
+        stop = threading.Event()
+        other = threading.Thread(target=stop.wait)
+        other.start()
+        try:
+            with pytest.raises(InputError, match="stopped here"):
+                calibrate([image], capture)
+        finally:
+            stop.set()
+            other.join()
+        assert set(seen.pop()) == {2} and set(_blas_threads()) == {2}
+
+
 @forks
 def test_a_step_that_fails_in_a_worker_is_run_again_in_the_caller():
     """Kills C24 (a worker's error raised in the caller as it stands). A step that failed

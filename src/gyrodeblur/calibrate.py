@@ -164,7 +164,7 @@ from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_N
                               with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
-from .calibration_workers import StepRunner, available_workers
+from .calibration_workers import StepRunner, available_workers, on_one_blas_thread
 from .capture import (EXIF_START_TOLERANCE, EXIF_WHOLE_SECOND_TOLERANCE, UNKNOWN_READOUT_MAX,
                       UNKNOWN_READOUT_PRIOR, Capture)
 from .errors import InputError
@@ -295,6 +295,7 @@ _SECONDS_PER_SPAN = 14.0
 _RANGE_SLACK = 0.001       # s: a log that cuts the asked range by less is not mentioned
 
 
+@on_one_blas_thread
 def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
               transfer="srgb", n_patches: int | None = None, say=None,
               mappings=None, downscale: float = 1.0,
@@ -350,7 +351,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         available, at most :data:`gyrodeblur.calibration_workers.MAX_WORKERS`; 1: none).
         The result is the same for any number. Called while the process runs other Python
         threads (a pipeline calibrating in threads), the steps run one after another in
-        the caller: a fork beside a running thread can deadlock.
+        the caller: a fork beside a running thread can deadlock. BLAS runs on one thread
+        throughout (the process's setting is restored after; left alone beside other
+        Python threads): see :func:`gyrodeblur.calibration_workers.on_one_blas_thread`.
 
     Returns
     -------
