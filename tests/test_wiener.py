@@ -306,3 +306,30 @@ def test_a_photos_phi_is_the_chapters_unless_its_noise_asks_for_more():
     expected = PHOTO_PHI_FACTOR * sigma ** 2 / float(np.var(noisy))
     assert expected > 5 * DEFAULT_PHI
     assert photo_phi(noisy) == pytest.approx(expected, rel=0.15)
+
+
+def test_the_fft_threads_are_the_cpus_this_process_may_use(monkeypatch):
+    """``FFT_WORKERS`` counts the CPUs of the process's affinity mask (``taskset``, a
+    container's cpuset), not the machine's cores: a process held to 2 of 64 cores must not
+    start 64 FFT threads. Without an affinity mask (not Linux) the machine's count, and
+    one CPU when that is unknown."""
+    import os
+
+    from gyrodeblur.fftutils import FFT_WORKERS, usable_cpus
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3, 5}, raising=False)
+    assert usable_cpus() == 2
+    monkeypatch.delattr(os, "sched_getaffinity")
+    assert usable_cpus() == 64
+    monkeypatch.setattr(os, "cpu_count", lambda: None)
+    assert usable_cpus() == 1
+    monkeypatch.undo()
+    assert FFT_WORKERS == usable_cpus()
+    if hasattr(os, "sched_setaffinity"):        # a process held to one CPU, from its start
+        import subprocess
+        import sys
+        code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
+                "from gyrodeblur.fftutils import FFT_WORKERS; print(FFT_WORKERS)")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             check=True)
+        assert out.stdout.strip() == "1"

@@ -52,6 +52,8 @@ from functools import wraps
 
 from threadpoolctl import threadpool_limits
 
+from .fftutils import usable_cpus
+
 __all__ = ["StepRunner", "available_workers", "settle_threads", "on_one_blas_thread",
            "MAX_WORKERS", "SETTLE_TIMEOUT"]
 
@@ -121,11 +123,7 @@ if hasattr(os, "register_at_fork"):
 
 def available_workers() -> int:
     """The CPUs this process may run on, at most :data:`MAX_WORKERS`."""
-    try:
-        n = len(os.sched_getaffinity(0))
-    except AttributeError:          # not on Linux
-        n = os.cpu_count() or 1
-    return max(1, min(n, MAX_WORKERS))
+    return max(1, min(usable_cpus(), MAX_WORKERS))
 
 
 def on_one_blas_thread(func):

@@ -15,14 +15,25 @@ import scipy.fft as sfft
 
 __all__ = [
     "FFT_WORKERS",
+    "usable_cpus",
     "fast_shape",
     "psf_to_otf",
     "smooth_periodic_pad",
     "convolve_fft",
 ]
 
-#: Threads given to ``scipy.fft`` (all cores of this machine).
-FFT_WORKERS: int = os.cpu_count() or 1
+def usable_cpus() -> int:
+    """The CPUs this process may run on: its affinity mask where the system has one
+    (``taskset``, a container's cpuset), else every core of the machine. ``os.cpu_count``
+    counts the machine's, so a process held to 2 of 64 cores would start 64 threads."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):       # not on Linux
+        return os.cpu_count() or 1
+
+
+#: Threads given to ``scipy.fft`` (every CPU this process may run on, when it starts).
+FFT_WORKERS: int = usable_cpus()
 
 
 def fast_shape(shape: tuple[int, int]) -> tuple[int, int]:
