@@ -180,6 +180,7 @@ def test_steps_a_dead_worker_left_undone_run_in_the_caller(tmp_path):
 
 @pytest.mark.parametrize("cpus, expected", [(1, 1), (3, 3), (8, MAX_WORKERS), (64, MAX_WORKERS)])
 def test_available_workers_is_the_cpus_allowed_up_to_the_cap(monkeypatch, cpus, expected):
+    monkeypatch.delenv("GYRODEBLUR_THREADS", raising=False)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cpus)), raising=False)
     assert available_workers() == expected
 
@@ -537,11 +538,21 @@ def test_where_workers_cannot_be_forked_the_steps_run_here(monkeypatch):
     assert {int(m.split(" in ")[1]) for m in fit.said} == {os.getpid()}
 
 
+def test_gyrodeblur_threads_caps_the_workers(monkeypatch):
+    """``GYRODEBLUR_THREADS`` (several processes at once) caps the workers as well."""
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    monkeypatch.setenv("GYRODEBLUR_THREADS", "1")
+    assert available_workers() == 1
+    monkeypatch.setenv("GYRODEBLUR_THREADS", "3")
+    assert available_workers() == 3
+
+
 @pytest.mark.parametrize("cpus, expected", [(3, 3), (16, MAX_WORKERS), (None, 1)])
 def test_without_cpu_affinity_the_cpu_count_is_used(monkeypatch, cpus, expected):
     """Kills C2 (an unknown CPU count not read as one). Where ``os.sched_getaffinity`` does
     not exist (macOS, Windows) the CPU count is used, capped the same way, and a count
     the system cannot tell (``None``) is one CPU."""
+    monkeypatch.delenv("GYRODEBLUR_THREADS", raising=False)
     monkeypatch.delattr(os, "sched_getaffinity", raising=False)
     monkeypatch.setattr(os, "cpu_count", lambda: cpus)
     assert available_workers() == expected

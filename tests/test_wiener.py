@@ -312,24 +312,37 @@ def test_the_fft_threads_are_the_cpus_this_process_may_use(monkeypatch):
     """``FFT_WORKERS`` counts the CPUs of the process's affinity mask (``taskset``, a
     container's cpuset), not the machine's cores: a process held to 2 of 64 cores must not
     start 64 FFT threads. Without an affinity mask (not Linux) the machine's count, and
-    one CPU when that is unknown."""
+    one CPU when that is unknown. ``GYRODEBLUR_THREADS`` caps the count (several
+    processes at once); a value that is not a whole number >= 1 is ignored, with a
+    warning."""
     import os
 
-    from gyrodeblur.fftutils import FFT_WORKERS, usable_cpus
+    from gyrodeblur.fftutils import FFT_WORKERS, THREADS_ENV, usable_cpus
+    assert FFT_WORKERS == usable_cpus()
+    monkeypatch.delenv(THREADS_ENV, raising=False)
     monkeypatch.setattr(os, "cpu_count", lambda: 64)
-    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3, 5}, raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3, 5, 7}, raising=False)
+    assert usable_cpus() == 3
+    monkeypatch.setenv(THREADS_ENV, "2")
     assert usable_cpus() == 2
+    monkeypatch.setenv(THREADS_ENV, "8")
+    assert usable_cpus() == 3                       # a cap, not a count
+    for bad in ("0", "two", "-1", "1.5"):
+        monkeypatch.setenv(THREADS_ENV, bad)
+        with pytest.warns(UserWarning, match=f"GYRODEBLUR_THREADS={bad!r} is not a whole"):
+            assert usable_cpus() == 3
+    monkeypatch.delenv(THREADS_ENV)
     monkeypatch.delattr(os, "sched_getaffinity")
     assert usable_cpus() == 64
     monkeypatch.setattr(os, "cpu_count", lambda: None)
     assert usable_cpus() == 1
     monkeypatch.undo()
-    assert FFT_WORKERS == usable_cpus()
     if hasattr(os, "sched_setaffinity"):        # a process held to one CPU, from its start
         import subprocess
         import sys
         code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
                 "from gyrodeblur.fftutils import FFT_WORKERS; print(FFT_WORKERS)")
+        env = {k: v for k, v in os.environ.items() if k != THREADS_ENV}
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             check=True)
+                             check=True, env=env)
         assert out.stdout.strip() == "1"

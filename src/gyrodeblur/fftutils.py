@@ -9,12 +9,14 @@ mass sits at offset ``+d`` moves content by ``+d``.
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 import scipy.fft as sfft
 
 __all__ = [
     "FFT_WORKERS",
+    "THREADS_ENV",
     "usable_cpus",
     "fast_shape",
     "psf_to_otf",
@@ -22,17 +24,32 @@ __all__ = [
     "convolve_fft",
 ]
 
+#: Environment variable that caps the CPUs one gyrodeblur process uses (its FFT threads,
+#: row bands and calibration workers): e.g. ``1`` where several processes run at once.
+THREADS_ENV = "GYRODEBLUR_THREADS"
+
+
 def usable_cpus() -> int:
     """The CPUs this process may run on: its affinity mask where the system has one
-    (``taskset``, a container's cpuset), else every core of the machine. ``os.cpu_count``
-    counts the machine's, so a process held to 2 of 64 cores would start 64 threads."""
+    (``taskset``, a container's cpuset), else every core of the machine, and at most
+    ``$GYRODEBLUR_THREADS`` where that is set (a whole number >= 1; anything else is
+    ignored, with a warning). ``os.cpu_count`` counts the machine's cores, so a process
+    held to 2 of 64 cores would start 64 threads."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        n = max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):       # not on Linux
-        return os.cpu_count() or 1
+        n = os.cpu_count() or 1
+    cap = os.environ.get(THREADS_ENV, "").strip()
+    if cap:
+        if cap.isdecimal() and int(cap) >= 1:
+            n = min(n, int(cap))
+        else:
+            warnings.warn(f"{THREADS_ENV}={cap!r} is not a whole number >= 1: ignored",
+                          stacklevel=2)
+    return n
 
 
-#: Threads given to ``scipy.fft`` (every CPU this process may run on, when it starts).
+#: Threads given to ``scipy.fft`` (:func:`usable_cpus` when the module is imported).
 FFT_WORKERS: int = usable_cpus()
 
 

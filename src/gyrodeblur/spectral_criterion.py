@@ -47,6 +47,7 @@ import scipy.fft as sfft
 
 from .calibration_patches import CalibrationPhoto
 from .capture import Capture
+from .fftutils import FFT_WORKERS
 from .orientation import Orientation, quat_conjugate, quat_multiply, quat_to_matrix
 from .psf import offsets_under_rotation
 
@@ -196,7 +197,8 @@ class PatchSpectra:
         self.E = None
         self.envelope = envelope
         self.evaluations = 0
-        self.fft_threads = 2           # threads of the OTFs' FFTs (the results do not depend on it)
+        # threads of the OTFs' FFTs (the results do not depend on it)
+        self.fft_threads = min(2, FFT_WORKERS)
 
     # -- geometry ---------------------------------------------------------------------
     def _orientation(self, i: int, theta: Corrections, lo: float, hi: float) -> Orientation:
