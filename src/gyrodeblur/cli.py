@@ -844,7 +844,8 @@ OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (de
                      "about 30 s more per second on each side on 2 cores")
 WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
                 "(Linux; default: the CPUs available, up to 4; 1: none); the result is the "
-                "same for any number")
+                "same for any number. The environment variable GYRODEBLUR_THREADS=N caps "
+                "the CPUs one process uses, workers and threads alike")
 
 
 class _OneLineErrors(argparse.ArgumentParser):
