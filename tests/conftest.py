@@ -9,12 +9,24 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
 
-# Under pytest-xdist (``-n auto``) every core already runs a test, so each worker's own
-# threads (FFTs, row bands) keep to one CPU: the deblurring tests took about 20 % less
-# time on 2 cores (session 54). Set before gyrodeblur is imported: the FFT thread count
-# is read then.
+# Under pytest-xdist (``-n auto``) every core already runs a test, so each worker keeps to
+# one CPU:
+# - GYRODEBLUR_THREADS=1 (read as gyrodeblur is imported, so set before the imports
+#   below): one FFT thread and row band (the deblurring tests took about 20 % less time on
+#   2 cores, session 54), and ``calibrate`` takes one process. A calibration that forked a
+#   worker per core besides would only crowd the cores, and would fork beside execnet's
+#   reader thread, which :func:`gyrodeblur.calibration_workers._can_fork` cannot see (a
+#   fork beside scipy's FFT threads hung one such run, session 50). A calibration's figures
+#   do not depend on its worker count (``test_calibration_workers.py``, which still forks,
+#   asks it).
+# - NumPy's BLAS (loaded above; the calibration's matrix products and small solves) on one
+#   thread: OpenBLAS starts a thread per core, and its threads spin while they wait, so two
+#   workers' four threads on 2 cores fought for the CPUs (``tests/test_calibrate.py`` on 2
+#   cores: 320 s, 205 s with one BLAS thread each; session 54). ``calibrate``'s own limit
+#   stands aside here, beside execnet's thread.
 if os.environ.get("PYTEST_XDIST_WORKER"):
-    os.environ.setdefault("GYRODEBLUR_THREADS", "1")
+    os.environ["GYRODEBLUR_THREADS"] = "1"
+    threadpool_limits(1, user_api="blas")
 
 from gyrodeblur.camera import Camera  # noqa: E402
 from gyrodeblur.capture import Capture  # noqa: E402
@@ -22,16 +34,6 @@ from gyrodeblur.gyrolog import GyroLog  # noqa: E402
 
 SHARED_DATA = Path(os.environ.get("GYRODEBLUR_SHARED_DATA",
                                   Path(__file__).resolve().parents[1].parent / "shared" / "data"))
-
-
-def pytest_configure(config):
-    """Under pytest-xdist (``-n auto``) every core already runs a test, so each worker's
-    BLAS keeps to one thread: OpenBLAS starts a thread per core, and its threads spin
-    while they wait, so two workers' four threads on 2 cores fought for the CPUs
-    (``tests/test_calibrate.py`` on 2 cores: 320 s, and 205 s with one BLAS thread each;
-    session 54)."""
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        threadpool_limits(1, user_api="blas")
 
 
 @pytest.fixture
@@ -53,16 +55,3 @@ def constant_rate_capture(rate, *, width=320, height=240, f=300.0, exposure=0.03
 @pytest.fixture
 def make_capture():
     return constant_rate_capture
-
-
-@pytest.fixture(autouse=True)
-def _calibrations_in_one_process_per_xdist_worker(monkeypatch):
-    """Under pytest-xdist (``-n auto``) every core already runs a test: a calibration that
-    forked a worker per core besides would only crowd them, and would fork beside
-    execnet's reader thread, which :func:`gyrodeblur.calibration_workers._can_fork`
-    cannot see (a fork beside scipy's FFT threads hung one such run, session 50). So
-    ``calibrate`` takes one process there; a calibration's figures do not depend on its
-    worker count (``test_calibration_workers.py``, which still forks, asks it)."""
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        import gyrodeblur.calibrate
-        monkeypatch.setattr(gyrodeblur.calibrate, "available_workers", lambda: 1)
