@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 from PIL import Image, ImageCms
+from PIL.TiffImagePlugin import IFDRational
 
 from gyrodeblur.cli import main
 from gyrodeblur.gyrolog import GyroLog, write_gcsv
@@ -731,6 +732,51 @@ def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir,
     msg = _run_error(["calibrate", str(d / "a.png"), "--capture", cap, "-o", str(d / "o.json"),
                       "--transfer", "gamma"], capsys)
     assert "--transfer: unknown transfer curve 'gamma' (known: auto, linear" in msg
+
+
+def test_a_digitally_zoomed_photo_is_calibrated_shrunk_by_its_zoom(capture_dir, capsys,
+                                                                  monkeypatch):
+    """A photo whose EXIF records a digital zoom Z is calibrated shrunk by 1/Z unless
+    ``--downscale`` is given (``calibrate``, ``deblur --refine`` alone and as a session),
+    and the tool says so; the factor leaves at least 96 px on the shorter side; photos
+    without a zoom keep the default of 1."""
+    seen = _spy_on_calibrate(monkeypatch, "downscale")
+    d = capture_dir
+    cap = str(d / "cap.json")
+    main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "a.png"),
+          "--seed", "1", "--snr-db", "40"])
+    pixels = read_photo(d / "a.png").pixels
+    for name, ratio in (("x2.jpg", IFDRational(2, 1)), ("x4.jpg", IFDRational(4, 1)),
+                        ("x1.jpg", IFDRational(0, 1))):
+        exif = Image.Exif()
+        exif.get_ifd(0x8769)[0xA404] = ratio
+        Image.fromarray((pixels * 255).round().astype(np.uint8)).save(
+            d / name, exif=exif.tobytes(), quality=95)
+    capsys.readouterr()
+
+    def calibrated(*argv):
+        with pytest.raises(_StopCalibration):
+            main(list(argv))
+        return seen[-1], capsys.readouterr().out
+
+    factor, out = calibrated("calibrate", str(d / "x2.jpg"), "--capture", cap,
+                             "-o", str(d / "o.json"))
+    assert factor == 0.5
+    assert "digitally zoomed x2 (EXIF DigitalZoomRatio)" in out and "shrunk by 0.5" in out
+    assert calibrated("calibrate", str(d / "x2.jpg"), "--capture", cap, "-o",
+                      str(d / "o.json"), "--downscale", "1")[0] == 1.0
+    assert calibrated("calibrate", str(d / "x1.jpg"), "--capture", cap,
+                      "-o", str(d / "o.json")) == (1.0, "")
+    # 192 rows: shrunk by 1/4 they would be 48, under calibrate's 64; 96 are kept
+    assert calibrated("calibrate", str(d / "x4.jpg"), "--capture", cap,
+                      "-o", str(d / "o.json"))[0] == 0.5
+    factor, out = calibrated("deblur", str(d / "x2.jpg"), "--capture", cap, "--refine",
+                             "-o", str(d / "o.png"))
+    assert factor == 0.5 and "shrunk by 0.5" in out
+    factor, out = calibrated("deblur", str(d / "a.png"), str(d / "x2.jpg"), "--capture",
+                             f"{cap},{cap}", "--refine", "-o",
+                             f"{d / 'o1.png'},{d / 'o2.png'}")
+    assert factor == 0.5 and "shrunk by 0.5 with the others" in out
 
 
 def test_sigterm_while_writing_leaves_no_file_and_exits_143(capture_dir):

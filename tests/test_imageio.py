@@ -728,6 +728,17 @@ def test_hints_offset_time_original_is_the_zone_before_offset_time():
     assert hints["capture_time_text"] == "2024:12:05 07:27:10.512 +01:00"
 
 
+def test_hints_digital_zoom_only_where_the_camera_zoomed():
+    """DigitalZoomRatio above 1 is reported; 1, and the standard's 0/0 or 0/1 for "not
+    used", are not; fx is left as the focal-length tags give it."""
+    zoomed = hints_for((40, 60), x_A405=50, x_A404=R(2, 1))
+    assert zoomed["digital_zoom"] == pytest.approx(2.0)
+    assert zoomed["fx"] == pytest.approx(hints_for((40, 60), x_A405=50)["fx"])
+    assert hints_for((40, 60), x_A404=R(13, 10))["digital_zoom"] == pytest.approx(1.3)
+    for none in (R(1, 1), R(0, 1), R(0, 0)):
+        assert "digital_zoom" not in hints_for((40, 60), x_A404=none)
+
+
 def test_hints_missing_or_damaged_exif():
     assert "fx" not in hints_for((40, 60))
     assert exif_capture_hints(like()) == {}

@@ -140,7 +140,7 @@ def _ignored_options(args) -> None:
         elif given("overlap") and args.grid is not None and _one_patch(args.grid):
             raise InputError("--overlap", f"does not apply with --grid {args.grid} (one patch "
                                           "has no neighbours to overlap)")
-    if args.downscale != 1.0 and not args.refine:   # (with --blind, --refine is refused)
+    if args.downscale is not None and not args.refine:   # (with --blind, --refine is refused)
         raise InputError("--downscale", "applies with --refine only")
     if args.workers is not None and not args.refine:
         raise InputError("--workers", "applies with --refine only")
@@ -576,12 +576,13 @@ def _deblur_session(runs, say) -> None:
     (:func:`gyrodeblur.calibrate.calibrate`), then each photo deblurred with its own
     corrected capture."""
     from .calibrate import calibrate
-    from .calibrate_cli import format_estimates
+    from .calibrate_cli import calibration_downscale, format_estimates
     args = runs[0].args
     for run in runs:
         run.load()
+    downscale = calibration_downscale(args.downscale, [r.photo for r in runs], say)
     res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
-                    say=say, downscale=args.downscale, workers=args.workers,
+                    say=say, downscale=downscale, workers=args.workers,
                     transfer=[r.curve for r in runs], offset_range=args.offset_range)
     say(f"calibration of {len(runs)} photos in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
@@ -735,11 +736,12 @@ class _PhotoDeblur:
     def calibrate_alone(self) -> None:
         """``--refine`` for this photo alone: its capture replaced by the calibrated one."""
         from .calibrate import calibrate
-        from .calibrate_cli import format_estimates
+        from .calibrate_cli import calibration_downscale, format_estimates
         args = self.args
+        downscale = calibration_downscale(args.downscale, [self.photo], self.say)
         with _this_photo(self.args):
             res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
-                            downscale=args.downscale, workers=args.workers,
+                            downscale=downscale, workers=args.workers,
                             transfer=self.curve, offset_range=args.offset_range)
         for line in format_estimates(res.estimates):
             self.say(line)
@@ -834,9 +836,10 @@ def cmd_calibrate(args, say) -> None:
 
 # ----------------------------------------------------------------------------- parser
 
-DOWNSCALE_HELP = ("calibrate on the photos shrunk by this factor, 0 < F <= 1 (default 1): for "
-                  "photos softer than their pixel grid, e.g. upscaled or heavily denoised, "
-                  "try 0.5; the corrected capture keeps the given resolution")
+DOWNSCALE_HELP = ("calibrate on the photos shrunk by this factor, 0 < F <= 1 (default 1, or "
+                  "1/Z for a photo whose EXIF records a digital zoom Z): for photos softer "
+                  "than their pixel grid, e.g. upscaled or heavily denoised, try 0.5; the "
+                  "corrected capture keeps the given resolution")
 OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (default "
                      "0.04, or 1 around an exposure start taken from the photo's EXIF "
                      "time, 1.5 if that time is to the second); where the gyro and camera "
@@ -962,7 +965,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fix", default="", metavar="NAMES",
                    help="with --refine: parameters not to estimate, comma-separated from "
                         "offset,bias,readout,focal,axes")
-    s.add_argument("--downscale", type=float, default=1.0, metavar="F",
+    s.add_argument("--downscale", type=float, default=None, metavar="F",
                    help="with --refine: " + DOWNSCALE_HELP)
     s.add_argument("--workers", type=int, default=None, metavar="N",
                    help="with --refine: " + WORKERS_HELP)
@@ -1005,7 +1008,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated parameters not to estimate: offset,bias,readout,focal,"
                         "axes (a value given with --time-offset, --bias, --readout-time, "
                         "--fx/--fy or --orientation is fixed too)")
-    s.add_argument("--downscale", type=float, default=1.0, metavar="F", help=DOWNSCALE_HELP)
+    s.add_argument("--downscale", type=float, default=None, metavar="F", help=DOWNSCALE_HELP)
     s.add_argument("--workers", type=int, default=None, metavar="N", help=WORKERS_HELP)
     s.add_argument("--offset-range", type=float, default=None, metavar="S",
                    help=OFFSET_RANGE_HELP)

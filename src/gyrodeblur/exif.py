@@ -31,6 +31,7 @@ _IFD0_ASCII = (270, 271, 272, 305, 306, 315, 33432)  # Description, Make, Model,
 _ORIENTATION = 274  #                                  DateTime, Artist, Copyright
 # Exif sub-IFD tags used by exif_capture_hints.
 _EXPOSURE_TIME, _FOCAL_LENGTH, _FOCAL_35MM = 0x829A, 0x920A, 0xA405
+_DIGITAL_ZOOM = 0xA404
 _FP_XRES, _FP_UNIT = 0xA20E, 0xA210
 _PIXEL_X_DIM, _PIXEL_Y_DIM = 0xA002, 0xA003
 _DATETIME_ORIGINAL, _SUBSEC_ORIGINAL = 0x9003, 0x9291
@@ -156,6 +157,11 @@ def exif_capture_hints(photo: Photo) -> dict:
             The lens's real focal length, from FocalLength.
         ``"fx"`` : float
             Focal length in pixels at this photo's stored width and height.
+        ``"digital_zoom"`` : float
+            DigitalZoomRatio, where above 1: the camera enlarged a central part of its
+            sensor's image to the stored size, so the photo holds detail only up to
+            ``1 / digital_zoom`` of its pixel grid's band (or, where the sensor has more
+            pixels than the photo, somewhat more).
         ``"capture_time_unix"`` : float
             When the photo was taken, Unix time (s), from DateTimeOriginal,
             OffsetTimeOriginal or else OffsetTime (the time zone: without one there is
@@ -209,6 +215,9 @@ def exif_capture_hints(photo: Photo) -> dict:
 
     hints: dict = {}
     exposure, focal = number(_EXPOSURE_TIME), number(_FOCAL_LENGTH)
+    zoom = number(_DIGITAL_ZOOM)        # 0/0 or 0/1: no digital zoom
+    if zoom is not None and zoom > 1:
+        hints["digital_zoom"] = zoom
     if exposure is not None:
         hints["exposure_time"] = exposure
     if focal is not None:
