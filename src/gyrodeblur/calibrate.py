@@ -345,7 +345,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         Calibrate on the photos shrunk by this factor (0 < ``downscale`` <= 1, area
         averaging). For photos softer than their pixel grid (upscaled, or heavily
         denoised): the spectral criterion reads an empty top octave as blur. The corrected
-        captures keep the given ones' resolution.
+        captures keep the given ones' resolution. The command line takes it from a
+        photo's digital zoom (:func:`gyrodeblur.calibrate_cli.calibration_downscale`).
     workers : int, optional
         Processes that refine independent starts side by side (Linux; default: the CPUs
         available, at most :data:`gyrodeblur.calibration_workers.MAX_WORKERS`; 1: none).

@@ -58,7 +58,7 @@ __all__ = ["StepRunner", "available_workers", "settle_threads", "on_one_blas_thr
            "MAX_WORKERS", "SETTLE_TIMEOUT"]
 
 #: At most this many worker processes by default: a batch holds up to about seven steps
-#: (a calibration's candidates), and each step's FFTs take two threads.
+#: (a calibration's candidates); each worker runs its FFTs and BLAS on one thread.
 MAX_WORKERS = 4
 
 # (fit, method name, argument tuples) of the batch being run: set before the workers are
