@@ -699,6 +699,14 @@ def _spy_on_calibrate(monkeypatch, key: str | None, record=None) -> list:
     return seen
 
 
+def _blurred_a_png(d, cap: str) -> np.ndarray:
+    """``d/sharp.jpg`` blurred by the capture ``cap`` into ``d/a.png`` (40 dB, seed 1);
+    its pixels."""
+    main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "a.png"),
+          "--seed", "1", "--snr-db", "40"])
+    return read_photo(d / "a.png").pixels
+
+
 def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir, capsys,
                                                                     monkeypatch):
     """``calibrate`` takes each photo's curve from its profile (or ``--transfer``), and
@@ -711,9 +719,7 @@ def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir,
     seen = _spy_on_calibrate(monkeypatch, "transfer")
     d = capture_dir
     cap = str(d / "cap.json")
-    main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "a.png"),
-          "--seed", "1", "--snr-db", "40"])
-    a = read_photo(d / "a.png").pixels
+    a = _blurred_a_png(d, cap)
     b = np.clip(a + 0.01, 0, 1)
     write_photo(d / "b.png", b, bit_depth=16, like=Photo(b, 16, "PNG",
                                                          icc_profile=make_icc(curv_identity())))
@@ -743,9 +749,7 @@ def test_a_digitally_zoomed_photo_is_calibrated_shrunk_by_its_zoom(capture_dir, 
     seen = _spy_on_calibrate(monkeypatch, "downscale")
     d = capture_dir
     cap = str(d / "cap.json")
-    main(["simulate", str(d / "sharp.jpg"), "--capture", cap, "-o", str(d / "a.png"),
-          "--seed", "1", "--snr-db", "40"])
-    pixels = read_photo(d / "a.png").pixels
+    pixels = _blurred_a_png(d, cap)
     for name, ratio in (("x2.jpg", IFDRational(2, 1)), ("x4.jpg", IFDRational(4, 1)),
                         ("x1.jpg", IFDRational(0, 1))):
         exif = Image.Exif()
