@@ -232,6 +232,16 @@ def test_a_gyro_deblur_warns_when_the_logs_blur_does_not_fit_the_photo(capture_d
         if warned:
             assert "run calibrate (or deblur --refine) first" in err
             assert "the focal length (one in the pixels of another resolution)" in err
+            assert "digital zoom" not in err
+    # the same photo, its EXIF saying digital zoom x2: the warning names the factor
+    exif = Image.Exif()
+    exif.get_ifd(0x8769)[0xA404] = IFDRational(2, 1)
+    Image.fromarray((read_photo(d / "b.png").pixels * 255).round().astype(np.uint8)).save(
+        d / "b_zoom.jpg", exif=exif.tobytes(), quality=95)
+    assert main(["deblur", str(d / "b_zoom.jpg"), "--capture", cap, "-o", str(d / "z.png"),
+                 "--model", "patches", "--exposure-start", "50.6"]) == 0
+    assert ("EXIF says digital zoom x2: where the focal length leaves the zoom out, it "
+            "needs multiplying by 2 (--fx, --fy)") in capsys.readouterr().err
 
 
 def test_a_blur_check_that_fails_does_not_cost_the_deblur(capture_dir, capsys, monkeypatch):

@@ -317,12 +317,13 @@ def _rotations(text: str) -> list[int]:
 
 # ----------------------------------------------------------------------------- commands
 
-def _warn_if_the_blur_does_not_fit(cap, image, curve) -> None:
+def _warn_if_the_blur_does_not_fit(cap, image, curve, zoom: float | None = None) -> None:
     """Warn where no blur at all explains the photo better than the capture's PSFs do, by
     :data:`~gyrodeblur.blur_evidence.WRONG_BLUR_MARGIN`
     (:func:`~gyrodeblur.blur_evidence.capture_gain_over_no_blur`): a time offset, exposure
     start, axis mapping, focal length or log that are not the photo's (or a sharp photo),
-    which the deblur cannot see and which make the photo worse."""
+    which the deblur cannot see and which make the photo worse. ``zoom``: the photo's
+    digital zoom (EXIF), named with the focal length it may have left out."""
     from .blur_evidence import WRONG_BLUR_MARGIN, capture_gain_over_no_blur
     try:                              # a check only: it must not cost the finished deblur
         gain = capture_gain_over_no_blur(image, cap, transfer=curve)
@@ -338,7 +339,11 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve) -> None:
                       f"likely not the photo's, and the result is then worse than the "
                       f"input: run calibrate (or deblur --refine) first. A sharp photo, or one "
                       f"softer than its pixels (upscaled, digitally zoomed, heavily denoised), "
-                      f"also gives this (--no-blur-check skips the check)", stacklevel=2)
+                      f"also gives this (--no-blur-check skips the check)"
+                      + ("" if not zoom else
+                         f". This photo's EXIF says digital zoom x{zoom:g}: where the focal "
+                         f"length leaves the zoom out, it needs multiplying by {zoom:g} "
+                         f"(--fx, --fy)"), stacklevel=2)
 
 
 def cmd_psf(args, say) -> None:
@@ -781,7 +786,9 @@ class _PhotoDeblur:
                                       transfer=curve, progress=progress,
                                       return_report=True, **options)
             if not (args.refine or args.no_blur_check):  # options are all checked by now
-                _warn_if_the_blur_does_not_fit(cap, colour, curve)
+                from .imageio import exif_capture_hints
+                _warn_if_the_blur_does_not_fit(cap, colour, curve,
+                                               exif_capture_hints(self.photo).get("digital_zoom"))
             field = report.field
             mode_txt = args.mode
             grid_txt = f" {report.grid[0]}x{report.grid[1]}" if args.mode == "variant" else ""
