@@ -1359,7 +1359,7 @@ def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatc
                    if "covers the exposure only" in m), why
         said.clear()
     # a session: each EXIF time is off by its own amount, which no shared offset fits
-    with pytest.raises(InputError, match="--capture: photo 2 of this session starts at the "
+    with pytest.raises(InputError, match="^captures: photo 2 of this session starts at the "
                                          "EXIF capture time.*one at a time"):
         calibrate([blurred, blurred[::-1]], [later, exif])
     monkeypatch.undo()

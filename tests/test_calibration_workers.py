@@ -190,7 +190,7 @@ def test_workers_must_be_a_whole_number():
     cap = Capture(0.0, 0.01, 0.0, Camera.centred(64, 64, 60.0),
                   GyroLog(np.arange(0, 1, 0.005), np.zeros((200, 3))))
     for bad in (0, 1.5, True):
-        with pytest.raises(InputError, match="--workers"):
+        with pytest.raises(InputError, match="^workers: "):
             calibrate([img], cap, workers=bad)
 
 

@@ -269,6 +269,43 @@ def _run_error(argv, capsys):
     return err[0]
 
 
+def test_the_library_names_its_arguments_and_the_command_line_its_options(capsys):
+    """A bad keyword argument is named as the library's caller spelled it (``grid:``),
+    and on the command line as the option that set it (``--grid:``). Every argument the
+    library names that way (``InputError.of_argument`` in the source) is an option of
+    one of the commands, so no message names an option that does not exist."""
+    import re
+    from pathlib import Path
+
+    import gyrodeblur
+    from gyrodeblur.cli import as_option
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.tiling import patch_grid
+
+    with pytest.raises(InputError, match="^grid: expected RxC") as err:
+        patch_grid((480, 640), grid="6 by 8")
+    assert err.value.argument and as_option(err.value).args == (
+        "--grid: expected RxC with two positive integers (e.g. 6x8), got '6 by 8'",)
+    assert not as_option(err.value).argument
+    assert as_option(InputError.of_argument("captures", "2 photos but 1 captures")).source \
+        == "--capture"
+    for plain in (InputError("grid.png", "not found"), InputError(None, "no photo")):
+        assert as_option(plain) is plain                   # a file's name is left alone
+    assert InputError.of_argument("phi", "x").reworded("y").argument
+    src = Path(gyrodeblur.__file__).parent
+    names = {m for f in src.glob("*.py")
+             for m in re.findall(r'of_argument\(\s*"(\w+)"', f.read_text(encoding="utf-8"))}
+    assert {"grid", "overlap", "kernel_size", "captures", "phi", "transfer"} <= names, names
+    helps = ""
+    for command in ("psf", "simulate", "deblur", "calibrate", "demo"):
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        helps += capsys.readouterr().out
+    options = set(re.findall(r"--[a-z][a-z-]*", helps))
+    for name in names:
+        assert as_option(InputError.of_argument(name, "")).source in options, name
+
+
 def test_bad_inputs_exit_2_and_write_nothing(capture_dir, capsys):
     d = capture_dir
     cap = str(d / "cap.json")

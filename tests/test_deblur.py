@@ -535,7 +535,7 @@ def test_blind_sizes_count_each_patch_s_share_of_max_pixels():
     assert len(check_blind_sizes((200, 200), 31, (1, 1), max_pixels=10_000)) == 1
     with pytest.raises(InputError, match="central crop of each patch") as err:
         check_blind_sizes((200, 200), 31, (2, 2), max_pixels=10_000)
-    assert err.value.source == "--kernel-size"
+    assert err.value.source == "kernel_size"
     assert len(check_blind_sizes((200, 200), 23, (2, 2), max_pixels=10_000)) == 4
 
 

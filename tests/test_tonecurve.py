@@ -69,7 +69,7 @@ def test_curve_lookup():
 
 
 def test_unknown_curve_is_an_input_error():
-    with pytest.raises(InputError, match=r"--transfer: unknown transfer curve 'rec709'.*srgb"):
+    with pytest.raises(InputError, match=r"^transfer: unknown transfer curve 'rec709'.*srgb"):
         get_transfer_curve("rec709")
     with pytest.raises(InputError, match=r"^photo.tif: unknown"):
         get_transfer_curve("gamma", source="photo.tif")

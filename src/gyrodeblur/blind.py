@@ -118,7 +118,7 @@ def estimate_kernel(
     ------
     InputError
         ``kernel_size`` is not odd, below 3 or not smaller than half the image
-        (source ``"--kernel-size"``); ``init_psf`` fails
+        (source ``"kernel_size"``); ``init_psf`` fails
         :func:`~gyrodeblur.images.check_psf`.
 
     Notes
@@ -278,15 +278,15 @@ def _check_options(iterations, levels, lambda_grad, lambda_min, lambda_decay, ke
 
 def _check_kernel_size(kernel_size, shape: tuple[int, int], what: str = "image") -> None:
     if not is_whole(kernel_size):
-        raise InputError("--kernel-size", f"must be an odd integer, got {kernel_size!r}")
+        raise InputError.of_argument("kernel_size", f"must be an odd integer, got {kernel_size!r}")
     k = int(kernel_size)
     if k < 3 or k % 2 == 0:
-        raise InputError("--kernel-size", f"must be odd and >= 3, got {k}")
+        raise InputError.of_argument("kernel_size", f"must be odd and >= 3, got {k}")
     limit = min(shape) / 2
     if k >= limit:
-        raise InputError("--kernel-size",
-                         f"{k} px is too large for a {shape[1]}x{shape[0]} {what} "
-                         f"(must be smaller than {limit:g}, half its shorter side)")
+        raise InputError.of_argument("kernel_size",
+                                     f"{k} px is too large for a {shape[1]}x{shape[0]} {what} "
+                                     f"(must be smaller than {limit:g}, half its shorter side)")
 
 
 def _check_psf(psf: np.ndarray) -> np.ndarray:

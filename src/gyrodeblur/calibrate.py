@@ -370,32 +370,35 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if captures is None or not all(isinstance(c, Capture) for c in captures):
         raise TypeError("captures must be a Capture or a list of them, one per photo")
     if len(captures) != len(images):
-        raise InputError("--capture", f"{len(images)} photos but {len(captures)} captures")
+        raise InputError.of_argument(
+            "captures", f"{len(images)} photos but {len(captures)} captures")
     _refuse_repeated_images(images)
     fix = checked_fix(fix)
     say_ = say or (lambda msg: None)
     if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
             or not 0 < downscale <= 1:
-        raise InputError("--downscale", f"must be in (0, 1], got {downscale!r}")
+        raise InputError.of_argument("downscale", f"must be in (0, 1], got {downscale!r}")
     if workers is not None and not _is_count(workers):
-        raise InputError("--workers", f"must be a whole number >= 1, got {workers!r}")
+        raise InputError.of_argument("workers", f"must be a whole number >= 1, got {workers!r}")
     from_exif = [cap.exposure_start_from_exif for cap in captures]
     if len(captures) > 1 and any(from_exif) and "offset" not in fix:
         which = ", ".join(str(k + 1) for k, f in enumerate(from_exif) if f)
-        raise InputError("--capture", f"photo{'s' if sum(from_exif) > 1 else ''} {which} of "
-                         f"this session start{'' if sum(from_exif) > 1 else 's'} at the EXIF "
-                         "capture time, which is off by its own amount in each photo, while a "
-                         "session shares one time offset: no offset would fit them all. "
-                         "Calibrate such photos one at a time, or give their exposure starts "
-                         "on the gyro log's clock")
+        raise InputError.of_argument(
+            "captures", f"photo{'s' if sum(from_exif) > 1 else ''} {which} of "
+                        f"this session start{'' if sum(from_exif) > 1 else 's'} at the EXIF "
+                        "capture time, which is off by its own amount in each photo, while a "
+                        "session shares one time offset: no offset would fit them all. "
+                        "Calibrate such photos one at a time, or give their exposure starts "
+                        "on the gyro log's clock")
     unknown = [cap.readout_time_unknown for cap in captures]
     if any(unknown) and not all(unknown) and "readout" not in fix:
         which = ", ".join(cap.source or f"photo {k + 1}'s capture"
                           for k, cap in enumerate(captures) if cap.readout_time_unknown)
-        raise InputError("--capture", f"{which} give{'s' if sum(unknown) == 1 else ''} no "
-                         "readout_time while the other descriptions of this session do, and "
-                         "a session shares one readout correction: give a readout_time in "
-                         "every description (or in none)")
+        raise InputError.of_argument(
+            "captures", f"{which} give{'s' if sum(unknown) == 1 else ''} no "
+                        "readout_time while the other descriptions of this session do, and "
+                        "a session shares one readout correction: give a readout_time in "
+                        "every description (or in none)")
     widened = offset_range is None and "offset" not in fix and any(from_exif)
     if offset_range is None:
         if not widened:
@@ -405,13 +408,16 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         else:
             offset_range = EXIF_START_OFFSET_RANGE
     elif "offset" in fix:
-        raise InputError("--offset-range", "the time offset is fixed (--time-offset or --fix "
-                                           "offset): there is no range to search")
+        raise InputError.of_argument(
+            "offset_range", "the time offset is fixed ('offset' in fix; on the command "
+                            "line --fix offset or --time-offset): there is no range to "
+                            "search")
     if isinstance(offset_range, bool) or not (isinstance(offset_range, (int, float, np.number))
                                               and 0 < offset_range <= MAX_OFFSET_RANGE):
-        raise InputError("--offset-range", f"must be seconds in (0, {MAX_OFFSET_RANGE:g}] on "
-                                           f"each side of the given time offset (to keep the "
-                                           f"offset, fix it), got {offset_range!r}")
+        raise InputError.of_argument(
+            "offset_range", f"must be seconds in (0, {MAX_OFFSET_RANGE:g}] on "
+                            f"each side of the given time offset (to keep the "
+                            f"offset, fix it), got {offset_range!r}")
     if n_patches is not None and not _is_count(n_patches):
         raise InputError(None, f"n_patches must be a whole number >= 1, got {n_patches!r}")
     work_caps = captures
@@ -422,8 +428,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     transfers = (list(transfer) if isinstance(transfer, (list, tuple))
                  else [transfer] * len(images))
     if len(transfers) != len(images):
-        raise InputError("--transfer", f"{len(transfers)} transfer curves for {len(images)} "
-                                       "photos: give one, or one per photo")
+        raise InputError.of_argument(
+            "transfer", f"{len(transfers)} transfer curves for {len(images)} "
+                        "photos: give one, or one per photo")
     photos = [CalibrationPhoto(img, cap, curve, i)
               for i, (img, cap, curve) in enumerate(zip(images, work_caps, transfers))]
     notes: list[str] = []
@@ -837,8 +844,9 @@ def _shrunk_photos(images, captures, factor: float):
         small = _shrunk(img, factor)
         hs, ws = small.shape[:2]
         if min(hs, ws) < 64:
-            raise InputError("--downscale", f"{factor:g} shrinks a {w}x{h} photo to {ws}x{hs}: "
-                                            "too small to calibrate on")
+            raise InputError.of_argument(
+                "downscale", f"{factor:g} shrinks a {w}x{h} photo to {ws}x{hs}: "
+                             "too small to calibrate on")
         cam = full.camera.scaled_to(ws, hs, tolerance=1.0)
         out_imgs.append(small)
         out_caps.append(cap.replace(camera=cam))
@@ -932,6 +940,6 @@ def checked_fix(names) -> set[str]:
     fix.discard(None)
     unknown = fix - set(PARAMETERS)
     if unknown:
-        raise InputError("--fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
-                                  f"known: {', '.join(PARAMETERS)}")
+        raise InputError.of_argument("fix", f"unknown parameter(s) {', '.join(sorted(unknown))}; "
+                                            f"known: {', '.join(PARAMETERS)}")
     return fix

@@ -189,9 +189,9 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
         except InputError as exc:
             turned = getattr(args, "photo_rotation", 0)
             if turned and "turned by 90 degrees" in exc.problem:     # by the option itself
-                raise InputError(exc.source, exc.problem.split(" (turned")[0] + f", after "
-                                 f"--photo-rotation {turned}; as stored the photo fits, so "
-                                 f"its pixels were not turned: leave the option out") from None
+                raise exc.reworded(exc.problem.split(" (turned")[0] + f", after "
+                                   f"--photo-rotation {turned}; as stored the photo fits, so "
+                                   f"its pixels were not turned: leave the option out") from None
             raise
         if cap.camera is not given_cam:
             sx, sy = size[0] / given_cam.width, size[1] / given_cam.height  # more than rounding:
@@ -566,7 +566,7 @@ def _this_photo(args):
         if exc.source is None:
             raise InputError(args.photo, exc.problem) from None
         if exc.source != args.photo and args.photo not in exc.problem:
-            raise InputError(exc.source, f"{exc.problem} (for {args.photo})") from None
+            raise exc.reworded(f"{exc.problem} (for {args.photo})") from None
         raise
 
 
@@ -1059,6 +1059,20 @@ def joined_negative_lists(argv: list[str]) -> list[str]:
     return out
 
 
+#: The library's keyword arguments that an option of another name sets.
+_OPTION_OF_ARGUMENT = {"captures": "--capture"}
+
+
+def as_option(exc: InputError) -> InputError:
+    """``exc`` as the command line says it: a library function's keyword argument named
+    as the option that set it (``kernel_size`` -> ``--kernel-size``, ``captures`` ->
+    ``--capture``); an error about a file or an option unchanged."""
+    if not exc.argument:
+        return exc
+    return InputError(_OPTION_OF_ARGUMENT.get(exc.source, "--" + exc.source.replace("_", "-")),
+                      exc.problem)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(joined_negative_lists(sys.argv[1:] if argv is None else list(argv)))
@@ -1083,6 +1097,7 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         if exc.source is None and _photos(args):     # a problem of the photo(s) themselves
             exc = InputError(_photos(args), exc.problem)
+        exc = as_option(exc)
         _write(sys.stderr, f"gyrodeblur: error: {exc}{_written_before(args)}\n")
         return 2
     except KeyboardInterrupt:

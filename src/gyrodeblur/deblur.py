@@ -262,7 +262,7 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
         return ([Patch(0, H, 0, W)], PSFField(np.array([[cam.cx, cam.cy]]), [psf], (1, 1), disp),
                 notes)
     if mode != "variant":
-        raise InputError("--mode", f"unknown mode {mode!r} (variant or invariant)")
+        raise InputError.of_argument("mode", f"unknown mode {mode!r} (variant or invariant)")
     automatic = isinstance(grid, str) and grid.strip().lower() == "auto"
     if automatic:
         grid = auto_grid(cap, (H, W), overlap, centred=align)
@@ -374,7 +374,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     """
     method = method or DEFAULT_METHOD
     if method not in METHODS:
-        raise InputError("--method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
+        raise InputError.of_argument(
+            "method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
     clip = check_flag(clip, "clip")
     check_callback(progress, "progress")
     curve = get_transfer_curve(transfer)
@@ -458,14 +459,14 @@ def _check_model(model, method: str, patches, shape) -> str:
         small = shape[0] * shape[1] <= GLOBAL_DEFAULT_MAX_PIXELS
         return "global" if method == "sparse" and one_grid and small else "patches"
     if model not in MODELS:
-        raise InputError("--model", f"unknown model {model!r} (global or patches)")
+        raise InputError.of_argument("model", f"unknown model {model!r} (global or patches)")
     if model == "global":
         if method != "sparse":
-            raise InputError("--model", f"'global' is the sparse method's; method "
-                                        f"{method!r} deconvolves patch by patch")
+            raise InputError.of_argument("model", f"'global' is the sparse method's; method "
+                                                  f"{method!r} deconvolves patch by patch")
         if len(patches) > 1 and not one_grid:
-            raise InputError("--model", "'global' needs a grid of equal windows "
-                                        "(gyrodeblur.tiling.patch_grid)")
+            raise InputError.of_argument("model", "'global' needs a grid of equal windows "
+                                                  "(gyrodeblur.tiling.patch_grid)")
     return model if len(patches) > 1 else "patches"
 
 
@@ -704,8 +705,8 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     Raises
     ------
     InputError
-        A bad ``grid`` or ``overlap`` (sources ``"--grid"``, ``"--overlap"``), or
-        patches too small for the kernel (``"--grid"``).
+        A bad ``grid`` or ``overlap`` (sources ``"grid"``, ``"overlap"``), or
+        patches too small for the kernel (``"grid"``).
     """
     from .blind import estimate_kernel
 
@@ -745,8 +746,8 @@ def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
     Raises
     ------
     InputError
-        Sources ``"--kernel-size"`` (a size not odd, or too large for the photo),
-        ``"--grid"`` (patches too small for the kernel) or ``"--overlap"``.
+        Sources ``"kernel_size"`` (a size not odd, or too large for the photo),
+        ``"grid"`` (patches too small for the kernel) or ``"overlap"``.
     """
     from .blind import _check_kernel_size
     patches = patch_grid(shape, grid, overlap)
@@ -755,10 +756,11 @@ def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
                        "px central crop the kernel is estimated on")
     if len(patches) > 1:
         if kernel_size >= min(patches[0].shape) // 2:
-            raise InputError("--grid", f"{len(patches)} patches of {patches[0].shape[1]}x"
-                                       f"{patches[0].shape[0]} px are too small for a "
-                                       f"{kernel_size} px kernel (it must be under half a "
-                                       f"patch's shorter side): use a coarser grid")
+            raise InputError.of_argument(
+                "grid", f"{len(patches)} patches of {patches[0].shape[1]}x"
+                        f"{patches[0].shape[0]} px are too small for a "
+                        f"{kernel_size} px kernel (it must be under half a "
+                        f"patch's shorter side): use a coarser grid")
         share = max_pixels / len(patches)
         for p in patches:
             _check_kernel_size(kernel_size, _central_shape(p.shape, share),

@@ -217,8 +217,7 @@ def photo_transfer_curve(photo, requested: str | TransferCurve = AUTO
         try:
             return get_transfer_curve(requested), None
         except InputError as exc:
-            raise InputError(exc.source, exc.problem.replace("(known: ", f"(known: {AUTO}, ")) \
-                from None
+            raise exc.reworded(exc.problem.replace("(known: ", f"(known: {AUTO}, ")) from None
 
     where = photo.path or "the photo"
     icc = photo.icc_profile

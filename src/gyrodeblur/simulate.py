@@ -236,7 +236,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     check_seed(seed)
     quantize = check_flag(quantize, "quantize")
     check_capture(capture)
-    curve = get_transfer_curve(transfer, "transfer")
+    curve = get_transfer_curve(transfer)
     # an encoded photo (sRGB) holds neither values far below black (offset or negated) nor
     # far above 1 (0-255, not scaled); linear values are blurred as they are (a linear
     # operator: lights far above 1, or a zero-mean test texture)

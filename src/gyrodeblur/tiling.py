@@ -120,9 +120,9 @@ def patch_grid(shape: Sequence[int], grid: Sequence[int] = DEFAULT_GRID,
     Raises
     ------
     InputError
-        Bad ``grid`` (source ``"--grid"``): not two positive integers, or so fine that a
+        Bad ``grid`` (source ``"grid"``): not two positive integers, or so fine that a
         window would be under ``MIN_WINDOW`` pixels. Bad ``overlap`` (source
-        ``"--overlap"``): not a number in [0, 0.5].
+        ``"overlap"``): not a number in [0, 0.5].
 
     Examples
     --------
@@ -402,8 +402,9 @@ def check_grid(grid: Sequence[int] | str) -> tuple[int, int]:
         items = ([int(v) for v in parts]
                  if len(parts) == 2 and all(v.strip().isdigit() for v in parts) else None)
         if items is None or min(items) < 1:
-            raise InputError("--grid", f"expected RxC with two positive integers (e.g. 6x8), "
-                                       f"got {grid!r}")
+            raise InputError.of_argument(
+                "grid", f"expected RxC with two positive integers (e.g. 6x8), "
+                        f"got {grid!r}")
         return items[0], items[1]
     try:
         items = list(grid)
@@ -412,7 +413,8 @@ def check_grid(grid: Sequence[int] | str) -> tuple[int, int]:
     if (items is None or len(items) != 2
             or not all(is_whole(v) for v in items)
             or not all(v >= 1 for v in items)):
-        raise InputError("--grid", f"must be two positive integers (rows, columns), got {grid!r}")
+        raise InputError.of_argument(
+            "grid", f"must be two positive integers (rows, columns), got {grid!r}")
     return int(items[0]), int(items[1])
 
 
@@ -421,8 +423,8 @@ def check_overlap(overlap: float) -> float:
     fraction of the patch size in [0, :data:`MAX_OVERLAP`]."""
     if (isinstance(overlap, bool) or not isinstance(overlap, numbers.Real)
             or not math.isfinite(overlap) or not 0.0 <= overlap <= MAX_OVERLAP):
-        raise InputError("--overlap", "must be a fraction of the patch size in "
-                                      f"[0, {MAX_OVERLAP}], got {overlap!r}")
+        raise InputError.of_argument("overlap", "must be a fraction of the patch size in "
+                                                f"[0, {MAX_OVERLAP}], got {overlap!r}")
     return float(overlap)
 
 
@@ -444,13 +446,15 @@ def _axis_windows(length: int, n: int, overlap: float, axis_name: str) -> list[t
         if best is None or err < best[0] - 1e-12:
             best = (err, w, v)
     if best is None or best[1] < MIN_WINDOW:
-        raise InputError("--grid", f"{n} patches across {length} {axis_name} are too many: "
-                                   f"windows would be under {MIN_WINDOW} px")
+        raise InputError.of_argument(
+            "grid", f"{n} patches across {length} {axis_name} are too many: "
+                    f"windows would be under {MIN_WINDOW} px")
     _, w, v = best
     if v / w > CROWDED_OVERLAP:       # the windows are as small as allowed and still crowd
-        raise InputError("--grid", f"{n} patches across {length} {axis_name} are too many: "
-                                   f"they would overlap by {100 * v / w:.0f} % (more than "
-                                   f"{100 * CROWDED_OVERLAP:.0f} %)")
+        raise InputError.of_argument(
+            "grid", f"{n} patches across {length} {axis_name} are too many: "
+                    f"they would overlap by {100 * v / w:.0f} % (more than "
+                    f"{100 * CROWDED_OVERLAP:.0f} %)")
     return [(i * (w - v), i * (w - v) + w) for i in range(n)]
 
 
@@ -495,5 +499,5 @@ def _warn_large_psfs(patches: Sequence[Patch], psfs: Sequence[np.ndarray]) -> No
         warnings.warn(
             f"PSF extent up to {extent} px exceeds the patch window "
             f"({patch.shape[0]}x{patch.shape[1]} px) in {len(bad)} of {len(patches)} patches: "
-            "deblurring will be poor there; use a coarser --grid",
+            "deblurring will be poor there; use a coarser grid",
             UserWarning, stacklevel=3)

@@ -369,7 +369,7 @@ def matches_curve(curve: TransferCurve, reference: TransferCurve, *,
     return bool(np.max(np.abs(back - v)) <= tolerance)
 
 
-def get_transfer_curve(name: str | TransferCurve, source: str | None = "--transfer") -> TransferCurve:
+def get_transfer_curve(name: str | TransferCurve, source: str | None = None) -> TransferCurve:
     """Look up a transfer curve by name (case-insensitive): ``"srgb"``, ``"linear"``/``"none"``.
 
     A :class:`TransferCurve` passes through unchanged.
@@ -378,7 +378,8 @@ def get_transfer_curve(name: str | TransferCurve, source: str | None = "--transf
     ----------
     name : str or TransferCurve
     source : str or None
-        What to name in the error message (the CLI option or file the name came from).
+        What to name in the error message: the file the name came from; by default the
+        keyword argument ``transfer`` (on the command line, ``--transfer``).
 
     Raises
     ------
@@ -392,12 +393,17 @@ def get_transfer_curve(name: str | TransferCurve, source: str | None = "--transf
     """
     if isinstance(name, TransferCurve):
         return name
+
+    def refused(problem: str) -> InputError:
+        return (InputError.of_argument("transfer", problem) if source is None
+                else InputError(source, problem))
+
     if not isinstance(name, str):        # None would read as "none", i.e. linear
-        raise InputError(source, f"a transfer curve is a name ({', '.join(sorted(_CURVES))}) "
-                                 f"or a TransferCurve, got {name!r}")
+        raise refused(f"a transfer curve is a name ({', '.join(sorted(_CURVES))}) or a "
+                      f"TransferCurve, got {name!r}")
     key = name.strip().lower()
     try:
         return _CURVES[key]
     except KeyError:
         known = ", ".join(sorted(_CURVES))
-        raise InputError(source, f"unknown transfer curve {name!r} (known: {known})") from None
+        raise refused(f"unknown transfer curve {name!r} (known: {known})") from None

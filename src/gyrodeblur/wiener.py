@@ -101,7 +101,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     Raises
     ------
     InputError
-        ``phi`` is not a positive finite number (source ``"--phi"``); ``image`` fails
+        ``phi`` is not a positive finite number (source ``"phi"``); ``image`` fails
         :func:`~gyrodeblur.images.check_image`, or ``psf``
         :func:`~gyrodeblur.images.check_psf` (2-D, odd sides, finite, positive sum).
 
@@ -304,5 +304,5 @@ def check_phi(phi: float) -> float:
     """``phi`` as a float, or :class:`InputError` unless it is a positive finite number."""
     if isinstance(phi, bool) or not isinstance(phi, numbers.Real) or not np.isfinite(phi) \
             or phi <= 0:
-        raise InputError("--phi", f"must be a positive number (inverse SNR), got {phi!r}")
+        raise InputError.of_argument("phi", f"must be a positive number (inverse SNR), got {phi!r}")
     return float(phi)
