@@ -1066,7 +1066,7 @@ def test_cli_save_capture_needs_refine_and_a_json_file_apart(cli_dir, capsys):
             (["--refine", "--save-capture", str(d / "cap.json")],
              "cap.json: is one of the command's inputs"),
             (["--refine", "--save-capture", str(d / "old.json")],
-             "old.json: exists; pass --overwrite")):
+             "old.json: exists; --overwrite (overwrite=True) replaces it")):
         assert main(base + extra) == 2
         err = capsys.readouterr().err
         assert says in err, err

@@ -477,6 +477,65 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
         assert field.psfs[0][3, 3] == 1
 
 
+def test_a_blind_photo_returned_as_it_is_still_has_its_method_and_options_checked(monkeypatch):
+    """A bad method is refused before the kernel is estimated, and a bad option of the
+    method even where the photo comes back as it is (before, both were silently taken
+    there); ``max_pixels`` is checked before any work."""
+    import gyrodeblur.blind as blind
+    import gyrodeblur.blur_evidence as evidence
+    from gyrodeblur.deblur import deblur_blind
+    from gyrodeblur.errors import InputError
+
+    photo = np.random.default_rng(7).uniform(0.1, 0.9, (64, 64)).astype(np.float32)
+    real = blind.estimate_kernel
+
+    def not_now(*args, **kwargs):
+        raise AssertionError("the kernel was estimated before the arguments were checked")
+
+    monkeypatch.setattr(blind, "estimate_kernel", not_now)
+    with pytest.raises(InputError, match="^method: unknown method 'lucy'"):
+        deblur_blind(photo, 7, method="lucy")
+    for bad in (-5, 0, "1e6", 2.5):
+        with pytest.raises(InputError, match="^max_pixels must be a whole number"):
+            deblur_blind(photo, 7, max_pixels=bad)
+    monkeypatch.setattr(blind, "estimate_kernel", real)
+    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")            # "returned as it is"
+        with pytest.raises(InputError, match="^phi: must be a positive number"):
+            deblur_blind(photo, 7, method="wiener", phi=-1.0, transfer="linear")
+        with pytest.raises(TypeError, match="unknown option.*bogus"):
+            deblur_blind(photo, 7, bogus=1, transfer="linear")
+
+
+def test_psfs_and_a_displacement_field_of_the_wrong_kind_are_refused_by_name():
+    """One 2-D PSF given where a list is due was read as one PSF per row ("5 PSFs for 1
+    patches"), and a displacement that is not a field failed inside the warp."""
+    from gyrodeblur.deblur import deblur_with_psfs
+    from gyrodeblur.psf import displacement_field
+
+    photo = np.full((60, 80), 0.5, np.float32)
+    patches = patch_grid(photo.shape, (1, 1), 0.0)
+    psf = np.zeros((5, 5), np.float32)
+    psf[2, 2] = 1
+    with pytest.raises(TypeError, match=r"got one 5x5 array: give \[psf\]"):
+        deblur_with_psfs(photo, patches, psf)
+    cap = Capture(0.1, 0.03, 0.0, Camera.centred(80, 60, 70.0),
+                  GyroLog(np.arange(0, 1, 0.005), np.full((200, 3), 0.01)))
+    field = displacement_field(cap)
+    out = deblur_with_psfs(photo, patches, [psf], displacement=field, method="wiener")
+    assert out.shape == photo.shape
+    with pytest.raises(TypeError, match="displacement must be \\(ys, xs, d\\)"):
+        deblur_with_psfs(photo, patches, [psf], displacement="x")
+    ys, xs, d = field
+    for bad in ((ys, xs, d[:, :-1]), (ys[::-1], xs, d), (ys, xs, d * np.nan)):
+        with pytest.raises(ValueError, match="displacement must be a grid"):
+            deblur_with_psfs(photo, patches, [psf], displacement=bad)
+    other = displacement_field(cap.replace(camera=Camera.centred(160, 120, 140.0)))
+    with pytest.raises(ValueError, match="a field for another size of photo"):
+        deblur_with_psfs(photo, patches, [psf], displacement=other)
+
+
 def test_blind_patches_refine_the_photo_s_kernel_on_central_crops(monkeypatch):
     """Kills ``deblur_blind`` estimating each patch's kernel from scratch, and cropping
     anything but the centre: the photo's kernel is estimated on its central

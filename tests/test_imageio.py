@@ -814,10 +814,13 @@ def test_returns_path_and_leaves_no_temporary_file(tmp_path):
 def test_refuses_existing_output_unless_overwrite(tmp_path):
     out = tmp_path / "a.png"
     write_photo(out, np.zeros((4, 4), np.float32))
-    with pytest.raises(InputError, match="exists; pass --overwrite to replace it") as info:
+    with pytest.raises(InputError, match=r"exists; --overwrite \(overwrite=True\) replaces it") as info:
         write_photo(out, np.ones((4, 4), np.float32))
     assert "a.png" in str(info.value)
     assert read_photo(out).pixels.max() == 0
+    for empty in ("", "  "):                  # not ": unknown image type"
+        with pytest.raises(InputError, match="^an output file's name is empty"):
+            write_photo(empty, np.ones((4, 4), np.float32))
     write_photo(out, np.ones((4, 4), np.float32), overwrite=True)
     assert read_photo(out).pixels.min() == 1
 

@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from .arguments import check_callback, check_flag
+from .arguments import check_callback, check_flag, is_whole
 from .capture import Capture, check_capture
 from .errors import InputError
 from .gyrolog import step_warning
@@ -330,6 +330,48 @@ def _displacement_slope(displacement) -> float:
     return float(max(sx, sy))
 
 
+def _checked_method(method: str | None) -> str:
+    """``method``, or the default for ``None``; an unknown name refused."""
+    method = method or DEFAULT_METHOD
+    if method not in METHODS:
+        raise InputError.of_argument(
+            "method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    return method
+
+
+def _deconvolver(method: str, img: np.ndarray, encoded: np.ndarray, clip: bool, options):
+    """The method's deconvolver for the photo ``img`` (linear light; ``encoded`` as
+    given), its ``options`` checked by its factory."""
+    factory = METHODS[method]
+    if _takes_keyword(factory, "clip"):               # the method clips (or not) itself
+        options = {**options, "clip": clip}
+    if _takes_keyword(factory, "encoded"):
+        options = {**options, "encoded": encoded}
+    return factory(img, **options)
+
+
+def _checked_displacement(displacement, shape: tuple[int, int]) -> tuple:
+    """``displacement`` as ``(ys, xs, d)`` float arrays
+    (:func:`gyrodeblur.psf.displacement_field`'s), refused naming the argument where it is
+    not such a grid over a photo of ``shape`` (rows, columns)."""
+    try:
+        ys, xs, d = (np.asarray(v, np.float64) for v in displacement)
+    except (TypeError, ValueError):
+        raise TypeError("displacement must be (ys, xs, d), as "
+                        "gyrodeblur.psf.displacement_field returns it") from None
+    if (ys.ndim != 1 or xs.ndim != 1 or len(ys) < 2 or len(xs) < 2
+            or d.shape != (len(ys), len(xs), 2) or not np.isfinite(d).all()
+            or ys[0] != 0 or xs[0] != 0 or np.any(np.diff(ys) <= 0)
+            or np.any(np.diff(xs) <= 0)):
+        raise ValueError(f"displacement must be a grid from row and column 0, ys and xs "
+                         f"increasing, d finite of shape (len(ys), len(xs), 2), got ys "
+                         f"{ys.shape}, xs {xs.shape}, d {d.shape}")
+    if abs(ys[-1] - (shape[0] - 1)) > 1 or abs(xs[-1] - (shape[1] - 1)) > 1:
+        raise ValueError(f"displacement's grid spans {xs[-1] + 1:g}x{ys[-1] + 1:g} px, the "
+                         f"photo {shape[1]}x{shape[0]}: a field for another size of photo?")
+    return ys, xs, d
+
+
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
                      transfer: str | TransferCurve = "srgb", clip: bool = True, progress=None,
                      displacement=None, model: str | None = None, **options) -> np.ndarray:
@@ -372,15 +414,15 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     **options
         Passed to the method's factory (e.g. ``phi`` for Wiener).
     """
-    method = method or DEFAULT_METHOD
-    if method not in METHODS:
-        raise InputError.of_argument(
-            "method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
+    method = _checked_method(method)
     clip = check_flag(clip, "clip")
     check_callback(progress, "progress")
     curve = get_transfer_curve(transfer)
     checked = check_image(image, "photo", max_value=PHOTO_MAX,
                           min_value=PHOTO_MIN)
+    if isinstance(psfs, np.ndarray) and psfs.ndim == 2:     # its rows are not PSFs
+        raise TypeError(f"psfs must hold one 2-D PSF per patch (a list, or an N x K x K "
+                        f"stack), got one {psfs.shape[0]}x{psfs.shape[1]} array: give [psf]")
     patches, psfs = list(patches), list(psfs)
     check_patches(patches, *checked.shape[:2])
     model = _check_model(model, method, patches, checked.shape[:2])
@@ -397,13 +439,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
             raise InputError(None, f"PSF {i + 1} spreads light over {extent} px, more than the "
                                    f"{checked.shape[1]}x{checked.shape[0]} photo (a PSF for "
                                    "another size of photo?)")
+    if displacement is not None:
+        displacement = _checked_displacement(displacement, checked.shape[:2])
     img = curve.decode(encoded)
-    factory = METHODS[method]
-    if _takes_keyword(factory, "clip"):               # the method clips (or not) itself
-        options = {**options, "clip": clip}
-    if _takes_keyword(factory, "encoded"):
-        options = {**options, "encoded": encoded}
-    deconvolve = factory(img, **options)
+    deconvolve = _deconvolver(method, img, encoded, clip, options)
     unknown = None
     if displacement is not None:
         box = max(p.shape[0] * p.shape[1] for p in psfs)
@@ -712,15 +751,20 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
 
     image = check_image(image, "photo", max_value=PHOTO_MAX,
                         min_value=PHOTO_MIN)
-    check_flag(clip, "clip")
+    method = _checked_method(method)
+    clip = check_flag(clip, "clip")
     check_flag(check_blur, "check_blur")
     check_callback(progress, "progress")
+    if not (is_whole(max_pixels) and max_pixels >= 1):
+        raise InputError(None, f"max_pixels must be a whole number >= 1, got {max_pixels!r}")
     H, W = image.shape[:2]
-    lin = get_transfer_curve(transfer).decode(split_alpha(image)[0])     # not the mask
+    encoded = split_alpha(image)[0]                  # not the mask
+    lin = get_transfer_curve(transfer).decode(encoded)
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
     patches = check_blind_sizes((H, W), kernel_size, grid, overlap, max_pixels)
     psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
     if check_blur and _shows_no_blur(image, psfs[0], transfer):
+        _deconvolver(method, lin, encoded, clip, options)   # its options refused as always
         delta = np.zeros_like(psfs[0])
         delta[kernel_size // 2, kernel_size // 2] = 1.0
         out = np.array(image, np.float32)

@@ -785,6 +785,8 @@ def write_photo(
         ``bit_depth``/``quality`` is out of range.
     """
     p = os.fspath(path)
+    if not p.strip():
+        raise InputError(None, f"an output file's name is empty ({p!r}): name a file")
     fmt = _format_of(p)
     pixels = _check_pixels(pixels)
     depth = _choose_bit_depth(p, fmt, bit_depth, like)
@@ -919,7 +921,7 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
         if other is not None and _same_file(path, os.fspath(other)):
             raise InputError(path, "is one of the command's inputs; choose another output file")
     if os.path.lexists(path) and not overwrite:
-        raise InputError(path, "exists; pass --overwrite to replace it")
+        raise InputError(path, "exists; --overwrite (overwrite=True) replaces it")
     check_writable(path)
 
 
