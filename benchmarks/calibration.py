@@ -128,15 +128,17 @@ def inject(capture, rng: np.random.Generator):
 
 
 def run_case(case, rng, *, say, method=None, n_patches=None, no_errors=False,
-             attribute=False, offset_range=None, readout_unknown=False) -> dict:
+             attribute=False, offset_range=None, readout_unknown=False,
+             mappings=None) -> dict:
     """Calibrate one case's photo alone, from its capture with errors injected."""
     return run_session([case], rng, say=say, method=method, n_patches=n_patches,
                        no_errors=no_errors, attribute=attribute, offset_range=offset_range,
-                       readout_unknown=readout_unknown)[0]
+                       readout_unknown=readout_unknown, mappings=mappings)[0]
 
 
 def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False,
-                attribute=False, offset_range=None, readout_unknown=False) -> list[dict]:
+                attribute=False, offset_range=None, readout_unknown=False,
+                mappings=None) -> list[dict]:
     """Calibrate the photos of one session together: every case's capture gets the same
     injected errors (one gyro, one camera; none with ``no_errors``), and ``calibrate`` sees
     all the photos at once. One row per photo (``seconds`` is the whole session's
@@ -147,7 +149,11 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
     the runs pair), and ``calibrate`` searches +-(``offset_range`` + 10 ms).
 
     ``readout_unknown``: the descriptions give no readout time (a phone user's), so the
-    captures have 0 marked unknown (the other errors as usual)."""
+    captures have 0 marked unknown (the other errors as usual).
+
+    ``mappings``: as :func:`~gyrodeblur.calibrate.calibrate` takes it (``"phone"``: the
+    8 mappings of a phone's own camera, as for a phone app's log; default: all 24, the
+    shared log being a plain CSV)."""
     errors = draw_errors(cases[0].capture, rng, none=no_errors)
     if readout_unknown:
         errors.update(readout_factor=0.0, readout_unknown=True)
@@ -159,7 +165,7 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
     t0 = time.perf_counter()
     try:
         res = calibrate([case.blurred for case in cases], bads, n_patches=n_patches,
-                        offset_range=search)
+                        offset_range=search, mappings=mappings)
     except InputError as exc:
         for case in cases:
             say(f"  {case.name:24s} calibration refused: {exc}")
@@ -572,6 +578,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                     help="clocks known only roughly: inject time offsets of up to +-S s (the "
                          "usual +-30 ms draws scaled) and search +-(S + 0.01) s, each capture "
                          "given 2 S + 0.35 s of the source trace on each side (at least)")
+    ap.add_argument("--mappings", choices=("phone", "all"), default=None,
+                    help="axis mappings searched: phone, the 8 of a phone's own camera (as "
+                         "calibrate searches for a phone app's log; the shared log is a "
+                         "phone's), or all 24 (the default here: the log is a plain CSV)")
     ap.add_argument("--readout-unknown", action="store_true",
                     help="the corrupted descriptions give no readout time (0, marked unknown, "
                          "as a phone user's without one): calibrate searches 0-50 ms")
@@ -599,6 +609,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
             stem += "_no_errors"
         if args.readout_unknown:
             stem += "_readout_unknown"
+        if args.mappings:
+            stem += f"_mappings_{args.mappings}"
         args.out = _common.RESULTS / (stem + ".json")
     if args.log_seconds is not None and args.log_seconds < 0:
         ap.error(f"--log-seconds: must be >= 0, got {args.log_seconds:g}")
@@ -644,7 +656,8 @@ def main(argv: list[str] | None = None) -> int:
     rows, session_secs = [], []
     injected = ("nothing injected" if args.no_errors
                 else f"errors injected with seed {args.seed}"
-                + (", no readout given" if args.readout_unknown else ""))
+                + (", no readout given" if args.readout_unknown else "")
+                + (f", mappings searched: {args.mappings}" if args.mappings else ""))
     if args.sessions or args.burst:
         if args.burst:
             sessions = [[case, burst_partner(case)] for case in cases]
@@ -659,7 +672,8 @@ def main(argv: list[str] | None = None) -> int:
             got = run_session(group, rng, say=say, method=args.method,
                               n_patches=args.patches, no_errors=args.no_errors,
                               attribute=args.attribute, offset_range=args.offset_range,
-                              readout_unknown=args.readout_unknown)
+                              readout_unknown=args.readout_unknown,
+                              mappings=args.mappings)
             rows += got
             session_secs.append(got[0]["seconds"])
     else:
@@ -669,7 +683,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(run_case(case, rng, say=say, method=args.method,
                                  n_patches=args.patches, no_errors=args.no_errors,
                                  attribute=args.attribute, offset_range=args.offset_range,
-                                 readout_unknown=args.readout_unknown))
+                                 readout_unknown=args.readout_unknown,
+                                 mappings=args.mappings))
     summary = summarise(rows)
     if args.sessions or args.burst:
         summary["sessions"] = len(sessions)
@@ -688,6 +703,7 @@ def main(argv: list[str] | None = None) -> int:
                        else "single photos"),
               "log_seconds": log_seconds, "offset_range": args.offset_range,
               "no_errors": args.no_errors, "readout_unknown": args.readout_unknown,
+              "mappings": args.mappings or "all",
               "targets": TARGETS, "summary": summary, "cases": rows,
               "total_seconds": time.perf_counter() - t_start, "machine": _common.machine_info()}
     _common.write_json(args.out, result)

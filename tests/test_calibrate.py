@@ -811,6 +811,41 @@ def test_the_candidate_mappings():
     assert only is measured
 
 
+def test_a_phone_log_is_searched_over_the_mappings_a_phone_s_camera_can_have(monkeypatch):
+    """A phone's own camera looks along the device's z axis, so from a phone app's log (in
+    the device's axes) only the 8 mappings that keep camera z on log z are searched, and a
+    given mapping outside them is not kept however close it scores; a plain log (or a
+    session with one) gets all 24, and ``mappings`` chooses either."""
+    from gyrodeblur.axes import PHONE_AXIS_LETTERS, PROPER_AXIS_LETTERS
+    from gyrodeblur.calibrate import searched_mappings
+
+    assert len(PHONE_AXIS_LETTERS) == 8 and all(a[2] in "Zz" for a in PHONE_AXIS_LETTERS)
+    true = _true_capture(0.5)
+    phone = true.replace(log=GyroLog(true.log.t, true.log.omega, None, {"axes": "phone device"}))
+    assert phone.log.in_device_axes and not true.log.in_device_axes
+    letters, why = searched_mappings(None, [phone])
+    assert letters == list(PHONE_AXIS_LETTERS) and "searching the 8 axis mappings" in why
+    assert "not among" not in why
+    assert searched_mappings(None, [true]) == (list(PROPER_AXIS_LETTERS), None)
+    assert searched_mappings(None, [phone, true])[0] == list(PROPER_AXIS_LETTERS)
+    assert searched_mappings("all", [phone]) == (list(PROPER_AXIS_LETTERS), None)
+    assert searched_mappings(" Phone ", [true]) == (list(PHONE_AXIS_LETTERS), None)
+    assert searched_mappings(None, [phone], {"axes"})[1] is None
+    sideways = parse_axes("Yzx")                      # the camera looking out of a side
+    _, why = searched_mappings(None, [phone.replace(axes=sideways)])
+    assert "is not among those searched: a phone's camera does not look" in why, why
+    for bad in ("phones", ["QQQ"], ["XYz", "XXY"]):
+        with pytest.raises(InputError, match="^mappings: ") as err:
+            searched_mappings(bad, [phone])
+        assert err.value.argument
+    script = {"candidates": {"Xyz": -100.0, "xYz": -92.0}, "winner": -105.0, "given": -104.9}
+    res, _ = _scripted(monkeypatch, script, captures=[phone.replace(axes=sideways)])
+    assert axes_to_letters(res.capture.axes) == "Xyz" and not _said(res, "kept the given")
+    assert _said(res, "searching the 8 axis mappings"), res.notes
+    res, _ = _scripted(monkeypatch, script, captures=[true.replace(axes=sideways)])
+    assert axes_to_letters(res.capture.axes) == "Yzx" and _said(res, "kept the given")
+
+
 def test_the_widened_ranking_steps_each_axis_by_its_own_prior_sd():
     """A long log's prior on the bias is tighter on some axes than on others: each bias step
     is one sd of its own axis."""

@@ -514,12 +514,48 @@ def test_options_out_of_range_or_ignored_are_refused(capture_dir, capsys):
         (["deblur", photo, "--blind", "--downscale", "0.5", "-o", str(d / "o.png")],
          "--downscale: applies with --refine only"),
         (["deblur", photo, "--blind", "--capture", cap, "-o", str(d / "o.png")], "--capture: does not apply"),
+        (["deblur", photo, "--capture", cap, "--mappings", "all", "-o", str(d / "o.png")],
+         "--mappings: applies with --refine only"),
+        (["calibrate", photo, "--capture", cap, "--mappings", "phones", "-o", str(d / "o.json")],
+         "--mappings: invalid choice"),
         (["deblur", photo, "--capture", cap, "--mode", "invariant", "--grid", "2x2", "-o",
           str(d / "o.png")], "--grid: applies to --mode variant only"),
     ]
     for argv, match in cases:
         assert match in _run_error(argv, capsys), argv
     assert not any((d / n).exists() for n in ("p.npy", "s.png", "o.png"))
+
+
+def test_the_mappings_searched_reach_the_calibration(capture_dir, capsys, monkeypatch):
+    """``--mappings`` of ``calibrate`` and of ``deblur --refine`` (alone and as a
+    session) is what the search gets; left out, the search chooses (``None``)."""
+    import gyrodeblur.calibrate
+    import gyrodeblur.calibrate_cli
+    from gyrodeblur.errors import InputError
+
+    d, asked = capture_dir, []
+
+    def stub(*args, mappings=None, **kwargs):
+        asked.append(mappings)
+        raise InputError(None, "stopped here")
+
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", stub)
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", stub)
+    main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o",
+          str(d / "m.png"), "--overwrite"])
+    other = read_photo(d / "m.png").pixels.copy()
+    other[0, 0] = 1 - other[0, 0]                   # another photo of the session
+    write_photo(d / "m2.png", other, bit_depth=8, overwrite=True)
+    photo, cap = str(d / "m.png"), str(d / "cap.json")
+    for argv in (["calibrate", photo, "--capture", cap, "-o", str(d / "m.json"), "--mappings",
+                  "all"],
+                 ["calibrate", photo, "--capture", cap, "-o", str(d / "m.json")],
+                 ["deblur", photo, "--capture", cap, "--refine", "--mappings", "phone", "-o",
+                  str(d / "mo.png")],
+                 ["deblur", photo, str(d / "m2.png"), "--capture", cap, "--refine",
+                  "--mappings", "all", "-o", str(d / "mo.png"), "-o", str(d / "mo2.png")]):
+        assert "stopped here" in _run_error(argv, capsys), argv
+    assert asked == ["all", None, "phone", "all"]
 
 
 def test_calibrate_never_overwrites_its_inputs(capture_dir, capsys):

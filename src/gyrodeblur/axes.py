@@ -24,7 +24,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["parse_axes", "axes_to_letters", "PROPER_AXIS_LETTERS", "NAMED_AXES"]
+__all__ = ["parse_axes", "axes_to_letters", "PROPER_AXIS_LETTERS", "PHONE_AXIS_LETTERS",
+           "NAMED_AXES"]
 
 #: Named mappings, log frame -> camera frame. ``android-back-camera-<θ>``: Android device
 #: axes (x right, y up, z out of the screen, in the device's natural orientation) to the
@@ -126,3 +127,11 @@ def _all_proper() -> tuple[str, ...]:
 
 #: The 24 proper signed axis permutations, as letter strings.
 PROPER_AXIS_LETTERS: tuple[str, ...] = _all_proper()
+
+#: The 8 of them that keep the camera's optical axis (z) on the log's z axis, either way:
+#: a phone's or tablet's own camera looks out of its back (camera z = -log z, the
+#: ``android-back-camera-*`` of :data:`NAMED_AXES`) or out of its screen (+log z), while
+#: its sensor's rows may run along the device's x or y axis, either way. So these are the
+#: mappings possible from a phone's device axes (x right, y up, z out of the screen) to
+#: the camera frame of a photo that phone took.
+PHONE_AXIS_LETTERS: tuple[str, ...] = tuple(a for a in PROPER_AXIS_LETTERS if a[2] in "Zz")

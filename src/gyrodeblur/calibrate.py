@@ -156,7 +156,7 @@ import numpy as np
 from scipy.special import gammaincinv
 
 from .arguments import is_whole
-from .axes import PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
+from .axes import PHONE_AXIS_LETTERS, PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
 from .blur_evidence import NO_BLUR_MARGIN
 from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, TWIN,
@@ -173,7 +173,8 @@ from .gyrolog import rate_noise
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
            "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
-           "EXIF_START_OFFSET_RANGE", "EXIF_WHOLE_SECOND_OFFSET_RANGE", "MAX_OFFSET_RANGE"]
+           "EXIF_START_OFFSET_RANGE", "EXIF_WHOLE_SECOND_OFFSET_RANGE", "MAX_OFFSET_RANGE",
+           "searched_mappings"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
 PARAMETERS = ("offset", "bias", "readout", "focal", "axes")
@@ -339,8 +340,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         patches of the others).
     say : callable(str), optional
         Progress messages.
-    mappings : list of str, optional
-        Axis mappings to consider (default: all 24 proper signed permutations).
+    mappings : {"phone", "all"} or list of str, optional
+        Axis mappings to consider: ``"all"``, the 24 proper signed permutations;
+        ``"phone"``, the 8 of them possible for a phone's own camera from the phone's
+        device axes (:data:`gyrodeblur.axes.PHONE_AXIS_LETTERS`: the camera looks along
+        the device's z axis); or a list of mappings (letters). Default: ``"phone"`` where
+        every capture's log is a phone app's or an Android sensor dump, in the device's
+        axes (:attr:`GyroLog.in_device_axes <gyrodeblur.gyrolog.GyroLog.in_device_axes>`),
+        else ``"all"``. Give ``"all"`` for a phone's log and a photo from another camera
+        fixed to it. A given mapping outside the set is not kept.
     downscale : float
         Calibrate on the photos shrunk by this factor (0 < ``downscale`` <= 1, area
         averaging). For photos softer than their pixel grid (upscaled, or heavily
@@ -374,6 +382,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             "captures", f"{len(images)} photos but {len(captures)} captures")
     _refuse_repeated_images(images)
     fix = checked_fix(fix)
+    mappings, why_mappings = searched_mappings(mappings, captures, fix)
     say_ = say or (lambda msg: None)
     if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
             or not 0 < downscale <= 1:
@@ -472,7 +481,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         note(msg)
 
     given_letters = axes_to_letters(c0.axes)
+    if why_mappings:
+        note(why_mappings)
     cand = _candidate_mappings(c0.axes, fix, mappings)
+    given_searched = any(np.allclose(c0.axes, m) for m in cand)
     fit = CalibrationFit(photos, search, fix, bias_prior, n_patches, len(cand), say_)
     if fit.fine.band_cuts:
         note(f"the photos show JPEG's 8 px blocks (strength {fit.blockiness:.2f} > {BLOCKY:g}): "
@@ -507,7 +519,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     # the given parameters (with a long log, its bias) stay unless the photo(s) clearly
     # prefer others
     kept = False
-    if fit.idx or len(cand) > 1:
+    if (fit.idx or len(cand) > 1) and given_searched:
         f_given, x0 = fit.given_objective(c0.axes)
         if np.allclose(M, c0.axes):
             margin = _keep_margin(noise, len(fit.idx))
@@ -787,6 +799,44 @@ def _gap_to_other_mappings(results: list, M: np.ndarray, objective: float) -> fl
     ``objective`` (``nan`` when there is no other)."""
     rival = _best_other_mapping(results, M)
     return np.nan if rival is None else float(rival[0] - objective)
+
+
+def searched_mappings(mappings, captures, fix=()) -> tuple[list, str | None]:
+    """The axis mappings :func:`calibrate` searches (letters or matrices, as given;
+    ``mappings`` as :func:`calibrate` takes it) and, for the user, why a default narrowed
+    them or that the given mapping is left out (``None`` where there is nothing to say).
+    """
+    default = mappings is None
+    if default:
+        mappings = "phone" if all(cap.log.in_device_axes for cap in captures) else "all"
+    if isinstance(mappings, str):
+        key = mappings.strip().lower()
+        if key not in ("phone", "all"):
+            raise InputError.of_argument(
+                "mappings", f"'phone', 'all' or a list of axis mappings, got {mappings!r}")
+        mappings = list(PHONE_AXIS_LETTERS if key == "phone" else PROPER_AXIS_LETTERS)
+    else:
+        mappings = list(mappings)
+        for m in mappings:                            # refused before any work
+            try:
+                parse_axes(m)
+            except InputError as exc:
+                raise InputError.of_argument("mappings", exc.problem) from None
+    if "axes" in fix or not mappings:
+        return mappings, None
+    narrowed = default and mappings == list(PHONE_AXIS_LETTERS)
+    why = (f"the gyro log is a phone's, in its device axes: searching the "
+           f"{len(PHONE_AXIS_LETTERS)} axis mappings of a camera looking along the device's z "
+           "axis, out of its back or its screen (--mappings all, mappings='all': all 24)"
+           if narrowed else None)
+    given = axes_to_letters(captures[0].axes)      # a measured matrix is searched as well
+    if given is not None and not any(np.allclose(parse_axes(given), parse_axes(m))
+                                     for m in mappings):
+        left = (f"the given axis mapping {given} is not among those searched"
+                + (": a phone's camera does not look along the device's x or y axis"
+                   if narrowed else ""))
+        why = left if why is None else f"{why}; {left}"
+    return mappings, why
 
 
 def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarray]:

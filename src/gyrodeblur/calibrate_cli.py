@@ -182,7 +182,7 @@ def calibrate_command(args, say, load_capture) -> None:
     downscale = calibration_downscale(args.downscale, photos, say)
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
                     downscale=downscale, workers=args.workers, transfer=curves,
-                    offset_range=args.offset_range)
+                    offset_range=args.offset_range, mappings=args.mappings)
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):

@@ -146,6 +146,8 @@ def _ignored_options(args) -> None:
         raise InputError("--workers", "applies with --refine only")
     if args.offset_range is not None and not args.refine:
         raise InputError("--offset-range", "applies with --refine only")
+    if args.mappings is not None and not args.refine:
+        raise InputError("--mappings", "applies with --refine only")
 
 
 def _load_capture(args, photo=None, say=None, exif_start: bool = True):
@@ -588,7 +590,8 @@ def _deblur_session(runs, say) -> None:
     downscale = calibration_downscale(args.downscale, [r.photo for r in runs], say)
     res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
                     say=say, downscale=downscale, workers=args.workers,
-                    transfer=[r.curve for r in runs], offset_range=args.offset_range)
+                    transfer=[r.curve for r in runs], offset_range=args.offset_range,
+                    mappings=args.mappings)
     say(f"calibration of {len(runs)} photos in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
@@ -747,7 +750,8 @@ class _PhotoDeblur:
         with _this_photo(self.args):
             res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
                             downscale=downscale, workers=args.workers,
-                            transfer=self.curve, offset_range=args.offset_range)
+                            transfer=self.curve, offset_range=args.offset_range,
+                            mappings=args.mappings)
         for line in format_estimates(res.estimates):
             self.say(line)
         self.cap = res.capture
@@ -852,6 +856,10 @@ OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (de
                      "time, 1.5 if that time is to the second); where the gyro and camera "
                      "clocks are known only roughly, e.g. 1: as far as the log covers it, "
                      "about 30 s more per second on each side on 2 cores")
+MAPPINGS_HELP = ("axis mappings searched: phone, the 8 of a phone's own camera (it looks "
+                 "along the device's z axis), or all 24; default phone for a phone app's "
+                 "log or an Android sensor dump (in the device's axes), else all. Give all "
+                 "for a phone's log and a photo from another camera fixed to it")
 WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
                 "(Linux; default: the CPUs available, up to 4; 1: none); the result is the "
                 "same for any number. The environment variable GYRODEBLUR_THREADS=N caps "
@@ -978,6 +986,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --refine: " + WORKERS_HELP)
     s.add_argument("--offset-range", type=float, default=None, metavar="S",
                    help="with --refine: " + OFFSET_RANGE_HELP)
+    s.add_argument("--mappings", choices=("phone", "all"), default=None,
+                   help="with --refine: " + MAPPINGS_HELP)
     s.add_argument("--save-psf", metavar="FIELD.png", action="append",
                    help="also draw the PSF field used (several photos: one per photo)")
     s.add_argument("--save-capture", metavar="CORRECTED.json", action="append",
@@ -1019,6 +1029,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=None, metavar="N", help=WORKERS_HELP)
     s.add_argument("--offset-range", type=float, default=None, metavar="S",
                    help=OFFSET_RANGE_HELP)
+    s.add_argument("--mappings", choices=("phone", "all"), default=None, help=MAPPINGS_HELP)
     _add_transfer_option(s)
     _add_rotation_option(s, per_photo=True)
     s.add_argument("--overwrite", action="store_true",
