@@ -158,8 +158,9 @@ def test_options_that_do_not_apply_are_refused_and_defaults_fit_the_photo(
         scene, make_capture):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
     blurred = simulate_blur(scene, cap, transfer="linear")
-    with pytest.raises(InputError, match="grid: does not apply with mode='invariant'"):
+    with pytest.raises(InputError, match="^grid: does not apply with mode='invariant'") as err:
         deblur(blurred, cap, mode="invariant", grid="bogus")
+    assert err.value.argument                   # the command line would say --grid
     with pytest.raises(InputError, match="overlap: does not apply"):
         deblur(blurred, cap, mode="invariant", overlap=0.1)
     with pytest.raises(InputError, match="model: does not apply"):   # it was dropped

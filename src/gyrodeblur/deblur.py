@@ -663,8 +663,8 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
         for name, value in (("grid", grid), ("overlap", overlap),
                             ("model", options.get("model"))):
             if value is not None:
-                raise InputError(name, "does not apply with mode='invariant' (one PSF for "
-                                       "the whole photo, no patches)")
+                raise InputError.of_argument(name, "does not apply with mode='invariant' "
+                                                   "(one PSF for the whole photo, no patches)")
     overlap = DEFAULT_OVERLAP if overlap is None else overlap
     grid_given = grid is not None
     if grid is None:

@@ -16,6 +16,7 @@ import os
 
 __all__ = ["InputError"]
 
+
 class InputError(ValueError):
     """Bad user input: a one-line message naming the source and the problem.
 
