@@ -2,7 +2,8 @@
 
 What a gyro log gets wrong is low-dimensional: the clock offset between gyro and camera,
 a constant gyro bias (3 components), the rolling-shutter readout time, the focal length
-(a scale), and the axis mapping (one of the 24 proper signed axis permutations). We keep
+(a scale), and the axis mapping (one of the 24 proper signed axis permutations; from a
+phone's log in its device axes, one of the 8 its own camera can have). We keep
 the physics and fit only these, from the blurred photo(s) themselves: every candidate
 parameter set gives, through the rotation-only model of :mod:`gyrodeblur.psf`, the PSF of
 each of a few textured patches, and each patch's spectrum says how well that PSF explains

@@ -746,7 +746,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       f"SENSOR_ORIENTATION 90, as most phones' and iPhones' "
                       f"(ios-back-camera), its photo in the sensor's layout; "
                       f"android-back-camera-0, -180 or -270 for others; calibrate "
-                      f"and deblur --refine try all 24 mappings)", stacklevel=2)
+                      f"and deblur --refine try the 8 mappings a phone's own camera can "
+                      f"have)", stacklevel=2)
     axes = parse_axes(orientation, source=("--orientation" if "orientation" in ov
                                            else f"{src} (gyro.orientation)"))
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
