@@ -785,8 +785,7 @@ def write_photo(
         ``bit_depth``/``quality`` is out of range.
     """
     p = os.fspath(path)
-    if not p.strip():
-        raise InputError(None, f"an output file's name is empty ({p!r}): name a file")
+    _refuse_empty_name(p)
     fmt = _format_of(p)
     pixels = _check_pixels(pixels)
     depth = _choose_bit_depth(p, fmt, bit_depth, like)
@@ -864,6 +863,11 @@ def _choose_bit_depth(path: str, fmt: str, bit_depth: int | None, like: Photo | 
     return like.bit_depth if like is not None else 8
 
 
+def _refuse_empty_name(path: str) -> None:
+    if not path.strip():
+        raise InputError(None, f"an output file's name is empty ({path!r}): name a file")
+
+
 def _format_of(path: str) -> str:
     fmt = EXTENSIONS.get(os.path.splitext(path)[1].lower())
     if fmt is None:
@@ -901,8 +905,7 @@ def check_destination(path: str | os.PathLike, like: Photo | None = None,
         ``like`` has an alpha channel or ``bit_depth`` is 16.
     """
     path = os.fspath(path)
-    if not path.strip():
-        raise InputError(None, f"an output file's name is empty ({path!r}): name a file")
+    _refuse_empty_name(path)
     if os.path.isdir(path):
         raise InputError(path, "is a folder; name the output file")
     if image:
