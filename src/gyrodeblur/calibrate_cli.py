@@ -17,7 +17,7 @@ from .images import split_alpha, to_sensor_layout
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
            "refuse_non_json", "refuse_repeated_photos", "refuse_one_start_for_several",
            "refuse_repeated_outputs", "photo_rotations", "per_photo_values",
-           "note_one_start_for_all", "calibration_downscale"]
+           "note_one_start_for_all", "calibration_downscale", "calibration_options"]
 
 #: Photos are not shrunk by their digital zoom below this many pixels on their shorter
 #: side (:func:`calibration_downscale`; ``calibrate`` refuses fewer than 64).
@@ -126,6 +126,15 @@ def calibration_downscale(given, photos, say) -> float:
     return factor
 
 
+def calibration_options(args, photos, say) -> dict:
+    """The keyword arguments of :func:`gyrodeblur.calibrate.calibrate` that the options of
+    ``calibrate`` and ``deblur --refine`` set alike: ``downscale``
+    (:func:`calibration_downscale`), ``workers``, ``offset_range`` and ``mappings``."""
+    return {"downscale": calibration_downscale(args.downscale, photos, say),
+            "workers": args.workers, "offset_range": args.offset_range,
+            "mappings": args.mappings}
+
+
 def refuse_repeated_photos(paths, images) -> None:
     """One photo given twice would count its evidence twice (:func:`calibrate.calibrate`
     refuses it too); said here with the files' names, whether the same file or a copy.
@@ -179,10 +188,8 @@ def calibrate_command(args, say, load_capture) -> None:
         refuse_non_json(out)
     from .icc import said_transfer_curve
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
-    downscale = calibration_downscale(args.downscale, photos, say)
     res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
-                    downscale=downscale, workers=args.workers, transfer=curves,
-                    offset_range=args.offset_range, mappings=args.mappings)
+                    transfer=curves, **calibration_options(args, photos, say))
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):

@@ -583,15 +583,13 @@ def _deblur_session(runs, say) -> None:
     (:func:`gyrodeblur.calibrate.calibrate`), then each photo deblurred with its own
     corrected capture."""
     from .calibrate import calibrate
-    from .calibrate_cli import calibration_downscale, format_estimates
+    from .calibrate_cli import calibration_options, format_estimates
     args = runs[0].args
     for run in runs:
         run.load()
-    downscale = calibration_downscale(args.downscale, [r.photo for r in runs], say)
     res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
-                    say=say, downscale=downscale, workers=args.workers,
-                    transfer=[r.curve for r in runs], offset_range=args.offset_range,
-                    mappings=args.mappings)
+                    say=say, transfer=[r.curve for r in runs],
+                    **calibration_options(args, [r.photo for r in runs], say))
     say(f"calibration of {len(runs)} photos in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
     for line in format_estimates(res.estimates):
@@ -744,14 +742,11 @@ class _PhotoDeblur:
     def calibrate_alone(self) -> None:
         """``--refine`` for this photo alone: its capture replaced by the calibrated one."""
         from .calibrate import calibrate
-        from .calibrate_cli import calibration_downscale, format_estimates
-        args = self.args
-        downscale = calibration_downscale(args.downscale, [self.photo], self.say)
+        from .calibrate_cli import calibration_options, format_estimates
+        options = calibration_options(self.args, [self.photo], self.say)
         with _this_photo(self.args):
             res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
-                            downscale=downscale, workers=args.workers,
-                            transfer=self.curve, offset_range=args.offset_range,
-                            mappings=args.mappings)
+                            transfer=self.curve, **options)
         for line in format_estimates(res.estimates):
             self.say(line)
         self.cap = res.capture
