@@ -816,13 +816,11 @@ def searched_mappings(mappings, captures, fix=()) -> tuple[list, str | None]:
             raise InputError.of_argument(
                 "mappings", f"'phone', 'all' or a list of axis mappings, got {mappings!r}")
         mappings = list(PHONE_AXIS_LETTERS if key == "phone" else PROPER_AXIS_LETTERS)
-    else:
-        mappings = list(mappings)
-        for m in mappings:                            # refused before any work
-            try:
-                parse_axes(m)
-            except InputError as exc:
-                raise InputError.of_argument("mappings", exc.problem) from None
+    mappings = list(mappings)
+    try:                                              # refused before any work
+        matrices = [parse_axes(m) for m in mappings]
+    except InputError as exc:
+        raise InputError.of_argument("mappings", exc.problem) from None
     if "axes" in fix or not mappings:
         return mappings, None
     narrowed = default and mappings == list(PHONE_AXIS_LETTERS)
@@ -831,8 +829,7 @@ def searched_mappings(mappings, captures, fix=()) -> tuple[list, str | None]:
            "axis, out of its back or its screen (--mappings all, mappings='all': all 24)"
            if narrowed else None)
     given = axes_to_letters(captures[0].axes)      # a measured matrix is searched as well
-    if given is not None and not any(np.allclose(parse_axes(given), parse_axes(m))
-                                     for m in mappings):
+    if given is not None and not any(np.allclose(captures[0].axes, m) for m in matrices):
         left = (f"the given axis mapping {given} is not among those searched"
                 + (": a phone's camera does not look along the device's x or y axis"
                    if narrowed else ""))
