@@ -124,23 +124,42 @@ def test_a_photo_must_be_an_image():
         CalibrationPhoto(np.zeros(10), _capture(), "srgb", 0)
 
 
+def _jpeg(u8: np.ndarray, quality: int) -> np.ndarray:
+    buf = io.BytesIO()
+    Image.fromarray(u8).save(buf, format="JPEG", quality=quality)
+    return np.asarray(Image.open(io.BytesIO(buf.getvalue())))
+
+
+def _blockiness(u8: np.ndarray) -> float:
+    return CalibrationPhoto(u8.astype(np.float32) / 255, _capture(u8.shape[1], u8.shape[0]),
+                            "srgb", 0).blockiness()
+
+
 def test_blockiness_tells_a_jpeg_from_the_same_photo_uncompressed():
-    """JPEG's 8 px blocks stand out in one phase of the neighbour differences, at any grid
-    offset (a crop); an uncompressed photo has no such phase."""
+    """JPEG's 8 px blocks stand out in one phase of the neighbour differences: the phase of
+    a grid from the first row and column, or any phase on both axes (a crop); an
+    uncompressed photo has no such phase."""
     img = transform.resize(data.astronaut(), (256, 384), anti_aliasing=True).astype(np.float32)
     img = ndimage.gaussian_filter(img, (1.5, 1.5, 0))           # a blurred photo
     u8 = (img * 255).round().astype(np.uint8)
+    assert _blockiness(u8) < 1.05
+    assert _blockiness(_jpeg(u8, 80)) > BLOCKY
+    assert _blockiness(_jpeg(u8, 60)[3:, 5:]) > BLOCKY          # the grid shifted, both axes
+    assert _blockiness(_jpeg(u8, 60)[5:, 3:]) > BLOCKY
 
-    def photo(a):
-        return CalibrationPhoto(a.astype(np.float32) / 255, _capture(a.shape[1], a.shape[0]),
-                                "srgb", 0)
 
-    buf = io.BytesIO()
-    Image.fromarray(u8).save(buf, format="JPEG", quality=80)
-    jpeg = np.asarray(Image.open(io.BytesIO(buf.getvalue())))
-    assert photo(u8).blockiness() < 1.05
-    assert photo(jpeg).blockiness() > BLOCKY
-    assert photo(jpeg[3:, 5:]).blockiness() > BLOCKY                  # the grid shifted
+def test_a_scene_that_was_a_jpeg_is_not_taken_for_a_compressed_photo():
+    """A photo of a scene that was itself a JPEG (a synthetic blur of a JPEG, as benchmarks
+    make them) holds the scene's block grid, moved by the motion and smeared along it: on
+    one axis only, at another phase. Its band is not cut. The same photo compressed after
+    the blur is."""
+    img = transform.resize(data.astronaut(), (256, 384), anti_aliasing=True).astype(np.float32)
+    scene = _jpeg((img * 255).round().astype(np.uint8), 60).astype(np.float32) / 255
+    moved = np.roll(scene, (3, 5), axis=(0, 1))
+    streak = ndimage.uniform_filter1d(moved, 9, axis=1)          # a 9 px horizontal blur
+    photo = (streak * 255).round().astype(np.uint8)
+    assert _blockiness(photo) < BLOCKY
+    assert _blockiness(_jpeg(photo, 80)) > BLOCKY
 
 
 @pytest.mark.parametrize("seed", [1, 3, 5])

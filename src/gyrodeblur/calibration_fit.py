@@ -103,11 +103,13 @@ WIDE_APART = 0.02
 #: A photo whose 8 px block grid is this strong (:meth:`CalibrationPhoto.blockiness`) is
 #: taken for a compressed JPEG, and the criterion keeps frequencies up to
 #: ``COMPRESSED_BAND`` cycles per pixel of the photo rather than 0.42: JPEG quantisation
-#: empties the top of the spectrum, which reads as blur. Benchmark photos (PNG): 1.005-1.086
-#: on the 24 calibration cases; saved as JPEG, 1.09-1.59 at quality 90 and 1.04-1.41 at 95.
-#: A false positive exists: lai_text_02_w2 (not among the 24; its small sharp original was
-#: itself a JPEG, 1.21) measures 1.144 as PNG and would be cut. On the PNG benchmark the cut
-#: for every photo cost too much to be the rule (BENCHMARKS.md, section 4).
+#: empties the top of the spectrum, which reads as blur. The calibration benchmark's 48
+#: photos (shared log and gentler shake): 1.00-1.08 uncompressed; saved as JPEG, 1.01-1.40
+#: at quality 95, 1.04-1.62 at 90 and 1.05-1.92 at 80. Photos blurred from a scene that was
+#: a JPEG measured 1.11-1.17 (three gentler-shake text photos, and lai_text_02_w2 1.14)
+#: before the grid had to start at the photo's origin or show on both axes: their cut
+#: cost up to 4.9 dB (BENCHMARKS.md, section 4, session 57). On the PNG benchmark the cut
+#: for every photo cost too much to be the rule (section 4, session 12).
 BLOCKY = 1.10
 COMPRESSED_BAND = 0.3
 #: Rows of each fine patch whose rolling-shutter timings are averaged (fractions of the
