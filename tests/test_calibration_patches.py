@@ -162,6 +162,23 @@ def test_a_scene_that_was_a_jpeg_is_not_taken_for_a_compressed_photo():
     assert _blockiness(_jpeg(photo, 80)) > BLOCKY
 
 
+def test_the_grid_s_phase_is_counted_from_the_photo_s_own_first_row():
+    """On one axis the grid counts at the phase of blocks from the photo's first row, also
+    where only the photo's centre is measured (a large photo): a JPEG streaked along x
+    after compression keeps its grid in the row differences only. Moved by 3 rows, the
+    same grid is at another phase, on one axis: not counted."""
+    img = transform.resize(data.astronaut(), (256, 384), anti_aliasing=True).astype(np.float32)
+    jpeg = _jpeg((img * 255).round().astype(np.uint8), 20).astype(np.float32) / 255
+    streak = ndimage.uniform_filter1d(jpeg, 9, axis=1)
+
+    def centre(a):                 # 40 000 px of the photo's centre: rows 46-208
+        return CalibrationPhoto(a, _capture(a.shape[1], a.shape[0]), "srgb",
+                                0).blockiness(max_pixels=40_000)
+
+    assert centre(streak) > BLOCKY
+    assert centre(np.roll(streak, 3, axis=0)) < BLOCKY
+
+
 @pytest.mark.parametrize("seed", [1, 3, 5])
 def test_a_partly_clipped_window_pays_for_its_clipped_share(seed):
     """Clipped highlights break the linear model, so a window under 30 % clipped is
