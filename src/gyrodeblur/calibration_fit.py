@@ -107,8 +107,9 @@ WIDE_APART = 0.02
 #: photos (shared log and gentler shake): 1.00-1.08 uncompressed; saved as JPEG, 1.01-1.40
 #: at quality 95, 1.04-1.62 at 90 and 1.05-1.92 at 80. Photos blurred from a scene that was
 #: a JPEG measured 1.11-1.17 (three gentler-shake text photos, and lai_text_02_w2 1.14)
-#: before the grid had to start at the photo's origin or show on both axes: their cut
-#: cost up to 4.9 dB (BENCHMARKS.md, section 4, session 57). On the PNG benchmark the cut
+#: before the grid had to be in line with the photo's first row or column, or show on
+#: both axes: the cut cost two of the three 2.2 and 4.9 dB and gained the third 0.8 dB
+#: (BENCHMARKS.md, section 4, session 57). On the PNG benchmark the cut
 #: for every photo cost too much to be the rule (section 4, session 12).
 BLOCKY = 1.10
 COMPRESSED_BAND = 0.3

@@ -53,18 +53,20 @@ class CalibrationPhoto:
         """How strongly the photo shows the 8 px block grid of a JPEG compressed after the
         blur.
 
-        Per axis, the mean absolute difference between neighbouring columns (rows) in each
-        of the 8 phases, over their median. A camera's or an app's JPEG starts its grid at
-        the photo's first row and column, so that phase counts on either axis. At another
-        phase (a JPEG cropped) the grid must show on both axes, the larger of their phases
-        each, as compression leaves it: a grid on one axis at another phase is the scene's
-        own, a JPEG's blocks photographed, moved and smeared along the motion by the blur
-        (a synthetic blur of a photo that was itself a JPEG shows them: 1.11-1.17 on three
-        of the gentler shake's text photos, 1.00-1.05 with this rule). On the central
-        ``max_pixels`` of the photo, encoded values. On the calibration benchmark's photos
-        (its 24 cases on the shared log and on a gentler shake, 48): 1.00-1.08
-        uncompressed; saved as JPEG, 1.01-1.40 at quality 95, 1.04-1.62 at 90 and
-        1.05-1.92 at 80."""
+        Per axis (column differences, row differences), the mean absolute difference
+        between neighbouring columns (rows) in each of the 8 phases, over their median. A
+        camera's or an app's JPEG starts its grid at the photo's first column and row, so
+        that phase of either axis counts on its own. Any other phase counts only where the
+        grid shows on both axes, as compression leaves it (a JPEG cropped): the smaller of
+        the two axes' largest phases. Returned: the larger of the two rules' figures (1.0
+        where neither can be read: an axis under 129 px is not read). A grid on one axis at
+        another phase is the scene's own, a JPEG's blocks photographed, moved and smeared
+        along the motion by the blur (a synthetic blur of a photo that was itself a JPEG:
+        1.11-1.17 on three of the gentler shake's text photos by any phase on either axis,
+        1.03-1.05 by these rules). Measured on the central ``max_pixels`` of the photo,
+        encoded values. On the calibration benchmark's photos (its 24 cases on the shared
+        log and on a gentler shake, 48): 1.00-1.08 uncompressed; saved as JPEG, 1.01-1.40
+        at quality 95, 1.04-1.62 at 90 and 1.05-1.92 at 80."""
         s = min(1.0, float(np.sqrt(max_pixels / (self.H * self.W))))
         h, w = max(16, int(self.H * s)), max(16, int(self.W * s))
         y0, x0 = (self.H - h) // 2, (self.W - w) // 2
