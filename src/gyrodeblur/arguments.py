@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_flag", "check_callback", "check_real", "check_seed", "is_whole"]
+__all__ = ["check_flag", "check_callback", "check_real", "check_seed", "is_whole",
+           "is_count"]
 
 
 def check_flag(value, name: str) -> bool:
@@ -25,6 +26,12 @@ def is_whole(value) -> bool:
     (``True`` is an ``int``, and ``3.0`` or ``"3"`` are not whole numbers here). The
     callers add their own range and message."""
     return not isinstance(value, bool) and isinstance(value, (int, np.integer))
+
+
+def is_count(value) -> bool:
+    """Whether ``value`` is a whole number (:func:`is_whole`) >= 1: a count of iterations,
+    samples, workers or pixels. The callers add their own message."""
+    return is_whole(value) and value >= 1
 
 
 def check_callback(value, name: str):

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.fft as sfft
 from scipy import ndimage, signal
 
-from .arguments import check_real, is_whole
+from .arguments import check_real, is_count, is_whole
 from .errors import InputError
 from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, split_alpha
@@ -263,7 +263,7 @@ def _check_options(iterations, levels, lambda_grad, lambda_min, lambda_decay, ke
     out of its range (a whole count where one is meant, finite weights, a decay in (0, 1],
     a cleanup threshold under 1 that leaves the kernel's peak)."""
     for name, v in (("iterations", iterations), ("levels", levels)):
-        if v is not None and not (is_whole(v) and v >= 1):
+        if v is not None and not is_count(v):
             raise ValueError(f"{name} must be a whole number >= 1, got {v!r}")
     for name, v, ok, what in (("lambda_grad", lambda_grad, lambda x: x > 0, "> 0"),
                               ("lambda_min", lambda_min, lambda x: x >= 0, ">= 0"),

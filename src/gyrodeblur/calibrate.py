@@ -156,7 +156,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaincinv
 
-from .arguments import is_whole
+from .arguments import is_count
 from .axes import PHONE_AXIS_LETTERS, PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
 from .blur_evidence import NO_BLUR_MARGIN
@@ -388,7 +388,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if isinstance(downscale, bool) or not isinstance(downscale, (int, float, np.number)) \
             or not 0 < downscale <= 1:
         raise InputError.of_argument("downscale", f"must be in (0, 1], got {downscale!r}")
-    if workers is not None and not _is_count(workers):
+    if workers is not None and not is_count(workers):
         raise InputError.of_argument("workers", f"must be a whole number >= 1, got {workers!r}")
     from_exif = [cap.exposure_start_from_exif for cap in captures]
     if len(captures) > 1 and any(from_exif) and "offset" not in fix:
@@ -428,7 +428,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             "offset_range", f"must be seconds in (0, {MAX_OFFSET_RANGE:g}] on "
                             f"each side of the given time offset (to keep the "
                             f"offset, fix it), got {offset_range!r}")
-    if n_patches is not None and not _is_count(n_patches):
+    if n_patches is not None and not is_count(n_patches):
         raise InputError(None, f"n_patches must be a whole number >= 1, got {n_patches!r}")
     work_caps = captures
     if downscale < 1:
@@ -848,11 +848,6 @@ def _candidate_mappings(given: np.ndarray, fix: set, mappings) -> list[np.ndarra
     if axes_to_letters(given) is None:
         cand.append(given)
     return cand
-
-
-def _is_count(value) -> bool:
-    """Whether ``value`` is a whole number >= 1 (an int, not a bool)."""
-    return is_whole(value) and value >= 1
 
 
 def repeated_photo(images) -> tuple[int, int] | None:

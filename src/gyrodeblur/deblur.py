@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from .arguments import check_callback, check_flag, is_whole
+from .arguments import check_callback, check_flag, is_count
 from .capture import Capture, check_capture
 from .errors import InputError
 from .gyrolog import step_warning
@@ -755,7 +755,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     clip = check_flag(clip, "clip")
     check_flag(check_blur, "check_blur")
     check_callback(progress, "progress")
-    if not (is_whole(max_pixels) and max_pixels >= 1):
+    if not is_count(max_pixels):
         raise InputError(None, f"max_pixels must be a whole number >= 1, got {max_pixels!r}")
     H, W = image.shape[:2]
     encoded = split_alpha(image)[0]                  # not the mask

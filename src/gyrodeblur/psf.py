@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arguments import check_flag, is_whole
+from .arguments import check_flag, is_count, is_whole
 from .capture import Capture, check_capture
 from .errors import InputError
 
@@ -85,7 +85,7 @@ def _timing_row(capture: Capture, row) -> float | None:
 
 def _sample_count(n) -> int:
     """``n`` as a whole number of samples >= 1, or ValueError."""
-    if not (is_whole(n) and n >= 1):
+    if not is_count(n):
         raise ValueError(f"n must be a whole number of samples >= 1, got {n!r}")
     return int(n)
 

@@ -14,7 +14,7 @@ from scipy import ndimage
 
 from .bands import for_row_bands
 from .capture import Capture, check_capture
-from .arguments import check_flag, check_real, check_seed, is_whole
+from .arguments import check_flag, check_real, check_seed, is_count, is_whole
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, join_alpha, split_alpha
 from .psf import check_blur_span
 from .tonecurve import LINEAR, TransferCurve, get_transfer_curve
@@ -227,7 +227,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     """
     if not (is_whole(order) and order in (1, 3)):
         raise ValueError(f"order must be 1 (bilinear) or 3 (cubic spline), got {order!r}")
-    if n_samples is not None and not (is_whole(n_samples) and n_samples >= 1):
+    if n_samples is not None and not is_count(n_samples):
         raise ValueError(f"n_samples must be a positive whole number or None, got {n_samples!r}")
     if snr_db is not None:
         snr_db = check_real(snr_db, "snr_db")

@@ -26,7 +26,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .arguments import check_real, is_whole
+from .arguments import check_real, is_count
 from .fftutils import FFT_WORKERS, fast_shape
 from .psf import psf_extent
 from .sparse import _BETA_MAX as _SPARSE_BETA_MAX
@@ -293,7 +293,7 @@ def refine_globally(image: np.ndarray, start: np.ndarray, blur: InterpolatedBlur
     outer = default_outer if outer is None else outer
     cg_steps = default_steps if cg_steps is None else cg_steps
     for name, v in (("outer", outer), ("cg_steps", cg_steps)):
-        if not (is_whole(v) and v >= 1):
+        if not is_count(v):
             raise ValueError(f"{name} must be a positive whole number, got {v!r}")
     if not (np.isfinite(weight) and weight > 0):
         raise ValueError(f"weight must be a positive number, got {weight!r}")
