@@ -559,7 +559,9 @@ def test_an_android_log_given_no_mapping_is_read_as_the_back_camera(tmp_path):
 
 
 @pytest.mark.parametrize("header", ["time,seconds_elapsed,z,y,x",
-                                    "timestamp,rotationRateX,rotationRateY,rotationRateZ"])
+                                    "timestamp,rotationRateX,rotationRateY,rotationRateZ",
+                                    "gyroTimestamp_sinceReboot(s),gyroRotationX(rad/s),"
+                                    "gyroRotationY(rad/s),gyroRotationZ(rad/s)"])
 def test_a_phone_apps_csv_given_no_mapping_is_read_as_the_back_camera(tmp_path, header):
     """Sensor Logger's and Core Motion's columns are in the device's axes: read, like an
     Android dump, as android-back-camera (yxz, most phones' sensor orientation) with a

@@ -429,6 +429,38 @@ def test_text_columns_the_log_does_not_use_are_not_read(tmp_path, trace):
         read_gyro_log(p, time_unit="ns", rate_unit="rad/s")
 
 
+@pytest.mark.parametrize("location", [True, False])
+def test_a_log_of_several_sensors_takes_the_gyros_own_timestamps(tmp_path, trace, location):
+    """iOS SensorLog's full export: the location's and the accelerometer's timestamps come
+    before the gyro's own, and the rates are paired with the time column of their own
+    sensor (the first time column would be the location's, repeated between fixes, or the
+    accelerometer's, 6 ms off)."""
+    names = (["loggingTime(txt)", "loggingSample(N)"]
+             + ["locationTimestamp_since1970(s)"] * location
+             + ["accelerometerTimestamp_sinceReboot(s)", "accelerometerAccelerationX(G)",
+                "accelerometerAccelerationY(G)", "accelerometerAccelerationZ(G)",
+                "gyroTimestamp_sinceReboot(s)", "gyroRotationX(rad/s)", "gyroRotationY(rad/s)",
+                "gyroRotationZ(rad/s)", "motionTimestamp_sinceReboot(s)", "motionYaw(rad)",
+                "motionRotationRateX(rad/s)", "motionRotationRateY(rad/s)",
+                "motionRotationRateZ(rad/s)"])
+    rows = []
+    for k, (a, w) in enumerate(zip(trace.t, trace.omega)):
+        rows.append(",".join(["2024-12-05 07:27:10.512 +0100", str(k)]
+                             + ["1733380030.5"] * location
+                             + [repr(float(a) + 0.006), "0.01", "-0.99", "0.02"]
+                             + [repr(float(a))] + [repr(float(v)) for v in w]
+                             + [repr(float(a) + 0.001), "0.1"] + [repr(0.9 * float(v)) for v in w]))
+    p = tmp_path / "sensorlog.csv"
+    p.write_text(",".join(names) + "\n" + "\n".join(rows) + "\n")
+    log = read_gyro_log(p)
+    np.testing.assert_allclose(log.t, trace.t, atol=1e-9)
+    np.testing.assert_allclose(log.omega, trace.omega)
+    assert log.meta.get("axes") == "phone device"        # Core Motion's device axes
+    # a column named by the caller is taken as it is
+    log = read_gyro_log(p, time_column="accelerometerTimestamp_sinceReboot(s)")
+    np.testing.assert_allclose(log.t, trace.t + 0.006, atol=1e-9)
+
+
 @pytest.mark.parametrize("options,match", [
     ({"rate_columns": (1, 1, 1)}, "three different columns"),
     ({"rate_columns": ("gx", "gy", "gy")}, "three different columns"),

@@ -45,7 +45,8 @@ from .errors import InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
                           default_rate_columns, default_time_column, from_a_phone_app,
                           is_number, looks_like_time, parse_number, refuse_signed_names,
-                          sniff_delimiter, time_unit_from_interval, unit_from_name)
+                          sensor_time_column, sniff_delimiter, time_unit_from_interval,
+                          unit_from_name)
 
 __all__ = [
     "GyroLog",
@@ -574,7 +575,9 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
     path : path-like
     time_column : str or int, optional
         Name or index of the time column. Default: the first column, unless its name is not
-        a time's and a later one's is (an index column first).
+        a time's and a later one's is (an index column first); in a log of several sensors,
+        the time column named for the rate columns' sensor
+        (:func:`~gyrodeblur.log_columns.sensor_time_column`).
     rate_columns : three names or indices, optional
         Default: the columns whose names say which rate they hold (``x``, ``wx``,
         ``gyro_x``, ``rotationRateX``, ... with or without a unit suffix), in x, y, z order
@@ -641,8 +644,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                                    "counted from 0)")
         return i
 
-    first_row = next((ln for ln in lines[1:] if ln.strip()), "")
-    ti = (default_time_column(header, _fields(first_row, delimiter)) if time_column is None
+    first_row = _fields(next((ln for ln in lines[1:] if ln.strip()), ""), delimiter)
+    ti = (default_time_column(header, first_row) if time_column is None
           else col(time_column, "time_column"))
     if rate_columns is None:
         ri = default_rate_columns(path, header, ti)
@@ -654,6 +657,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             raise InputError(path, "rate_columns must be three different columns, other than "
                                    f"the time column; got {', '.join(header[i] for i in ri)} "
                                    f"(time: {header[ti]})")
+    if time_column is None:
+        ti = sensor_time_column(header, first_row, ri, ti)
     refuse_signed_names(path, header, ri)
     for name, given, known in (("time_unit", time_unit, TIME_UNITS),
                                ("rate_unit", rate_unit, RATE_UNITS)):

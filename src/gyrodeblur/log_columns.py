@@ -21,7 +21,8 @@ from .errors import InputError
 __all__ = ["TIME_UNITS", "RATE_UNITS", "RATE_UNIT_ENDINGS", "RATE_ALIASES",
            "GUESSED_RATE_RANGE", "parse_number", "is_number", "unit_from_name",
            "bracketed_unit", "sniff_delimiter", "time_unit_from_interval", "rate_axis",
-           "looks_like_time", "default_time_column", "default_rate_columns",
+           "looks_like_time", "default_time_column", "sensor_time_column",
+           "default_rate_columns",
            "from_a_phone_app", "refuse_signed_names"]
 
 #: Seconds per unit of time.
@@ -146,18 +147,50 @@ def default_time_column(header: list[str], first_row: list[str] | None = None) -
     of the first data row, a column named as a time whose value there is not a number (a
     logger's ``loggingTime(txt)`` date) is passed over for the next one."""
     def numeric(i: int) -> bool:
-        if first_row is None or i >= len(first_row):
-            return True
-        try:
-            parse_number(first_row[i], decimal_comma=True)
-            return True
-        except ValueError:
-            return False
+        return _is_numeric_field(first_row, i)
 
     times = [i for i, h in enumerate(header) if looks_like_time(h)]
     if 0 in times and numeric(0):
         return 0
     return next((i for i in times if numeric(i)), 0)
+
+
+def _sensor_word(name: str) -> str:
+    """A column name's first word, lowercased (``gyroRotationX(rad/s)`` -> ``gyro``,
+    ``gyro_t`` -> ``gyro``, ``accelerometerTimestamp_sinceReboot(s)`` ->
+    ``accelerometer``): the sensor a multi-sensor logger names its columns by."""
+    words = re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])", name)
+    return words[0].lower() if words else ""
+
+
+def sensor_time_column(header: list[str], first_row: list[str] | None, rate_columns: list[int],
+                       ti: int) -> int:
+    """The time column that goes with ``rate_columns`` in a log of several sensors: a
+    column named as a time (and a number in ``first_row``) whose first word is the rate
+    columns' own (iOS SensorLog's ``gyroTimestamp_sinceReboot(s)`` for
+    ``gyroRotationX(rad/s)``, not the ``accelerometerTimestamp_sinceReboot(s)`` or
+    ``locationTimestamp_since1970(s)`` before it); ``ti`` (the default time column) when
+    the rate columns share no such word or no such column exists."""
+    words = {_sensor_word(header[i]) for i in rate_columns}
+    word = words.pop() if len(words) == 1 else ""
+    if len(word) < 2 or ti < len(header) and _sensor_word(header[ti]) == word:
+        return ti
+    for i, h in enumerate(header):
+        if (i not in rate_columns and looks_like_time(h) and _sensor_word(h) == word
+                and _is_numeric_field(first_row, i)):
+            return i
+    return ti
+
+
+def _is_numeric_field(row: list[str] | None, i: int) -> bool:
+    """Whether field ``i`` of ``row`` is a number (``True`` where there is no such field)."""
+    if row is None or i >= len(row):
+        return True
+    try:
+        parse_number(row[i], decimal_comma=True)
+        return True
+    except ValueError:
+        return False
 
 
 def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
@@ -193,10 +226,12 @@ def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
 def from_a_phone_app(header: list[str], rate_columns: list[int]) -> bool:
     """Whether a CSV's columns are a phone app's, whose rates are in the device's axes:
     Sensor Logger's ``seconds_elapsed`` column, or rates named as Core Motion's
-    ``rotationRateX`` (iOS apps)."""
+    ``rotationRateX`` (iOS apps; SensorLog's ``gyroRotationX(rad/s)`` and
+    ``motionRotationRateX(rad/s)``)."""
     names = [h.strip().lower() for h in header]
-    return "seconds_elapsed" in names or any(names[i].startswith("rotationrate")
-                                             for i in rate_columns)
+    return "seconds_elapsed" in names or any(
+        names[i].startswith(("rotationrate", "gyrorotation", "motionrotationrate"))
+        for i in rate_columns)
 
 
 def refuse_signed_names(path: str, header: list[str], columns: list[int]) -> None:
