@@ -372,7 +372,7 @@ def test_each_orientation_is_written_into_a_tiff(tmp_path):
 
 
 def test_float_tiffs_are_clipped_and_reported_as_16bit(tmp_path):
-    grey = np.array([[-1.0, 0.25, 2.0]], np.float32)
+    grey = np.array([[-0.2, 0.25, 1.9]], np.float32)
     tifffile.imwrite(tmp_path / "g.tif", grey, metadata=None)
     rgb = np.stack([grey, grey, grey], axis=-1)
     tifffile.imwrite(tmp_path / "c.tif", rgb, photometric="rgb", metadata=None)
@@ -385,6 +385,31 @@ def test_float_tiffs_are_clipped_and_reported_as_16bit(tmp_path):
     tifffile.imwrite(tmp_path / "n.tif", np.array([[0.5, np.nan]], np.float32), metadata=None)
     with pytest.warns(UserWarning, match="1 NaN or infinite samples are read as 0"):
         assert np.array_equal(read_photo(tmp_path / "n.tif").pixels, [[0.5, 0.0]])
+
+
+@pytest.mark.parametrize("values,scene,match", [
+    ([0.0, 128.0, 255.0], False, "float samples up to 255, most of them above 1; .* by 255"),
+    ([0.0, 3e4, 65535.0], False, "float samples up to 6.554e\\+04, most .* by 65535"),
+    ([-0.5, 0.0, 0.5], False, "float samples down to -0.5; .* offset or negated"),
+    ([-0.5, 0.0, 40.0], True, "float samples down to -0.5"),
+])
+def test_float_tiffs_far_outside_0_1_are_refused_not_clipped(tmp_path, values, scene, match):
+    """Clipped, a 0-255 float photo would be white and an offset one half black: such a file
+    is refused, naming it, where deblur() would refuse the array (a scene's lights above 1
+    are kept for simulate; nothing far below black is light)."""
+    tifffile.imwrite(tmp_path / "f.tif", np.array([values], np.float32), metadata=None)
+    with pytest.raises(InputError, match=match) as e:
+        read_photo(tmp_path / "f.tif", scene=scene)
+    assert "f.tif" in str(e.value)
+    # a photo mostly in [0, 1], its lights far above (clipped: the photo's clipped
+    # highlights), and a stray cold pixel, are read
+    ok = np.full(200, 0.5, np.float32)
+    ok[:3], ok[3] = 40.0, -0.5
+    tifffile.imwrite(tmp_path / "ok.tif", ok[None], metadata=None)
+    with pytest.warns(UserWarning, match="4 float samples outside .* clipped"):
+        assert read_photo(tmp_path / "ok.tif").pixels.max() == 1.0
+    with pytest.warns(UserWarning, match="1 float samples below 0 are clipped"):
+        assert read_photo(tmp_path / "ok.tif", scene=True).pixels.max() == 40.0
 
 
 def test_only_the_first_page_of_a_stack_is_read_with_a_warning(tmp_path):
@@ -974,9 +999,9 @@ def test_photo_is_frozen_with_identity_equality():
 
 
 def test_a_scene_keeps_light_above_white(tmp_path):
-    rgb = np.stack([np.array([[-1.0, 0.25, 8.0]], np.float32)] * 3, axis=-1)
+    rgb = np.stack([np.array([[-0.2, 0.25, 8.0]], np.float32)] * 3, axis=-1)
     tifffile.imwrite(tmp_path / "hdr.tif", rgb, photometric="rgb", metadata=None)
-    with pytest.warns(UserWarning, match="3 float samples below 0 are clipped \\(range -1 to 8\\)$"):
+    with pytest.warns(UserWarning, match="3 float samples below 0 are clipped \\(range -0.2 to 8\\)$"):
         scene = read_photo(tmp_path / "hdr.tif", scene=True)
     assert np.allclose(scene.pixels[0, :, 0], [0.0, 0.25, 8.0])
     with pytest.warns(UserWarning, match=r"6 float samples outside \[0, 1\]"):

@@ -17,7 +17,9 @@ Conventions
   transparency (``tRNS`` on grey/RGB images) is ignored.
 * Floating-point TIFFs are accepted: samples are clipped to ``[0, 1]`` (NaN -> 0, with a
   warning when any is outside) and ``bit_depth`` is reported as 16, so a ``like=`` output
-  keeps the most precision.
+  keeps the most precision. Samples far outside, which ``deblur()`` would refuse in an
+  array, are refused where they are no photo's light: most of them above 1 and some above 2
+  (0-255 values), or more than 1 % below -0.25 (an offset or negated image).
   CMYK, Lab, signed and 32-bit integer images are refused.
 * Only the first frame of a multi-page TIFF or animated PNG is read (with a warning; the
   preview frames of an MPO JPEG are skipped silently).
@@ -74,6 +76,7 @@ from gyrodeblur.errors import InputError
 from gyrodeblur.exif import (_EXIF_ERRORS, _IFD0_ASCII, _JPEG_MAX_EXIF, _ORIENTATION,
                              _exif_for_jpeg, _load_exif, _normalise_exif, _pillow_exif,
                              _sub_ifds, _tiff_exif, exif_capture_hints)
+from gyrodeblur.images import PHOTO_MAX, PHOTO_MIN
 from gyrodeblur.pngwrite import _PNG_XMP_KEY, DEFLATE_LEVEL, _write_png
 
 __all__ = ["Photo", "read_photo", "write_photo", "check_destination", "exif_capture_hints",
@@ -189,7 +192,8 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     ------
     InputError
         The file is missing, is not a JPEG/PNG/TIFF image, is damaged or truncated, or
-        holds a colour mode this library does not handle (CMYK, Lab, 32-bit integer).
+        holds a colour mode this library does not handle (CMYK, Lab, 32-bit integer), or
+        float samples far outside ``[0, 1]`` (module notes).
     """
     p = os.fspath(path)
     if not os.path.exists(p):
@@ -711,6 +715,7 @@ def _to_float(path: str, arr: np.ndarray, keep_bright: bool = False) -> tuple[np
         a = arr.astype(np.float32)
         finite = np.isfinite(a)
         bad = int(a.size - np.count_nonzero(finite))
+        _refuse_far_outside(path, a[finite], keep_bright)
         top = np.inf if keep_bright else 1.0
         over = int(np.count_nonzero(finite & ((a > top) | (a < 0))))
         if bad or over:
@@ -728,6 +733,25 @@ def _to_float(path: str, arr: np.ndarray, keep_bright: bool = False) -> tuple[np
     kind = {"i": "signed integers", "u": "unsigned integers"}.get(arr.dtype.kind, str(arr.dtype))
     raise InputError(path, f"unsupported samples ({8 * arr.dtype.itemsize}-bit {kind}); "
                      "use 8 or 16 bits")
+
+
+def _refuse_far_outside(path: str, values: np.ndarray, keep_bright: bool) -> None:
+    """Refuse float samples that no clipping makes a photo of: most of them above 1, beyond
+    :data:`~gyrodeblur.images.PHOTO_MAX` (0-255 or 0-65535 values; a photo's or a scene's
+    lights above white are kept or clipped), or more than 1 % below
+    :data:`~gyrodeblur.images.PHOTO_MIN` (an offset or negated image; a stray cold pixel is
+    clipped), the limits ``deblur()`` holds an array to."""
+    if not values.size:
+        return
+    high = float(values.max())
+    if not keep_bright and high > PHOTO_MAX and float(np.median(values)) > 1.0:
+        raise InputError(path, f"float samples up to {high:.4g}, most of them above 1; "
+                               "expected light in [0, 1] (divide 0-255 values by 255, "
+                               "0-65535 ones by 65535)")
+    if np.count_nonzero(values < PHOTO_MIN) > 0.01 * values.size:
+        raise InputError(path, f"float samples down to {float(values.min()):.4g}; expected "
+                               "light in [0, 1] (light is never below black: is it offset "
+                               "or negated?)")
 
 
 #: Longest XMP packet one JPEG APP1 segment holds (after its 29-byte namespace header).
