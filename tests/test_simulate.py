@@ -285,3 +285,28 @@ def test_a_photo_at_another_scale_is_blurred_by_the_capture_rescaled(make_captur
     assert np.abs(got - small).max() > 0.05                    # it did blur
     with pytest.raises(InputError, match="sharp image: .*aspect ratio differs"):
         simulate_blur(small[:, :60], cap, transfer="linear")
+
+
+def test_a_dropout_inside_the_exposure_is_warned_of_and_one_beside_it_is_not(make_capture):
+    """As deblur() does: the blur made across a 30 ms dropout inside the exposure window
+    (0.05-0.09 s of the log's clock) is made from interpolated motion, and said to be; the
+    same dropout after the window is not named."""
+    import dataclasses
+    import warnings
+
+    from gyrodeblur.gyrolog import GyroLog
+    cap = make_capture((0.0, 0.3, 0.0), readout=0.01)
+    t = cap.log.t
+    image = np.random.default_rng(2).random((cap.camera.height, cap.camera.width))
+
+    def dropped(after):                               # a 30 ms step from the sample at `after`
+        keep = ~((t > after + 1e-6) & (t < after + 0.03 - 1e-6))
+        return dataclasses.replace(cap, log=GyroLog(t[keep], cap.log.omega[keep]))
+
+    with pytest.warns(UserWarning, match=r"gap of 30\.0 ms in the gyro log at 0\.060000 s, "
+                                         r"inside the exposure: .* the blur is made from "
+                                         r"that interpolation"):
+        simulate_blur(image.astype(np.float32), dropped(0.06), seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate_blur(image.astype(np.float32), dropped(0.1), seed=0)

@@ -261,15 +261,20 @@ def largest_step(log: GyroLog, t0: float, t1: float) -> tuple[float, float]:
 INTERPOLATED_STEP = 0.015
 
 
-def step_warning(log: GyroLog, t0: float, t1: float, *, what: str = "exposure") -> str | None:
+#: What a long step costs a deblurred photo, as :func:`step_warning` says it.
+LESS_SHARP = "the result will be less sharp than the log could make it"
+
+
+def step_warning(log: GyroLog, t0: float, t1: float, *, what: str = "exposure",
+                 cost: str = LESS_SHARP) -> str | None:
     """A sentence for the user where the longest step between ``log``'s samples inside
     ``[t0, t1]`` (the log's clock, s) exceeds :data:`INTERPOLATED_STEP`: a dropout, or a
-    log sampled that coarsely throughout; ``None`` otherwise."""
+    log sampled that coarsely throughout; ``None`` otherwise. ``cost`` says what the
+    interpolation across it costs (default: a deblurred photo's sharpness)."""
     gap, at = largest_step(log, t0, t1)
     if gap <= INTERPOLATED_STEP + _TIME_TOLERANCE:
         return None
-    cost = ("the motion between samples is interpolated, and the result will be less sharp "
-            "than the log could make it")
+    cost = f"the motion between samples is interpolated, and {cost}"
     coarse, said = _long_step(log, gap, at, what)
     return f"{said}: {cost}; log the gyro at 100 Hz or more" if coarse else f"{said}: {cost}"
 

@@ -9,11 +9,14 @@ uses a PSF, so comparing it with PSF convolution checks both.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy import ndimage
 
 from .bands import for_row_bands
 from .capture import Capture, check_capture
+from .gyrolog import step_warning
 from .arguments import check_flag, check_real, check_seed, is_count, is_whole
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, join_alpha, split_alpha
 from .psf import check_blur_span
@@ -216,6 +219,13 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         the camera's (an :class:`InputError`), or a rotation that carries pixels to
         infinity (by 90 degrees or more).
 
+    Warns
+    -----
+    UserWarning
+        Where the gyro log steps more than 15 ms between two samples inside the exposure
+        (:func:`gyrodeblur.gyrolog.step_warning`): the blur is made from the motion
+        interpolated across it.
+
     Notes
     -----
     Sampling: the spline of ``order`` (the cubic spline's coefficients computed once per
@@ -236,6 +246,10 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     check_seed(seed)
     quantize = check_flag(quantize, "quantize")
     check_capture(capture)
+    coarse = step_warning(capture.log, *capture.log_window, cost="the blur is made from "
+                          "that interpolation, not from motion the log recorded")
+    if coarse is not None:
+        warnings.warn(f"{capture.log.source or 'gyro log'}: {coarse}", stacklevel=2)
     curve = get_transfer_curve(transfer)
     # an encoded photo (sRGB) holds neither values far below black (offset or negated) nor
     # far above 1 (0-255, not scaled); linear values are blurred as they are (a linear
