@@ -157,6 +157,17 @@ class GyroLog:
         return GyroLog(self.t[keep], self.omega[keep], self.source, dict(self.meta))
 
 
+def _check_increasing(t: np.ndarray, source: str | None, unit: str | None = "s") -> None:
+    """Refuse timestamps ``t`` that do not increase, naming the first sample that does not
+    (in ``unit``; ``None``: as the file writes them, its unit still unknown)."""
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        a, b = float(t[i + 1]), float(t[i])
+        said = f"{a:.6f} s after {b:.6f} s" if unit == "s" else f"{a:.10g} after {b:.10g}"
+        raise InputError(source, f"timestamps are not increasing (sample {i + 2}: {said})")
+
+
 def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
     if t.ndim != 1 or w.shape != (t.size, 3):
         raise InputError(source, f"expected N times and N x 3 rates, got {t.shape} and {w.shape}")
@@ -171,11 +182,7 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
                                  f"{MAX_TIME:.3g} s (136 years), where seconds are too coarse "
                                  "for an exposure: microseconds or nanoseconds read as "
                                  "seconds? (set the time unit)")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        i = int(np.argmax(dt <= 0))
-        raise InputError(source, f"timestamps are not increasing (sample {i + 2}: "
-                                 f"{float(t[i + 1]):.6f} s after {float(t[i]):.6f} s)")
+    _check_increasing(t, source)
     med = float(np.median(np.linalg.norm(w, axis=1)))
     peak = np.max(np.abs(w), axis=1)
     if med <= IMPLAUSIBLE_MEDIAN_RATE and np.any(peak > MAX_GYRO_RATE):
@@ -700,6 +707,7 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                                "does not say it holds times; give the unit (--time-unit "
                                "s|ms|us|ns) or name the column (gyro.time_column)")
     if tu is None:
+        _check_increasing(rows[:, 0], path, None)     # before a unit is guessed from them
         tu, interval = time_unit_from_interval(rows[:, 0])
         if tu is None:
             raise InputError(path, f"time unit of column {header[ti]!r} unknown (its median "
