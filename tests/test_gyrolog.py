@@ -258,6 +258,7 @@ def test_shared_android_log(shared_data):
     ("timestamp,x,y,z\n2.996237,0,0,0\n2.992646,0,0,0\n2.987381,0,0,0\n",
      r"not increasing \(sample 2: 2.992646 after 2.996237\)"),
     ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,1\n1.0,0,0,2\n", r"not increasing \(sample 2: 1 after 1\)"),
+    ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,0\n1.0,0,0,0\n", r"only 1 gyro sample\(s\)"),
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
     # epoch microseconds said to be seconds: rounding would eat the exposure
     ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000005000,0,0,0\n",

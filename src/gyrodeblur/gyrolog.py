@@ -707,6 +707,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                                "does not say it holds times; give the unit (--time-unit "
                                "s|ms|us|ns) or name the column (gyro.time_column)")
     if tu is None:
+        if len(rows) < 2:                             # (repeated rows are one sample)
+            raise InputError(path, f"only {len(rows)} gyro sample(s); at least 2 are needed")
         _check_increasing(rows[:, 0], path, None)     # before a unit is guessed from them
         tu, interval = time_unit_from_interval(rows[:, 0])
         if tu is None:
