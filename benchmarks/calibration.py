@@ -161,6 +161,11 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
     if offset_range is not None:
         errors["offset_ms"] *= offset_range / MAX_INJECTED_OFFSET
         search = offset_range + WIDE_SEARCH_SLACK
+        inside = offset_inside_logs(cases, errors)
+        if inside != errors["offset_ms"]:
+            say(f"  {cases[0].name}: the injected offset {errors['offset_ms']:+.1f} ms would "
+                f"put an exposure outside its gyro log; {inside:+.1f} ms injected")
+            errors.update(offset_ms=inside, offset_drawn_ms=errors["offset_ms"])
     bads = [corrupt(case.capture, errors) for case in cases]
     t0 = time.perf_counter()
     try:
@@ -183,6 +188,26 @@ def run_session(cases, rng, *, say, method=None, n_patches=None, no_errors=False
                 + "; only one estimated: " + ", ".join(
                     f"{k} {v:+.2f}" for k, v in row["gap_if_only_db"].items() if v is not None))
     return rows
+
+
+#: s: how far inside its log :func:`offset_inside_logs` keeps a moved exposure.
+_LOG_EDGE = 1e-3
+
+
+def offset_inside_logs(cases, errors: dict) -> float:
+    """``errors["offset_ms"]``, moved towards 0 as far as needed for every case's corrupted
+    exposure (its readout scaled as ``errors`` says) to stay inside its gyro log (ms): an
+    offset drawn from a wide ``--offset-range`` can carry a window that starts near the
+    log's end beyond it, where no capture can be made."""
+    lo, hi = -np.inf, np.inf                # the offsets (s) added that keep every window in
+    for case in cases:
+        cap = case.capture
+        t0 = cap.exposure_start - cap.time_offset
+        t1 = t0 + cap.readout_time * errors["readout_factor"] + cap.exposure_time
+        lo = max(lo, t1 - cap.log.t[-1] + _LOG_EDGE)
+        hi = min(hi, t0 - cap.log.t[0] - _LOG_EDGE)
+    return float(np.clip(errors["offset_ms"], lo * 1e3, hi * 1e3)) if lo <= hi else \
+        errors["offset_ms"]
 
 
 def capture_errors(got, cap) -> dict:

@@ -185,6 +185,32 @@ def test_calibration_readout_unknown_leaves_the_readout_out(capsys):
     assert "--readout-unknown leaves out the readout" in capsys.readouterr().err
 
 
+def test_an_injected_offset_that_leaves_the_log_is_moved_back_inside():
+    """--offset-range with a short log: an offset that would carry an exposure out of its
+    log (no capture could be made, and the run stopped after its first case) is moved
+    towards 0 until every session photo's exposure, its readout as corrupted, is 1 ms
+    inside; one that fits is left as drawn."""
+    from types import SimpleNamespace
+
+    from conftest import constant_rate_capture
+    cal = _load("calibration")
+    cap = constant_rate_capture((0.0, 0.6, 0.0), width=160, height=120, f=300.0,
+                                readout=0.02)
+    t, (w0, w1) = cap.log.t, cap.log_window
+    case = SimpleNamespace(capture=cap)
+    errors = {"offset_ms": 0.0, "readout_factor": 1.3}
+    assert cal.offset_inside_logs([case], errors) == 0.0
+    late = (w0 - t[0]) * 1e3                       # the exposure would start before the log
+    got = cal.offset_inside_logs([case], dict(errors, offset_ms=late + 500.0))
+    assert got == pytest.approx(late - 1.0)
+    early = (w1 + 0.3 * 0.02 - t[-1]) * 1e3        # ... or end after it (readout x 1.3)
+    got = cal.offset_inside_logs([case], dict(errors, offset_ms=early - 500.0))
+    assert got == pytest.approx(early + 1.0)
+    bad = cal.corrupt(cap, dict(cal.draw_errors(cap, np.random.default_rng(0)),
+                                offset_ms=got, readout_factor=1.3))
+    assert bad.log_window[1] <= t[-1] - 0.999e-3
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_calibration_sessions_quick(tmp_path):
     """Two photos of one session share the injected errors and are calibrated together."""

@@ -640,11 +640,21 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
             ("unix.csv", dict(hints, capture_time_unix=1733380130.0),
              "does not cover an exposure within 1 s of the photo's EXIF time"),
             ("unix.csv", {"capture_time_text": "2024:12:05 07:27:10"},
-             "has no readable time zone")):
+             "has no readable time zone"),
+            ("unix.csv", {"unreadable": {"capture_time": "DateTimeOriginal '2024:13:45'"}},
+             "the photo's EXIF DateTimeOriginal '2024:13:45' is no date and time; give "
+             "exposure_start on the gyro log's clock")):
         (tmp_path / "c.json").write_text(json.dumps(dict(doc, gyro={"path": gyro})))
         with pytest.raises(InputError, match="c.json: missing 'exposure_start'.*"
                                              + problem.replace("(", "\\(")):
             load_capture(tmp_path / "c.json", exif_hints=h)
+    # an EXIF exposure time that is there but no time is said to be so
+    (tmp_path / "c.json").write_text(json.dumps({k: v for k, v in doc.items()
+                                                 if k != "exposure_time"}))
+    with pytest.raises(InputError, match="c.json: missing 'exposure_time': the photo's EXIF "
+                                         "ExposureTime -0.03 is no exposure time"):
+        load_capture(tmp_path / "c.json", exif_hints=dict(
+            hints, unreadable={"exposure_time": "ExposureTime -0.03"}))
     (tmp_path / "c.json").write_text(json.dumps(dict(doc, readout_time=20)))   # ms, by mistake
     with pytest.raises(InputError, match="readout_time 20 s is longer than any sensor's"):
         load_capture(tmp_path / "c.json", exif_hints=hints)

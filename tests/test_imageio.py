@@ -727,6 +727,19 @@ def test_hints_capture_time_in_unix_time_from_its_zone_and_fraction():
     assert "capture_time_text" not in hints_for((4, 4), x_9003="0000:00:00 00:00:00")
 
 
+def test_hints_say_which_values_are_present_but_unreadable():
+    """A negative ExposureTime or a DateTimeOriginal that is no date is said to be there
+    and unreadable (for a message better than "missing"); the EXIF "unknown" (0, all
+    zeros) and a readable value are not."""
+    bad = hints_for((4, 4), x_829A=R(-3, 100), x_9003="2024:13:45 99:99:99")
+    assert "exposure_time" not in bad and "capture_time_text" not in bad
+    assert bad["unreadable"] == {"exposure_time": "ExposureTime -0.03",
+                                 "capture_time": "DateTimeOriginal '2024:13:45 99:99:99'"}
+    for ok in (hints_for((4, 4), x_829A=R(0, 1), x_9003="0000:00:00 00:00:00"),
+               hints_for((4, 4), x_9003="2024:12:05 07:27:10")):
+        assert "unreadable" not in ok
+
+
 def test_hints_focal_plane_resolution_in_mm_and_the_inch_default():
     """FocalPlaneResolutionUnit 4 is pixels per mm (as some cameras write); without the
     unit tag the EXIF default, inches, applies."""

@@ -173,6 +173,10 @@ def exif_capture_hints(photo: Photo) -> dict:
         ``"capture_time_text"`` : str
             DateTimeOriginal as written, with its zone and fraction where present
             (``"2024:12:05 07:27:10.512 +01:00"``).
+        ``"unreadable"`` : dict
+            ``"exposure_time"`` and ``"capture_time"`` where the photo has the tag but its
+            value is none (a negative ExposureTime, a DateTimeOriginal that is no date):
+            the tag and the value as written, for a message.
 
     Notes
     -----
@@ -215,6 +219,10 @@ def exif_capture_hints(photo: Photo) -> dict:
 
     hints: dict = {}
     exposure, focal = number(_EXPOSURE_TIME), number(_FOCAL_LENGTH)
+    unreadable = {}                  # present, and neither a value nor "unknown" (0)
+    written = _as_written(sub.get(_EXPOSURE_TIME, ifd0.get(_EXPOSURE_TIME)))
+    if exposure is None and written not in ("", "0", "nan"):
+        unreadable["exposure_time"] = f"ExposureTime {written}"
     zoom = number(_DIGITAL_ZOOM)        # 0/0 or 0/1: no digital zoom
     if zoom is not None and zoom > 1:
         hints["digital_zoom"] = zoom
@@ -234,7 +242,29 @@ def exif_capture_hints(photo: Photo) -> dict:
             fx *= max(width, height) / max(px, py)
         hints["fx"] = fx
     hints.update(_capture_time(sub, ifd0))
+    written = _as_written(sub.get(_DATETIME_ORIGINAL, ifd0.get(_DATETIME_ORIGINAL)))
+    if "capture_time_text" not in hints and re.search("[1-9]", written):  # not "0000:00:00"
+        unreadable["capture_time"] = f"DateTimeOriginal {written}"
+    if unreadable:
+        hints["unreadable"] = unreadable
     return hints
+
+
+def _as_written(value) -> str:
+    """An EXIF value for a message: text quoted, a number (or a rational) as a float;
+    ``""`` for none."""
+    if isinstance(value, tuple):
+        value = value[0] if value else None
+    if value is None:
+        return ""
+    if isinstance(value, bytes):
+        value = value.decode("ascii", "replace")
+    if isinstance(value, str):
+        return repr(value.strip().strip("\x00"))
+    try:
+        return f"{float(value):g}"
+    except (TypeError, ValueError, ZeroDivisionError):
+        return repr(value)[:40]
 
 
 def _capture_time(sub: dict, ifd0: dict) -> dict:
