@@ -96,7 +96,7 @@ def grey_crop(path: Path, crop: int, pad: int, max_size: int) -> np.ndarray:
     h, w = g.shape
     side = min(crop + 2 * pad, h, w)
     if side < 64 + 2 * pad:
-        raise SystemExit(f"{path}: {w}x{h} px is too small for a 64 px crop")
+        raise InputError(str(path), f"{w}x{h} px is too small for a 64 px crop")
     y0, x0 = (h - side) // 2, (w - side) // 2
     return np.ascontiguousarray(g[y0:y0 + side, x0:x0 + side], np.float32)
 
@@ -243,12 +243,10 @@ def main(argv: list[str] | None = None) -> int:
     data = args.data or default_shared_data()
     kpath = data / "kernels" / "levin2009.npz"
     if not kpath.is_file():
-        raise SystemExit(f"{kpath}: the Levin kernels are not there (give --data)")
+        where = "" if args.data else " (give the shared data folder: --data)"
+        raise InputError(str(kpath), f"the Levin kernels are not there{where}")
     kernels = levin_kernels(kpath)
-    try:
-        photos = list_photos(data / "photos")
-    except InputError as exc:
-        raise SystemExit(str(exc)) from None
+    photos = list_photos(data / "photos")
     pick = np.unique(np.linspace(0, len(photos) - 1, min(args.photos, len(photos))).round())
     photos = [photos[int(i)] for i in pick]
     pad = max(k.shape[0] for k in kernels.values()) // 2 + 2

@@ -60,6 +60,18 @@ def test_noise_sensitivity_quick(tmp_path):
     assert r["border_px"] > 0 and r["method"]
 
 
+def test_blind_levin_without_its_kernels_is_a_clear_error(tmp_path, capsys):
+    """A --data folder without kernels/levin2009.npz: one line naming the file, exit 2 as
+    for the other benchmarks' bad inputs (not "give --data" when it was given)."""
+    mod = _load("blind_levin")
+    (tmp_path / "photos").mkdir()
+    assert _load("_common").run_main(mod.main, ["--data", str(tmp_path), "--out",
+                                                str(tmp_path / "b.json")]) == 2
+    err = capsys.readouterr().err
+    assert "levin2009.npz: the Levin kernels are not there" in err and "--data" not in err
+    assert not (tmp_path / "b.json").exists()
+
+
 def test_blind_levin_quick(tmp_path):
     """The Levin-protocol benchmark: the true kernel through the default method restores
     far better than the blurred input, a blind estimate lands in between on average, and
