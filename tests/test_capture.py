@@ -422,6 +422,11 @@ def test_rates_read_in_an_assumed_unit_are_said(tmp_path):
     assert said == ["readout_time not given: 0 (a global shutter) unless calibrated (a "
                     "phone's rolling shutter reads out in about 10-30 ms: give a guess, or "
                     "let calibrate or deblur --refine search for it)"]
+    # saved, it is left out again: its 0 is no global shutter's (which would not be searched)
+    assert "readout_time" not in cap.to_dict()
+    cap.save(tmp_path / "saved.json")
+    again = load_capture(tmp_path / "saved.json", overrides={"rate_unit": "rad/s"})
+    assert again.readout_time == 0.0 and again.readout_time_unknown
     # the option gives it
     cap = load_capture(tmp_path / "c.json", overrides={"rate_unit": "rad/s",
                                                        "readout_time": 0.02})

@@ -262,10 +262,35 @@ class CalibrationFit:
 
     def given_objective(self, M) -> tuple[float, np.ndarray]:
         """The objective of the given parameters under mapping ``M`` (the bias the prior's),
-        and their vector."""
+        and their vector. A readout that was not given (0 only as a placeholder) is no
+        given parameter: theirs is the best for them (the given time offset held), of
+        :data:`_UNKNOWN_READOUT_SCAN` and a parabola's minimum through its best three, so
+        that keeping the given parameters does not make the photo a global shutter's."""
         x0 = np.clip(np.r_[0.0, 0.0, 0.0, self.bias_prior.for_mapping(M)[0]], self.lo, self.hi)
-        return objective(self.fine, self.theta_of(M), x0, self.idx, self.prior_for(M),
-                         self.extra_for(M)), x0
+        f = self._given_with_readout(M, x0)
+        if not (self.search.readout_unknown and 1 in self.idx):
+            return f(0.0)
+        kappas = np.clip(np.array(_UNKNOWN_READOUT_SCAN) - self.search.r0, self.lo[1],
+                         self.hi[1])
+        scores = [f(k)[0] for k in kappas]
+        j = int(np.clip(np.argmin(scores), 1, len(kappas) - 2))
+        (a, b, c), (fa, fb, fc) = kappas[j - 1:j + 2], scores[j - 1:j + 2]
+        den = (b - a) * (fb - fc) - (b - c) * (fb - fa)
+        if den > 0:                  # a convex parabola: its vertex, within the three
+            k = b - 0.5 * ((b - a) ** 2 * (fb - fc) - (b - c) ** 2 * (fb - fa)) / den
+            kappas, scores = np.r_[kappas, np.clip(k, a, c)], scores + [f(np.clip(k, a, c))[0]]
+        return f(kappas[int(np.argmin(scores))])
+
+    def _given_with_readout(self, M, x0):
+        """``kappa -> (objective, x)``: the given parameters ``x0`` under mapping ``M``
+        with the readout correction ``kappa`` (s), the given time offset held."""
+        def f(kappa):
+            x = x0.copy()
+            x[1] = kappa
+            x[0] = np.clip(-self.ubar * kappa, self.lo[0], self.hi[0])   # offset + 0
+            return objective(self.fine, self.theta_of(M), x, self.idx, self.prior_for(M),
+                             self.extra_for(M)), x
+        return f
 
     # -- steps --------------------------------------------------------------------------
     def coarse_rankings(self, cand, steps, bias_steps=(None,), envelopes=(False, True),

@@ -237,7 +237,8 @@ class Capture:
 
     # -- files --------------------------------------------------------------------------
     def to_dict(self, gyro_path: str | None = None) -> dict:
-        """The JSON description (``gyro_path`` overrides the stored relative path)."""
+        """The JSON description (``gyro_path`` overrides the stored relative path; a
+        readout time not known is left out, as it was given)."""
         c = self.camera
         gyro = dict(self.gyro_spec)
         if not gyro and "time_unit" in self.log.meta:     # a capture made in code, of a CSV
@@ -252,7 +253,7 @@ class Capture:
             gyro["bias"] = self.bias.tolist()
         else:
             gyro.pop("bias", None)
-        return {
+        out = {
             "exposure_start": self.exposure_start,
             "exposure_time": self.exposure_time,
             "readout_time": self.readout_time,
@@ -260,6 +261,9 @@ class Capture:
                        "width": c.width, "height": c.height},
             "gyro": gyro,
         }
+        if self.readout_time_unknown:      # its 0 is a placeholder, not a global shutter
+            del out["readout_time"]
+        return out
 
     def save(self, path: str | os.PathLike, gyro_path: str | None = None) -> None:
         """Write the JSON description to ``path`` (whole or not at all).
