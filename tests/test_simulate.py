@@ -310,3 +310,20 @@ def test_a_dropout_inside_the_exposure_is_warned_of_and_one_beside_it_is_not(mak
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         simulate_blur(image.astype(np.float32), dropped(0.1), seed=0)
+
+
+@pytest.mark.parametrize("snr", [40.0, 30.0])
+def test_snr_db_is_the_encoded_photos_with_the_noise_added_as_light(make_capture, snr):
+    """snr_db is what the returned sRGB photo shows (std(photo) / std(noise), within 0.3
+    dB), though the noise is added to the blurred light, as a sensor's: so the dark
+    pixels, where the curve is steep, get more of it than the bright ones."""
+    cap = make_capture((0.1, 0.4, 0.0), readout=0.01)
+    sharp = transform.resize(data.astronaut(), (cap.camera.height, cap.camera.width),
+                             anti_aliasing=True).astype(np.float32)
+    clean = simulate_blur(sharp, cap)
+    noisy = simulate_blur(sharp, cap, snr_db=snr, seed=4)
+    err = noisy - clean
+    assert 20 * np.log10(clean.std() / err.std()) == pytest.approx(snr, abs=0.3)
+    dark, bright = clean < 0.15, clean > 0.6
+    assert dark.mean() > 0.05 and bright.mean() > 0.05
+    assert err[dark].std() > 3 * err[bright].std()

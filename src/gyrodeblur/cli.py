@@ -904,7 +904,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("sharp", metavar="SHARP")
     s.add_argument("-o", "--output", required=True, metavar="BLURRED")
     s.add_argument("--snr-db", type=float, default=None,
-                   help="add Gaussian noise at this SNR (dB, on the blurred image's std)")
+                   help="add Gaussian noise to the blurred light, so that the photo written "
+                        "has this SNR (dB: its std over the noise's)")
     s.add_argument("--seed", type=int, default=None, help="noise seed")
     s.add_argument("--sampling", choices=("cubic", "bilinear"), default="cubic",
                    help="sampling of the sharp photo between pixels: cubic spline (default; a "
