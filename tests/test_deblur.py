@@ -475,6 +475,12 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
         expected = np.clip(photo, 0, 1) if clip else photo
         np.testing.assert_array_equal(out, expected)
         assert field.psfs[0][3, 3] == 1
+    # a progress bar is told it is done; a grid given as text is read as deblur() reads it
+    told = []
+    with pytest.warns(UserWarning, match="returned as it is"):
+        _, field = deblur_blind(photo, 7, grid="1x2", transfer="linear",
+                                progress=lambda done, total: told.append((done, total)))
+    assert told == [(1, 1)] and field.grid == (1, 2) and len(field.psfs) == 2
 
 
 def test_a_blind_photo_returned_as_it_is_still_has_its_method_and_options_checked(monkeypatch):
@@ -554,8 +560,9 @@ def test_blind_patches_refine_the_photo_s_kernel_on_central_crops(monkeypatch):
 
     monkeypatch.setattr(blind, "estimate_kernel", recording)
     photo = np.random.default_rng(7).uniform(0.1, 0.9, (64, 96)).astype(np.float32)
-    _, field = deblur_blind(photo, 5, grid=(1, 2), transfer="linear", check_blur=False,
-                            method="wiener", max_pixels=2000)
+    _, field = deblur_blind(photo, 5, grid="1x2", transfer="linear", check_blur=False,
+                            method="wiener", max_pixels=2000)       # as deblur() takes it
+    assert field.grid == (1, 2)
 
     def central(a, pixels):
         s = np.sqrt(pixels / a.size)

@@ -704,7 +704,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
         through).
     kernel_size : int
         Side of the kernel support, px (odd; a little more than the blur's extent).
-    grid : (rows, cols)
+    grid : (rows, cols) or "RxC"
         ``(1, 1)`` (default): one kernel for the whole photo, the space-invariant
         baseline. A finer grid cuts the photo into overlapping patches
         (:func:`gyrodeblur.tiling.patch_grid`, ``overlap``), refines the photo's kernel
@@ -758,6 +758,7 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     if not is_count(max_pixels):
         raise InputError(None, f"max_pixels must be a whole number >= 1, got {max_pixels!r}")
     H, W = image.shape[:2]
+    grid = check_grid(grid)
     encoded = split_alpha(image)[0]                  # not the mask
     lin = get_transfer_curve(transfer).decode(encoded)
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
@@ -768,15 +769,17 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
         delta = np.zeros_like(psfs[0])
         delta[kernel_size // 2, kernel_size // 2] = 1.0
         out = np.array(image, np.float32)
+        if progress is not None:                     # nothing left to do
+            progress(1, 1)
         return (np.clip(out, 0.0, 1.0) if clip else out), \
-            PSFField(_centres_xy(patches), [delta] * len(patches), tuple(int(g) for g in grid))
+            PSFField(_centres_xy(patches), [delta] * len(patches), grid)
     if len(patches) > 1:       # each patch refines the photo's kernel on its own pixels
         share = max_pixels / len(patches)
         psfs = [estimate_kernel(_central(lum[p.y0:p.y1, p.x0:p.x1], share), kernel_size,
                                 init_psf=psfs[0]) for p in patches]
     out = deblur_with_psfs(image, patches, psfs, method=method, transfer=transfer,
                            clip=clip, progress=progress, **options)
-    return out, PSFField(_centres_xy(patches), psfs, tuple(int(g) for g in grid))
+    return out, PSFField(_centres_xy(patches), psfs, grid)
 
 
 def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
