@@ -185,7 +185,11 @@ def test_cli_calibrate_turns_each_photo_back(cli_dir, capsys):
     second = np.clip(first + noise, 0, 1)                    # another exposure of the scene
     write_photo(d / "second.png", second, bit_depth=8)
     write_photo(d / "turned.png", np.rot90(read_photo(d / "second.png").pixels, -1), bit_depth=8)
-    common = ["--capture", str(d / "cap.json"), "--fix", "bias,readout,focal,axes"]
+    doc = json.loads((d / "cap.json").read_text())
+    doc["exposure_start"] += 2e-4                            # exposed a little later
+    (d / "second.json").write_text(json.dumps(doc))
+    common = ["--capture", f"{d / 'cap.json'},{d / 'second.json'}",
+              "--fix", "bias,readout,focal,axes"]
     assert main(["calibrate", str(d / "blurred.png"), str(d / "second.png"), *common,
                  "-o", str(d / "out" / "same.json")]) == 0
     assert main(["calibrate", str(d / "blurred.png"), str(d / "turned.png"), *common,
@@ -534,6 +538,16 @@ def test_mismatched_inputs(case):
     for second in (blurred, blurred.copy()):
         with pytest.raises(InputError, match="photos 1 and 2 hold the same pixels"):
             calibrate([blurred, second], [true, true])
+    # two photos given one start on one log (one description for both): refused, unless
+    # the start is each photo's EXIF time, or the time offsets put them apart
+    other = np.clip(blurred[::-1] * 0.9 + 0.05, 0, 1)
+    with pytest.raises(InputError, match="^captures: photos 1 and 2 start exposing at the "
+                                         "same time .* on the same gyro log"):
+        calibrate([blurred, other], [true, true])
+    from gyrodeblur.calibrate import _refuse_one_start
+    _refuse_one_start([true, true.replace(exposure_start=true.exposure_start + 2e-4)])
+    _refuse_one_start([true, true.replace(time_offset=true.time_offset + 0.1)])
+    _refuse_one_start([true.replace(exposure_start_from_exif=True)] * 2)
 
 
 # ------------------------------------------------ decisions on a scripted search
@@ -1338,13 +1352,27 @@ def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
     noise = np.random.default_rng(8).normal(0, 2 / 255, first.shape).astype(np.float32)
     write_photo(d / "again.png", np.clip(first + noise, 0, 1), bit_depth=8)
     photos = [str(d / "blurred.png"), str(d / "again.png")]
+    doc = json.loads((d / "cap.json").read_text())
+    doc["exposure_start"] += 2e-4                            # exposed a little later
+    (d / "again.json").write_text(json.dumps(doc))
     fix = ["--fix", "bias,readout,focal,axes"]
     assert main(["calibrate", *photos, "--capture", str(d / "cap.json"), "--capture",
-                 str(d / "cap.json"), *fix, "-o", str(d / "out" / "each.json")]) == 0
-    assert main(["calibrate", *photos, "--capture", str(d / "cap.json"), *fix,
-                 "-o", str(d / "out" / "shared.json")]) == 0
+                 str(d / "again.json"), *fix, "-o", str(d / "out" / "each.json")]) == 0
+    assert main(["calibrate", *photos, "--capture", f"{d / 'cap.json'},{d / 'again.json'}",
+                 *fix, "-o", str(d / "out" / "listed.json")]) == 0
     assert (json.loads((d / "out" / "each.json").read_text())
-            == json.loads((d / "out" / "shared.json").read_text()))
+            == json.loads((d / "out" / "listed.json").read_text()))
+    # one description for both (given once, or twice) starts them at one time: a
+    # session's photos are taken at different times, so it is refused before any work
+    capsys.readouterr()
+    for given in (["--capture", str(d / "cap.json")],
+                  ["--capture", str(d / "cap.json"), "--capture", str(d / "cap.json")]):
+        assert main(["calibrate", *photos, *given, *fix,
+                     "-o", str(d / "out" / "shared.json")]) == 2
+        err = capsys.readouterr().err
+        assert "--capture: photos 1 and 2 start exposing at the same time" in err, err
+        assert "one capture description per photo" in err
+    assert not (d / "out" / "shared.json").exists()
 
 
 def test_an_exif_exposure_start_is_searched_a_second_either_way(case, monkeypatch):

@@ -382,6 +382,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         raise InputError.of_argument(
             "captures", f"{len(images)} photos but {len(captures)} captures")
     _refuse_repeated_images(images)
+    _refuse_one_start(captures)
     fix = checked_fix(fix)
     mappings, why_mappings = searched_mappings(mappings, captures, fix)
     say_ = say or (lambda msg: None)
@@ -873,6 +874,26 @@ def _refuse_repeated_images(images) -> None:
     if pair is not None:
         raise InputError(None, f"photos {pair[0] + 1} and {pair[1] + 1} hold the same pixels: "
                                "one photo counted twice would seem twice as sure")
+
+
+def _refuse_one_start(captures) -> None:
+    """A session's photos are taken at different times: two whose descriptions start them
+    at one time on one gyro log (one description given for several photos, not their EXIF
+    times) would be calibrated on one stretch of the log, which only one of them shows."""
+    seen: dict = {}
+    for k, cap in enumerate(captures):
+        if cap.exposure_start_from_exif:
+            continue
+        key = (cap.exposure_start - cap.time_offset, id(cap.log) if cap.log.source is None
+               else cap.log.source)
+        if key in seen:
+            raise InputError.of_argument(
+                "captures", f"photos {seen[key] + 1} and {k + 1} start exposing at the same "
+                            f"time ({cap.exposure_start:.6f} s) on the same gyro log, and "
+                            "a session's photos are taken at different times: give each "
+                            "its own exposure_start (one capture description per photo, "
+                            "--capture a.json,b.json)")
+        seen[key] = k
 
 
 def _shrunk_photos(images, captures, factor: float):
