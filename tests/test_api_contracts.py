@@ -282,10 +282,13 @@ def test_arguments_of_the_wrong_kind_are_refused_before_any_work(scene, make_cap
     deblur(blurred, cap, progress=lambda done, total: calls.append((done, total)))
     assert calls and calls[-1][0] == calls[-1][1]
     # a capture left out
-    from gyrodeblur.psf import render_psf, trace
+    from gyrodeblur.psf import (displacement_field, landing_pixel, psf_variation, render_psf,
+                                trace)
     for call in (lambda: simulate_blur(scene, None, transfer="linear"),
                  lambda: render_psf(None, 10, 10),
-                 lambda: trace(None, 10.0, 10.0, 3), lambda: deblur(blurred, {"fx": 1})):
+                 lambda: trace(None, 10.0, 10.0, 3), lambda: deblur(blurred, {"fx": 1}),
+                 lambda: landing_pixel(None, 10, 10), lambda: psf_variation({"fx": 1}),
+                 lambda: displacement_field("capture.json")):
         with pytest.raises(TypeError, match="capture must be a Capture"):
             call()
     # simulate's numbers, named

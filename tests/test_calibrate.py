@@ -500,6 +500,8 @@ def test_bad_fix_name_is_an_input_error(case):
     _, true, blurred = case
     with pytest.raises(InputError, match="unknown parameter"):
         calibrate([blurred], true, fix={"offset", "focus"})
+    with pytest.raises(InputError, match="^fix: must name parameters .* got 5; known: offset"):
+        calibrate([blurred], true, fix=5)
 
 
 def test_several_photos_share_the_corrections(case):

@@ -999,6 +999,9 @@ def checked_fix(names) -> set[str]:
         names = ()
     elif isinstance(names, str):
         names = names.split(",")
+    elif isinstance(names, bytes) or not hasattr(names, "__iter__"):
+        raise InputError.of_argument("fix", f"must name parameters (a list, or 'a,b'), got "
+                                            f"{names!r}; known: {', '.join(PARAMETERS)}")
     fix = {n.strip() if isinstance(n, str) else n for n in names}
     fix.discard("")
     fix.discard(None)

@@ -164,6 +164,7 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
     falls back to its own position: its PSF is then timed by its own row, as a global
     shutter would have it.
     """
+    check_capture(capture)
     x0 = np.asarray(x0, np.float64)
     y0 = np.asarray(y0, np.float64)
     start = np.stack([x0, y0], axis=-1)
@@ -503,7 +504,7 @@ def psf_variation(capture: Capture, *, probes: tuple[int, int] = (7, 9), n: int 
                                     and p >= 2 for p in probes)):
         raise ValueError(f"probes must be two whole numbers >= 2 (rows, columns), got {probes!r}")
     n = _sample_count(n)
-    cam = capture.camera
+    cam = check_capture(capture).camera
     ys = np.linspace(0, cam.height - 1, probes[0])
     xs = np.linspace(0, cam.width - 1, probes[1])
     d = np.empty((probes[0], probes[1], n, 2))
@@ -536,7 +537,7 @@ def displacement_field(capture: Capture, *, step: float = 48.0, n: int = 32):
     d : ndarray, shape (len(ys), len(xs), 2)
         Mean displacement (dx, dy) in pixels at each grid point.
     """
-    cam = capture.camera
+    cam = check_capture(capture).camera
     if isinstance(step, bool) or not isinstance(step, (int, float, np.number)) \
             or not (np.isfinite(step) and step >= 1) or isinstance(n, bool) or not (
             isinstance(n, (int, np.integer)) and n >= 1):
