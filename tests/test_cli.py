@@ -1432,7 +1432,7 @@ def test_several_photos_are_all_checked_before_any_work_and_each_named(capture_d
               "--exposure-start", "50.3"], "--exposure-start: would give every photo"),
             ([str(d / "b1.png"), str(d / "b1_turned.png"), "--capture",
               f"{cap},{d / 'cap_mm.json'}"],
-             f"cap_mm.json: the blur at (0, 0) would span"),
+             f"cap_mm.json: the PSF centred on its point (its blur reaching"),
             ([str(d / "b1.png"), str(d / "small.png"), "--blind", "--kernel-size", "31"],
              f"--kernel-size: 31 px is too large for a 80x60 image"),
             ([str(d / "b1.png"), str(d / "small.png"), "--blind", "--kernel-size", "19",

@@ -496,3 +496,20 @@ def test_a_psf_fields_grid_must_hold_its_points(make_capture):
     for bad in ((3, 3), (6,), (2.5, 3), "2x3", (0, 6), (2, 3, 1)):
         with pytest.raises(InputError, match="grid must be"):
             psf_field(cap, pts, grid=bad)
+
+
+def test_a_psf_too_large_for_the_frame_is_said_as_a_psf_not_as_a_blur(make_capture):
+    """render_psf refuses a PSF wider than the frame; the message gives the PSF's side
+    (twice the blur's reach from its point, rolling-shutter shift included) as the PSF's,
+    with that reach, not as the length of the blur, which is shorter."""
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.psf import trace
+    small = make_capture([0.3, 1.0, 0.5], width=40, height=30, f=500.0, exposure=0.04,
+                         readout=0.01)
+    pts = trace(small, 19.5, 14.5, 200)
+    reach = np.abs(pts - [19.5, 14.5]).max()
+    assert np.ptp(pts, axis=0).max() < 40 < 2 * reach          # the blur fits, the PSF not
+    with pytest.raises(InputError, match=f"the PSF centred on its point \\(its blur reaching "
+                                         f"{reach:.0f} px from it\\) at \\(20, 14\\) would span "
+                                         f"{2 * reach:.0f} px, more than the 40x30 frame"):
+        render_psf(small, 19.5, 14.5)

@@ -604,12 +604,12 @@ def _check_blur_fits_the_frame(cap) -> None:
     """Refuse a blur longer than the frame at the frame's corners or centre
     (:func:`gyrodeblur.psf.check_blur_span`, which the deblur applies to every PSF): wrong
     units in one photo's capture, said before another photo is deblurred."""
-    from .psf import check_blur_span, trace
+    from .psf import centred_psf, check_blur_span, trace
     cam = cap.camera
     for x, y in ((0, 0), (cam.width - 1, 0), (cam.cx, cam.cy), (0, cam.height - 1),
                  (cam.width - 1, cam.height - 1)):
-        offsets = trace(cap, x, y, 64) - [x, y]      # the PSF's reach, as render_psf's
-        check_blur_span(cap, 2 * float(np.abs(offsets).max()), f"at ({x:.0f}, {y:.0f})")
+        reach = float(np.abs(trace(cap, x, y, 64) - [x, y]).max())   # as render_psf's
+        check_blur_span(cap, 2 * reach, f"at ({x:.0f}, {y:.0f})", what=centred_psf(reach))
 
 
 class _PhotoDeblur:

@@ -44,7 +44,8 @@ from .capture import Capture, check_capture
 from .errors import InputError
 
 __all__ = ["trace", "landing_pixel", "render_psf", "splat", "lanczos_splat", "PSFField",
-           "psf_field", "psf_extent", "psf_variation", "displacement_field", "check_blur_span"]
+           "psf_field", "psf_extent", "psf_variation", "displacement_field", "check_blur_span",
+           "centred_psf"]
 
 #: Largest allowed distance (px) between consecutive trace samples when rendering.
 MAX_STEP_PX = 0.25
@@ -215,18 +216,25 @@ def _landing_by_newton(capture: Capture, start: np.ndarray, n: int, row) -> np.n
     return np.where(kept[:, None], p, start)
 
 
-def check_blur_span(capture: Capture, span: float, where: str) -> None:
+def check_blur_span(capture: Capture, span: float, where: str, *, what: str = "blur") -> None:
     """Refuse a blur longer than the frame: ``span`` (px) is how far a point moves during
-    its exposure (at ``where``, for the message). Such a blur comes from wrong capture
-    values (a focal length in mm rather than pixels, deg/s read as rad/s, an exposure in
-    ms read as s), and rendering or simulating it would exhaust memory or time."""
+    its exposure (at ``where``, for the message), or, ``what`` saying so, the side of a
+    PSF centred on its point. Such a blur comes from wrong capture values (a focal length
+    in mm rather than pixels, deg/s read as rad/s, an exposure in ms read as s), and
+    rendering or simulating it would exhaust memory or time."""
     cam = capture.camera
     limit = max(cam.width, cam.height)
     if not span <= limit:                     # NaN too
         raise InputError(capture.source,
-                         f"the blur {where} would span {span:.0f} px, more than the "
+                         f"the {what} {where} would span {span:.0f} px, more than the "
                          f"{cam.width}x{cam.height} frame: check the focal length (fx, fy, "
                          "pixels), the gyro's rate unit and the exposure and readout times")
+
+
+def centred_psf(reach: float) -> str:
+    """:func:`check_blur_span`'s ``what`` for a PSF centred on its point, whose side is
+    twice the ``reach`` (px) of its blur from the point."""
+    return f"PSF centred on its point (its blur reaching {reach:.0f} px from it)"
 
 
 def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float,
@@ -407,7 +415,7 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         offsets -= offsets.mean(axis=0)
     reach = float(np.abs(offsets).max())
     if radius is None:     # a point far off the frame sees its trace far from itself
-        check_blur_span(capture, 2 * reach, f"at ({x:.0f}, {y:.0f})")
+        check_blur_span(capture, 2 * reach, f"at ({x:.0f}, {y:.0f})", what=centred_psf(reach))
     elif reach > radius + 0.5:
         kept = float(np.mean(np.abs(offsets).max(axis=1) <= radius + 0.5))
         where = (f"the blur at ({x:.0f}, {y:.0f}) reaches {reach:.1f} px from it, beyond "
