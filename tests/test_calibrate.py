@@ -1766,6 +1766,12 @@ def test_a_readout_not_given_is_searched_not_held_at_a_global_shutter(case):
     assert res.estimates["readout"][2] is not None
     held = calibrate([blurred], bad, fix={"axes", "offset"}).capture
     assert held.readout_time < 0.01, held.readout_time
+    # a readout not given and fixed (not estimated) is still not known afterwards: saved,
+    # it is left out, not written as a global shutter's 0
+    kept = calibrate([blurred], bad.replace(readout_time_unknown=True),
+                     fix={"axes", "readout", "focal", "bias"}).capture
+    assert kept.readout_time == 0.0 and kept.readout_time_unknown
+    assert "readout_time" not in kept.to_dict()
     # a session shares one readout correction: one photo's readout given, another's not
     later = _true_capture(0.8)
     with pytest.raises(InputError, match="photo 2's capture gives no readout_time while the other descriptions"):

@@ -542,7 +542,7 @@ def test_a_candidate_is_its_mappings_lowest_start():
     assert x2[0] == -0.002 and [a[0] for a in alts2] == [0.498]
 
 
-def _textured_fit(cap, fix=(), n_patches=9, img=None):
+def _textured_fit(cap, fix=(), n_patches=9, img=None, offset_range=0.04):
     """A :class:`CalibrationFit` on a photo of noise texture (or ``img``) under ``cap``."""
     from gyrodeblur.bias_prior import BiasPrior
     from gyrodeblur.calibration_fit import CalibrationFit
@@ -551,7 +551,7 @@ def _textured_fit(cap, fix=(), n_patches=9, img=None):
     if img is None:
         img = np.random.default_rng(1).uniform(0.2, 0.8, (256, 384)).astype(np.float32)
     photos = [CalibrationPhoto(img, cap, "linear", 0)]
-    return CalibrationFit(photos, SearchSpace(photos, set(fix), 0.04), set(fix),
+    return CalibrationFit(photos, SearchSpace(photos, set(fix), offset_range), set(fix),
                           BiasPrior(np.zeros(3)), n_patches, 1, lambda msg: None)
 
 
@@ -580,27 +580,34 @@ def test_the_search_grids_and_priors():
     assert len(_textured_fit(cap, n_patches=1).fine.points) == 3
 
 
-def test_the_given_parameters_of_a_readout_not_given_have_their_best_readout():
+@pytest.mark.parametrize("readout", [0.021, 0.041])
+def test_the_given_parameters_of_a_readout_not_given_have_their_best_readout(readout):
     """A readout left out is 0 only as a placeholder: the "given parameters" that
     calibration keeps when the photo prefers nothing else clearly are the given ones with
     the readout that suits them best (the given time offset held), not a global shutter's.
-    The photo: noise texture blurred under a 30 ms readout; found within 6 ms. A readout
-    that was given stays as given."""
+    The photo: noise texture blurred under a readout between the scanned ones; found
+    within 2 ms (the scan's step is 6 ms). With a time-offset range too narrow for the
+    longest readouts at the given offset, those are not tried, and the offset still holds.
+    A readout that was given stays as given."""
     from scipy import ndimage
 
     from gyrodeblur.simulate import simulate_blur
-    cap = _capture()
+    cap = _capture().replace(readout_time=readout)
     rng = np.random.default_rng(3)
     scene = ndimage.gaussian_filter(rng.uniform(0, 1, (256, 384)), 1.0).astype(np.float32)
     blurred = simulate_blur(scene, cap, transfer="linear")
-    unknown = _textured_fit(cap.replace(readout_time=0.0, readout_time_unknown=True),
-                            fix={"axes"}, img=blurred)
-    f, x = unknown.given_objective(cap.axes)
-    theta = unknown.theta_of(cap.axes)(x)
-    assert abs(theta.readout - 0.03) < 0.006, theta.readout
-    assert theta.offset == 0.0 and theta.focal == 1.0          # the given ones held
-    f0 = unknown._given_with_readout(cap.axes, x)(0.0)[0]      # a global shutter's
-    assert f < f0
+    unknown = cap.replace(readout_time=0.0, readout_time_unknown=True)
+    for offset_range in (0.04, 0.003):
+        fit = _textured_fit(unknown, fix={"axes"}, img=blurred, offset_range=offset_range)
+        f, x = fit.given_objective(cap.axes)
+        theta = fit.theta_of(cap.axes)(x)
+        assert theta.offset == pytest.approx(0.0, abs=1e-12) and theta.focal == 1.0
+        if offset_range == 0.04:
+            assert abs(theta.readout - readout) < 0.002, theta.readout
+            f0 = fit._given_with_readout(cap.axes, x * 0)(0.0)[0]  # a global shutter's
+            assert f < f0
+        else:                   # x[0] = -ubar readout must stay within the offset bounds
+            assert fit.lo[0] <= x[0] <= fit.hi[0] and theta.readout > 0.005
     given = _textured_fit(cap, fix={"axes"}, img=blurred)
     _, x = given.given_objective(cap.axes)
     assert x[0] == 0.0 and x[1] == 0.0

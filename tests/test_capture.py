@@ -647,8 +647,8 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
             ("unix.csv", {"capture_time_text": "2024:12:05 07:27:10"},
              "has no readable time zone"),
             ("unix.csv", {"unreadable": {"capture_time": "DateTimeOriginal '2024:13:45'"}},
-             "the photo's EXIF DateTimeOriginal '2024:13:45' is no date and time; give "
-             "exposure_start on the gyro log's clock")):
+             "the photo's EXIF DateTimeOriginal '2024:13:45' is not a date and time in "
+             "EXIF's form, YYYY:MM:DD HH:MM:SS; give exposure_start on the gyro log's clock")):
         (tmp_path / "c.json").write_text(json.dumps(dict(doc, gyro={"path": gyro})))
         with pytest.raises(InputError, match="c.json: missing 'exposure_start'.*"
                                              + problem.replace("(", "\\(")):
@@ -657,7 +657,8 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
     (tmp_path / "c.json").write_text(json.dumps({k: v for k, v in doc.items()
                                                  if k != "exposure_time"}))
     with pytest.raises(InputError, match="c.json: missing 'exposure_time': the photo's EXIF "
-                                         "ExposureTime -0.03 is no exposure time"):
+                                         "ExposureTime -0.03 is not a positive number of "
+                                         "seconds"):
         load_capture(tmp_path / "c.json", exif_hints=dict(
             hints, unreadable={"exposure_time": "ExposureTime -0.03"}))
     (tmp_path / "c.json").write_text(json.dumps(dict(doc, readout_time=20)))   # ms, by mistake

@@ -466,6 +466,23 @@ def test_a_log_of_several_sensors_takes_the_gyros_own_timestamps(tmp_path, trace
     np.testing.assert_allclose(log.t, trace.t + 0.006, atol=1e-9)
 
 
+@pytest.mark.parametrize("names", [
+    ("time_acc", "ax", "ay", "az", "time_gyro", "gx", "gy", "gz"),
+    ("acc_timestamp", "acc_x", "acc_y", "acc_z", "timestamp_gyro", "gyro_x", "gyro_y", "gyro_z"),
+    ("accTimestamp", "accX", "accY", "accZ", "gyrTimestamp", "wx", "wy", "wz"),
+])
+def test_an_imu_log_pairs_the_gyros_rates_with_the_gyros_own_time(tmp_path, trace, names):
+    """An IMU log with the accelerometer's time column first: the rates named as the gyro's
+    take the time column that names the gyro, in whichever word of its name."""
+    rows = [f"{float(a) + 0.004!r},0.0,0.0,9.8,{float(a)!r}," + ",".join(map(repr, map(float, w)))
+            for a, w in zip(trace.t, trace.omega)]
+    p = tmp_path / "imu.csv"
+    p.write_text(",".join(names) + "\n" + "\n".join(rows) + "\n")
+    log = read_gyro_log(p, time_unit="s")
+    np.testing.assert_allclose(log.t, trace.t, atol=1e-12)
+    np.testing.assert_allclose(log.omega, trace.omega)
+
+
 @pytest.mark.parametrize("options,match", [
     ({"rate_columns": (1, 1, 1)}, "three different columns"),
     ({"rate_columns": ("gx", "gy", "gy")}, "three different columns"),

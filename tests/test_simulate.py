@@ -312,14 +312,19 @@ def test_a_dropout_inside_the_exposure_is_warned_of_and_one_beside_it_is_not(mak
         simulate_blur(image.astype(np.float32), dropped(0.1), seed=0)
 
 
-@pytest.mark.parametrize("snr", [40.0, 30.0])
-def test_snr_db_is_the_encoded_photos_with_the_noise_added_as_light(make_capture, snr):
+@pytest.mark.parametrize("snr,black", [(40.0, False), (30.0, False), (10.0, False),
+                                       (40.0, True)])
+def test_snr_db_is_the_encoded_photos_with_the_noise_added_as_light(make_capture, snr,
+                                                                    black):
     """snr_db is what the returned sRGB photo shows (std(photo) / std(noise), within 0.3
-    dB), though the noise is added to the blurred light, as a sensor's: so the dark
-    pixels, where the curve is steep, get more of it than the bright ones."""
+    dB; at 10 dB too, and with half the photo black, where the clipping at black takes
+    part of the noise), though the noise is added to the blurred light, as a sensor's: so
+    the dark pixels, where the curve is steep, get more of it than the bright ones."""
     cap = make_capture((0.1, 0.4, 0.0), readout=0.01)
     sharp = transform.resize(data.astronaut(), (cap.camera.height, cap.camera.width),
                              anti_aliasing=True).astype(np.float32)
+    if black:
+        sharp[:, :cap.camera.width // 2] = 0.0
     clean = simulate_blur(sharp, cap)
     noisy = simulate_blur(sharp, cap, snr_db=snr, seed=4)
     err = noisy - clean

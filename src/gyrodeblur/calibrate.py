@@ -310,10 +310,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         Blurred photos (float in [0, 1], (H, W) or (H, W, C)), one per capture (a single
         array is one photo).
     captures : Capture or list of Capture
-        Their capture descriptions (one shared, or one per photo, any resolution with the
-        photo's aspect ratio); the photos share the unknown corrections (one camera, one
-        gyro, one session): one time-offset change, one readout change, one focal scale,
-        one bias change and one axis mapping for all.
+        Their capture descriptions (one per photo, any resolution with the photo's aspect
+        ratio; one shared only where each photo's start is its EXIF time: photos of one
+        session started at one time on one log are refused); the photos share the unknown
+        corrections (one camera, one gyro, one session): one time-offset change, one
+        readout change, one focal scale, one bias change and one axis mapping for all.
     fix : iterable of str, or str
         Parameters not to estimate, from :data:`PARAMETERS` (a string: comma-separated).
     offset_range : float, optional
@@ -626,7 +627,10 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     out_caps = []
     for cap in captures:
         try:
-            out_caps.append(theta.apply(cap))
+            got = theta.apply(cap)
+            if "readout" in fix and cap.readout_time_unknown:    # not estimated: still not known
+                got = got.replace(readout_time_unknown=True)
+            out_caps.append(got)
         except InputError as exc:
             raise InputError(cap.source, f"calibrated parameters are not usable: {exc.problem}") from None
     cb = c0

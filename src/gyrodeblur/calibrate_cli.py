@@ -179,8 +179,6 @@ def calibrate_command(args, say, load_capture) -> None:
         a.capture = paths[k] if len(paths) > 1 else paths[0]
         a.photo_rotation = turns[k]                  # this photo's, as its messages say
         caps.append(load_capture(a, ph, say))
-    if len(paths) == 1:
-        note_one_start_for_all(paths[0], caps, say)
     inputs = list(args.photos) + [c.source for c in caps] + [c.log.source for c in caps]
     for out in outputs:
         check_destination(out, None, args.overwrite, image=False, inputs=inputs)

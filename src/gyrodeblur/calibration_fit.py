@@ -264,21 +264,26 @@ class CalibrationFit:
         """The objective of the given parameters under mapping ``M`` (the bias the prior's),
         and their vector. A readout that was not given (0 only as a placeholder) is no
         given parameter: theirs is the best for them (the given time offset held), of
-        :data:`_UNKNOWN_READOUT_SCAN` and a parabola's minimum through its best three, so
-        that keeping the given parameters does not make the photo a global shutter's."""
+        :data:`_UNKNOWN_READOUT_SCAN` (those the bounds allow) and the minimum of a
+        parabola through the best and its neighbours, so that keeping the given parameters does not make the
+        photo a global shutter's."""
         x0 = np.clip(np.r_[0.0, 0.0, 0.0, self.bias_prior.for_mapping(M)[0]], self.lo, self.hi)
         f = self._given_with_readout(M, x0)
         if not (self.search.readout_unknown and 1 in self.idx):
             return f(0.0)
-        kappas = np.clip(np.array(_UNKNOWN_READOUT_SCAN) - self.search.r0, self.lo[1],
-                         self.hi[1])
+        kappas = np.array(_UNKNOWN_READOUT_SCAN) - self.search.r0
+        # the readouts the bounds allow with the given offset held
+        tau = x0[0] - self.ubar * kappas
+        ok = ((kappas >= self.lo[1]) & (kappas <= self.hi[1])
+              & (tau >= self.lo[0]) & (tau <= self.hi[0]))
+        kappas = kappas[ok] if ok.any() else np.array([0.0])
         scores = [f(k)[0] for k in kappas]
-        j = int(np.clip(np.argmin(scores), 1, len(kappas) - 2))
-        (a, b, c), (fa, fb, fc) = kappas[j - 1:j + 2], scores[j - 1:j + 2]
-        den = (b - a) * (fb - fc) - (b - c) * (fb - fa)
-        if den > 0:                  # a convex parabola: its vertex, within the three
-            k = b - 0.5 * ((b - a) ** 2 * (fb - fc) - (b - c) ** 2 * (fb - fa)) / den
-            kappas, scores = np.r_[kappas, np.clip(k, a, c)], scores + [f(np.clip(k, a, c))[0]]
+        if len(kappas) >= 3:             # a parabola through the best and its neighbours
+            i = int(np.clip(np.argmin(scores) - 1, 0, len(kappas) - 3))
+            curv, slope, _ = np.polyfit(kappas[i:i + 3], scores[i:i + 3], 2)
+            if curv > 0:                 # convex: its vertex, within the three
+                k = float(np.clip(-slope / (2 * curv), kappas[i], kappas[i + 2]))
+                kappas, scores = np.r_[kappas, k], scores + [f(k)[0]]
         return f(kappas[int(np.argmin(scores))])
 
     def _given_with_readout(self, M, x0):
@@ -287,7 +292,7 @@ class CalibrationFit:
         def f(kappa):
             x = x0.copy()
             x[1] = kappa
-            x[0] = np.clip(-self.ubar * kappa, self.lo[0], self.hi[0])   # offset + 0
+            x[0] = x0[0] - self.ubar * kappa           # the given offset held
             return objective(self.fine, self.theta_of(M), x, self.idx, self.prior_for(M),
                              self.extra_for(M)), x
         return f

@@ -509,7 +509,7 @@ def cmd_deblur(args, say) -> None:
                                              r.args.save_capture)]
         for r in runs:         # no output is another photo's capture or log either
             _check_not_over_capture(r.cap, args.overwrite, *outputs)
-        if len({a.capture for a in jobs}) == 1:
+        if len({a.capture for a in jobs}) == 1 and not args.refine:   # refine: refused
             from .calibrate_cli import note_one_start_for_all
             note_one_start_for_all(jobs[0].capture, [r.cap for r in runs], say)
     from_exif = [r.args.photo for r in runs if r.cap is not None

@@ -24,7 +24,7 @@ import numpy as np
 from .arguments import check_callback, check_flag, is_count
 from .capture import Capture, check_capture
 from .errors import InputError
-from .gyrolog import step_warning
+from .gyrolog import warn_of_steps
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
 from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_variation,
                   render_psf)
@@ -652,9 +652,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     return_report = check_flag(return_report, "return_report")
     check_callback(progress, "progress")
     get_transfer_curve(transfer)                   # refused before the PSFs are rendered
-    coarse = step_warning(capture.log, *capture.log_window)
-    if coarse is not None:
-        warnings.warn(f"{capture.log.source or 'gyro log'}: {coarse}", stacklevel=2)
+    warn_of_steps(capture.log, *capture.log_window)
     if align is not None:
         align = check_flag(align, "align")
     method = method or DEFAULT_METHOD

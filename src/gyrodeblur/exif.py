@@ -175,8 +175,9 @@ def exif_capture_hints(photo: Photo) -> dict:
             (``"2024:12:05 07:27:10.512 +01:00"``).
         ``"unreadable"`` : dict
             ``"exposure_time"`` and ``"capture_time"`` where the photo has the tag but its
-            value is none (a negative ExposureTime, a DateTimeOriginal that is no date):
-            the tag and the value as written, for a message.
+            value cannot be read as one (a negative ExposureTime, a DateTimeOriginal not
+            in EXIF's ``YYYY:MM:DD HH:MM:SS`` form): the tag and the value as written,
+            for a message.
 
     Notes
     -----

@@ -59,6 +59,7 @@ __all__ = [
     "check_coverage",
     "largest_step",
     "step_warning",
+    "warn_of_steps",
     "INTERPOLATED_STEP",
     "rate_noise",
     "median_rate",
@@ -284,6 +285,15 @@ def step_warning(log: GyroLog, t0: float, t1: float, *, what: str = "exposure",
     cost = f"the motion between samples is interpolated, and {cost}"
     coarse, said = _long_step(log, gap, at, what)
     return f"{said}: {cost}; log the gyro at 100 Hz or more" if coarse else f"{said}: {cost}"
+
+
+def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
+                  stacklevel: int = 2) -> None:
+    """A :class:`UserWarning`, naming the log, with :func:`step_warning`'s sentence where
+    it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
+    said = step_warning(log, t0, t1, cost=cost)
+    if said is not None:
+        warnings.warn(f"{log.source or 'gyro log'}: {said}", stacklevel=stacklevel + 1)
 
 
 def _secs(t: float) -> str:

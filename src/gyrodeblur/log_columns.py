@@ -155,31 +155,52 @@ def default_time_column(header: list[str], first_row: list[str] | None = None) -
     return next((i for i in times if numeric(i)), 0)
 
 
-def _sensor_word(name: str) -> str:
-    """A column name's first word, lowercased (``gyroRotationX(rad/s)`` -> ``gyro``,
-    ``gyro_t`` -> ``gyro``, ``accelerometerTimestamp_sinceReboot(s)`` ->
-    ``accelerometer``): the sensor a multi-sensor logger names its columns by."""
-    words = re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])", name)
-    return words[0].lower() if words else ""
+#: Words that name the gyroscope in a column's name (``gyroTimestamp``, ``time_gyro``,
+#: ``gyrTimestamp``; a rate column ``gx`` or ``wx`` is the gyro's too).
+_GYRO_WORDS = frozenset({"g", "w", "gyr", "gyro", "gyroscope", "omega", "rot", "rotation"})
+
+
+def _name_words(name: str) -> list[str]:
+    """A column name's words, lowercased: split at case changes and at anything not a
+    letter (``gyroTimestamp_sinceReboot(s)`` -> gyro, timestamp, since, reboot, s)."""
+    return [w.lower() for w in re.findall(r"[A-Z]?[a-z]+|[A-Z]+(?![a-z])", name)]
+
+
+def _sensor_of(rate_name: str) -> frozenset:
+    """The words that name the sensor of a rate column: the gyroscope's
+    (:data:`_GYRO_WORDS`) for ``gx``, ``wx_rad_s``, ``gyro_x``, ``gyroRotationX(rad/s)``;
+    its own first word for another (``motionRotationRateX``: motion); none for a bare
+    ``x``."""
+    words = _name_words(rate_name)
+    first = words[0] if words else ""
+    if len(first) > 1 and first[-1] in "xyz" and rate_axis(rate_name) is not None \
+            and first[:-1] in _GYRO_WORDS | {""}:
+        first = first[:-1]                      # gx, wx: the axis letter joined on
+    if not first or first in "xyz":
+        return frozenset()
+    return _GYRO_WORDS if first in _GYRO_WORDS else frozenset({first})
 
 
 def sensor_time_column(header: list[str], first_row: list[str] | None, rate_columns: list[int],
                        ti: int) -> int:
     """The time column that goes with ``rate_columns`` in a log of several sensors: a
-    column named as a time (and a number in ``first_row``) whose first word is the rate
-    columns' own (iOS SensorLog's ``gyroTimestamp_sinceReboot(s)`` for
-    ``gyroRotationX(rad/s)``, not the ``accelerometerTimestamp_sinceReboot(s)`` or
-    ``locationTimestamp_since1970(s)`` before it); ``ti`` (the default time column) when
-    the rate columns share no such word or no such column exists."""
-    words = {_sensor_word(header[i]) for i in rate_columns}
-    word = words.pop() if len(words) == 1 else ""
-    if len(word) < 2 or ti < len(header) and _sensor_word(header[ti]) == word:
+    column named as a time (and a number in ``first_row``) one of whose words names the
+    rate columns' sensor (iOS SensorLog's ``gyroTimestamp_sinceReboot(s)`` for
+    ``gyroRotationX(rad/s)``, ``time_gyro`` for ``gx``; not the accelerometer's or the
+    location's before it); ``ti`` (the default time column) when it is one such, or when
+    the rate columns share no sensor or no such column exists."""
+    sensors = {_sensor_of(header[i]) for i in rate_columns}
+    sensor = sensors.pop() if len(sensors) == 1 else frozenset()
+    if not sensor:
         return ti
-    for i, h in enumerate(header):
-        if (i not in rate_columns and looks_like_time(h) and _sensor_word(h) == word
-                and _is_numeric_field(first_row, i)):
-            return i
-    return ti
+
+    def its(i: int) -> bool:
+        return (i not in rate_columns and looks_like_time(header[i])
+                and _is_numeric_field(first_row, i) and bool(sensor & set(_name_words(header[i]))))
+
+    if ti < len(header) and its(ti):
+        return ti
+    return next((i for i in range(len(header)) if its(i)), ti)
 
 
 def _is_numeric_field(row: list[str] | None, i: int) -> bool:

@@ -231,10 +231,10 @@ def check_blur_span(capture: Capture, span: float, where: str, *, what: str = "b
                          "pixels), the gyro's rate unit and the exposure and readout times")
 
 
-def centred_psf(reach: float) -> str:
-    """:func:`check_blur_span`'s ``what`` for a PSF centred on its point, whose side is
-    twice the ``reach`` (px) of its blur from the point."""
-    return f"PSF centred on its point (its blur reaching {reach:.0f} px from it)"
+def centred_psf(reach: float, on: str = "its point") -> str:
+    """:func:`check_blur_span`'s ``what`` for a PSF centred ``on`` its point (or another
+    centre), whose side is twice the ``reach`` (px) of its blur from that centre."""
+    return f"PSF centred on {on} (its blur reaching {reach:.0f} px from it)"
 
 
 def _adaptive_trace(capture: Capture, x0: float, y0: float, max_step: float,
@@ -415,7 +415,8 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         offsets -= offsets.mean(axis=0)
     reach = float(np.abs(offsets).max())
     if radius is None:     # a point far off the frame sees its trace far from itself
-        check_blur_span(capture, 2 * reach, f"at ({x:.0f}, {y:.0f})", what=centred_psf(reach))
+        check_blur_span(capture, 2 * reach, f"at ({x:.0f}, {y:.0f})",
+                        what=centred_psf(reach, "its trace's mean" if centred else "its point"))
     elif reach > radius + 0.5:
         kept = float(np.mean(np.abs(offsets).max(axis=1) <= radius + 0.5))
         where = (f"the blur at ({x:.0f}, {y:.0f}) reaches {reach:.1f} px from it, beyond "

@@ -9,14 +9,12 @@ uses a PSF, so comparing it with PSF convolution checks both.
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from scipy import ndimage
 
 from .bands import for_row_bands
 from .capture import Capture, check_capture
-from .gyrolog import step_warning
+from .gyrolog import warn_of_steps
 from .arguments import check_flag, check_real, check_seed, is_count, is_whole
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, join_alpha, split_alpha
 from .psf import check_blur_span
@@ -252,10 +250,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     check_seed(seed)
     quantize = check_flag(quantize, "quantize")
     check_capture(capture)
-    coarse = step_warning(capture.log, *capture.log_window, cost="the blur is made from "
-                          "that interpolation, not from motion the log recorded")
-    if coarse is not None:
-        warnings.warn(f"{capture.log.source or 'gyro log'}: {coarse}", stacklevel=2)
+    warn_of_steps(capture.log, *capture.log_window, cost="the blur is made from that "
+                  "interpolation, not from motion the log recorded")
     curve = get_transfer_curve(transfer)
     # an encoded photo (sRGB) holds neither values far below black (offset or negated) nor
     # far above 1 (0-255, not scaled); linear values are blurred as they are (a linear
@@ -301,28 +297,29 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
 
 #: Step (linear light) of the finite difference that gives a curve's slope.
 _SLOPE_STEP = 1e-3
+#: Most rescalings of the noise drawn for ``snr_db`` (:func:`_add_light_noise`).
+_NOISE_STEPS = 8
 
 
 def _add_light_noise(light: np.ndarray, curve: TransferCurve, snr_db: float,
                      seed=None) -> np.ndarray:
     """White Gaussian noise added to ``light`` (linear, as a sensor's), its one standard
     deviation chosen so that the photo ``curve`` encodes from it (light below black
-    clipped) has ``snr_db``: the noise's rms after the curve is ``std(encoded) /
+    clipped) has ``snr_db``: the std of the noise after the curve is ``std(encoded) /
     10**(snr_db / 20)``. Dark pixels, where sRGB is steep, get more of it, as in a
-    camera's photo. The first guess scales by the curve's rms slope; one secant step on
-    the noise drawn then corrects for the clipping."""
+    camera's photo. The first guess scales by the curve's rms slope; then the noise drawn
+    is rescaled until its std after the curve is within 0.5 % of that (up to
+    :data:`_NOISE_STEPS` times: near 0 dB the clipping at black can keep it short)."""
     base = np.maximum(light, 0.0)
     enc = curve.encode(base)
     target = float(np.std(enc)) / 10 ** (snr_db / 20)
     slope = (curve.encode(base + _SLOPE_STEP) - enc) / _SLOPE_STEP
     sigma = target / max(float(np.sqrt(np.mean(np.square(slope, dtype=np.float64)))), 1e-12)
     z = np.random.default_rng(seed).standard_normal(light.shape)
-
-    def rms_after(s: float) -> float:
-        return float(np.std(curve.encode(np.maximum(light + s * z, 0.0)) - enc))
-
-    got = rms_after(sigma)
-    if got > 0:
+    for _ in range(_NOISE_STEPS):
+        got = float(np.std(curve.encode(np.maximum(light + sigma * z, 0.0)) - enc))
+        if not got > 0 or abs(got / target - 1) < 0.005:
+            break
         sigma *= target / got
     return (light + sigma * z).astype(np.float32)
 
