@@ -464,6 +464,7 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
     forced (the spectral check itself is tested in test_blur_evidence.py)."""
     import gyrodeblur.blur_evidence as evidence
     from gyrodeblur.deblur import deblur_blind
+    from gyrodeblur.errors import InputError
 
     monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
     rng = np.random.default_rng(6)
@@ -481,6 +482,9 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
         _, field = deblur_blind(photo, 7, grid="1x2", transfer="linear",
                                 progress=lambda done, total: told.append((done, total)))
     assert told == [(1, 1)] and field.grid == (1, 2) and len(field.psfs) == 2
+    with pytest.raises(InputError, match="^grid: 'auto' sizes the patches by how fast the "
+                                         "gyro's PSFs change .* give RxC"):
+        deblur_blind(photo, 7, grid="auto", transfer="linear")
 
 
 def test_a_blind_photo_returned_as_it_is_still_has_its_method_and_options_checked(monkeypatch):

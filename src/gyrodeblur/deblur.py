@@ -756,6 +756,10 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     if not is_count(max_pixels):
         raise InputError(None, f"max_pixels must be a whole number >= 1, got {max_pixels!r}")
     H, W = image.shape[:2]
+    if isinstance(grid, str) and grid.strip().lower() == "auto":
+        raise InputError.of_argument("grid", "'auto' sizes the patches by how fast the gyro's "
+                                             "PSFs change across the photo, which a blind "
+                                             "deblur has no gyro for: give RxC (e.g. 2x3)")
     grid = check_grid(grid)
     encoded = split_alpha(image)[0]                  # not the mask
     lin = get_transfer_curve(transfer).decode(encoded)
