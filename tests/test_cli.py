@@ -1286,7 +1286,7 @@ def test_an_exif_exposure_start_reaches_calibration_marked_as_such(tmp_path, mon
     msg = _run_error(["deblur", photo, "--capture", str(tmp_path / "c.json"), "-o",
                       str(tmp_path / "plain.png")], capsys)
     assert "c.json: the exposure start is the photo's EXIF time" in msg   # no --refine given
-    assert "add --refine" in msg
+    assert "add --refine (it searches 1 s either way)" in msg
     assert not (tmp_path / "plain.png").exists()
     # a sharp scene's EXIF time says nothing of the exposure simulate makes
     msg = _run_error(["simulate", photo, "--capture", str(tmp_path / "c.json"), "-o",

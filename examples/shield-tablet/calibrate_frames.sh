@@ -5,20 +5,20 @@
 # corrected capture of frame 2) and prints every parameter before and after.
 # Usage (from this folder): ./calibrate_frames.sh [extra gyrodeblur calibrate options]
 set -euo pipefail
-data=../../../shared/data/real/shield-tablet
+data=${GYRODEBLUR_SHARED_DATA:-../../../shared/data}/real/shield-tablet
 frames=$(./frames_in_log.sh)
 mkdir -p shield-out
 photos=()
 captures=()
 while read -r frame start; do
-  python3 - "$start" "shield-out/published_$frame.json" <<'PY'
-import json, sys
-start, out = float(sys.argv[1]), sys.argv[2]
+  python3 - "$start" "shield-out/published_$frame.json" "$data" <<'PY'
+import json, os, sys
+start, out, data = float(sys.argv[1]), sys.argv[2], sys.argv[3]
 cap = json.load(open("capture_0003.json"))
 cap["exposure_start"] = start
 cap["camera"].update(fx=1558.69, fy=1558.69)          # the published focal length
-cap["gyro"].update(orientation="YXz", time_offset=0.0,
-                   path="../" + cap["gyro"]["path"])   # the file sits one folder down
+cap["gyro"].update(orientation="YXz", time_offset=0.0,  # the log where $data says it is
+                   path=os.path.abspath(os.path.join(data, "sensor_events.txt")))
 json.dump(cap, open(out, "w"), indent=2)
 PY
   photos+=("$data/$frame.jpg")

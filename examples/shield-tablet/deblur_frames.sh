@@ -4,11 +4,11 @@
 # CAPTURE=shield-out/calibrated.json after ./calibrate_frames.sh).
 # Usage (from this folder): [CAPTURE=file.json] ./deblur_frames.sh [extra gyrodeblur deblur options]
 set -euo pipefail
-data=../../../shared/data/real/shield-tablet
+data=${GYRODEBLUR_SHARED_DATA:-../../../shared/data}/real/shield-tablet
 capture=${CAPTURE:-capture_0003.json}
 frames=$(./frames_in_log.sh)
 mkdir -p shield-out
 while read -r frame start; do
   gyrodeblur deblur "$data/$frame.jpg" --capture "$capture" --exposure-start "$start" \
-    -o "shield-out/$frame.jpg" --overwrite "$@"
+    --gyro "$data/sensor_events.txt" -o "shield-out/$frame.jpg" --overwrite "$@"
 done <<< "$frames"

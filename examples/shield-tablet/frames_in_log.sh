@@ -3,5 +3,5 @@
 # number and its exposure start in seconds (frames.txt holds nanoseconds).
 # Usage (from this folder): ./frames_in_log.sh
 set -euo pipefail
-data=../../../shared/data/real/shield-tablet
+data=${GYRODEBLUR_SHARED_DATA:-../../../shared/data}/real/shield-tablet
 awk 'NR >= 2 && NR <= 6 { printf "%04d %.6f\n", NR, $1 * 1e-9 }' "$data/frames.txt"

@@ -110,8 +110,8 @@ class Capture:
     exposure_start_from_exif : bool
         Whether ``exposure_start`` is the photo's EXIF capture time (:func:`load_capture`),
         which marks the exposure only to tens or hundreds of milliseconds:
-        :func:`gyrodeblur.calibrate.calibrate` then searches a second either way, and
-        its corrected capture is no longer so.
+        :func:`gyrodeblur.calibrate.calibrate` then searches a second either way (1.5 s
+        for a time to the whole second), and its corrected capture is no longer so.
     readout_time_unknown : bool
         Whether ``readout_time`` was not given (:func:`load_capture`: no
         ``readout_time`` and no gcsv header stating it), so that its 0 is a stand-in, not
