@@ -174,7 +174,8 @@ from .gyrolog import rate_noise
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
            "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
-           "EXIF_START_OFFSET_RANGE", "EXIF_WHOLE_SECOND_OFFSET_RANGE", "MAX_OFFSET_RANGE",
+           "EXIF_START_OFFSET_RANGE", "EXIF_WHOLE_SECOND_OFFSET_RANGE", "exif_offset_range",
+           "MAX_OFFSET_RANGE",
            "searched_mappings"]
 
 #: Parameters that can be estimated (and fixed with ``fix=``).
@@ -285,6 +286,17 @@ EXIF_START_OFFSET_RANGE = EXIF_START_TOLERANCE
 #: The same for an EXIF time to the second, taken at its middle
 #: (:attr:`~gyrodeblur.capture.Capture.exif_time_to_the_second`).
 EXIF_WHOLE_SECOND_OFFSET_RANGE = EXIF_WHOLE_SECOND_TOLERANCE
+
+
+def exif_offset_range(captures) -> float:
+    """Seconds :func:`calibrate` searches, by default, on each side of exposure starts
+    that are the photos' EXIF times: :data:`EXIF_WHOLE_SECOND_OFFSET_RANGE` where any is
+    to the whole second, else :data:`EXIF_START_OFFSET_RANGE`."""
+    return (EXIF_WHOLE_SECOND_OFFSET_RANGE
+            if any(cap.exif_time_to_the_second for cap in captures)
+            else EXIF_START_OFFSET_RANGE)
+
+
 #: The widest range :func:`calibrate` takes (s, each side): the coarse ranking scans it
 #: every 2 ms for each axis mapping, and a wide range costs about ``_SECONDS_PER_SPAN`` s
 #: per second of log searched on one photo, so 5 s either side is about two and a half
@@ -415,10 +427,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if offset_range is None:
         if not widened:
             offset_range = DEFAULT_OFFSET_RANGE
-        elif any(cap.exif_time_to_the_second for cap in captures):
-            offset_range = EXIF_WHOLE_SECOND_OFFSET_RANGE
         else:
-            offset_range = EXIF_START_OFFSET_RANGE
+            offset_range = exif_offset_range(captures)
     elif "offset" in fix:
         raise InputError.of_argument(
             "offset_range", "the time offset is fixed ('offset' in fix; on the command "

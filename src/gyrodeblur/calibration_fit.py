@@ -265,8 +265,8 @@ class CalibrationFit:
         and their vector. A readout that was not given (0 only as a placeholder) is no
         given parameter: theirs is the best for them (the given time offset held), of
         :data:`_UNKNOWN_READOUT_SCAN` (those the bounds allow) and the minimum of a
-        parabola through the best and its neighbours, so that keeping the given parameters does not make the
-        photo a global shutter's."""
+        parabola through the best and its neighbours, so that keeping the given
+        parameters does not make the photo a global shutter's."""
         x0 = np.clip(np.r_[0.0, 0.0, 0.0, self.bias_prior.for_mapping(M)[0]], self.lo, self.hi)
         f = self._given_with_readout(M, x0)
         if not (self.search.readout_unknown and 1 in self.idx):

@@ -691,14 +691,13 @@ class _PhotoDeblur:
         if args.several:        # one photo alone: the deblur's own check, before any output
             _check_blur_fits_the_frame(cap)
         if cap.exposure_start_from_exif and not args.refine:
-            from .calibrate import EXIF_START_OFFSET_RANGE, EXIF_WHOLE_SECOND_OFFSET_RANGE
-            reach = (EXIF_WHOLE_SECOND_OFFSET_RANGE if cap.exif_time_to_the_second
-                     else EXIF_START_OFFSET_RANGE)
+            from .calibrate import exif_offset_range
             raise InputError(args.capture or args.photo,  # the file without exposure_start
                              "the exposure start is the photo's EXIF time, known only to "
                              "tens of milliseconds or worse, and the PSFs need it to well "
-                             f"under one: add --refine (it searches {reach:g} s either "
-                             "way), calibrate first, or give exposure_start")
+                             "under one: add --refine (it searches "
+                             f"{exif_offset_range([cap]):g} s either way), calibrate first, "
+                             "or give exposure_start")
         self._jpeg_noise()
 
     def load(self) -> None:

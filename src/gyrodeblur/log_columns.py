@@ -146,13 +146,10 @@ def default_time_column(header: list[str], first_row: list[str] | None = None) -
     first, as pandas writes: ``,t_s,wx,wy,wz`` or ``sample,time,x,y,z``). With the values
     of the first data row, a column named as a time whose value there is not a number (a
     logger's ``loggingTime(txt)`` date) is passed over for the next one."""
-    def numeric(i: int) -> bool:
-        return _is_numeric_field(first_row, i)
-
     times = [i for i, h in enumerate(header) if looks_like_time(h)]
-    if 0 in times and numeric(0):
+    if 0 in times and _is_numeric_field(first_row, 0):
         return 0
-    return next((i for i in times if numeric(i)), 0)
+    return next((i for i in times if _is_numeric_field(first_row, i)), 0)
 
 
 #: Words that name the gyroscope in a column's name (``gyroTimestamp``, ``time_gyro``,
