@@ -1129,6 +1129,23 @@ def test_overlap_with_one_patch_is_refused_however_the_grid_is_spelt(capture_dir
     assert not (d / "o.png").exists()
 
 
+def test_model_with_one_patch_is_refused(capture_dir, capsys):
+    """One patch (``--grid 1x1``, or ``--blind``'s one kernel) has no neighbours for the
+    global model to refine it with, so ``--model`` is refused rather than ignored (it
+    changed nothing: session 59's audit found the outputs bit-identical)."""
+    d = capture_dir
+    base = ["deblur", str(d / "sharp.jpg"), "-o", str(d / "o.png")]
+    for model in ("global", "patches"):
+        msg = _run_error(base + ["--capture", str(d / "cap.json"), "--grid", "1x1",
+                                 "--model", model], capsys)
+        assert "--model" in msg and "one patch" in msg, msg
+        for grid in ([], ["--grid", "1,1"]):
+            msg = _run_error(base + ["--blind", "--kernel-size", "9", "--model", model] + grid,
+                             capsys)
+            assert "--model" in msg and "--grid RxC only" in msg, msg
+    assert not (d / "o.png").exists()
+
+
 def test_writing_over_a_file_keeps_its_permissions(capture_dir):
     """--overwrite replaces the file's content, not who may read it."""
     import os

@@ -121,9 +121,10 @@ def _ignored_options(args) -> None:
                                  "does not apply with --blind, which uses no gyro log")
         if args.mode != "variant":
             raise InputError("--mode", "does not apply with --blind (--grid sets its patches)")
-        if given("overlap") and (args.grid is None or _one_patch(args.grid)):
-            raise InputError("--overlap", "applies with --blind --grid RxC only (one kernel "
-                                          "for the whole photo has no patches)")
+        for name in ("overlap", "model"):
+            if given(name) and (args.grid is None or _one_patch(args.grid)):
+                raise InputError("--" + name, "applies with --blind --grid RxC only (one "
+                                              "kernel for the whole photo has no patches)")
     else:
         if args.fix and not args.refine:
             raise InputError("--fix", "applies with --refine only")
@@ -137,9 +138,13 @@ def _ignored_options(args) -> None:
                 if given(name):
                     raise InputError("--" + name, "applies to --mode variant only (invariant "
                                                   "deblurs the whole photo with one PSF)")
-        elif given("overlap") and args.grid is not None and _one_patch(args.grid):
-            raise InputError("--overlap", f"does not apply with --grid {args.grid} (one patch "
-                                          "has no neighbours to overlap)")
+        elif args.grid is not None and _one_patch(args.grid):
+            for name, why in (("overlap", "has no neighbours to overlap"),
+                              ("model", "has no neighbours for the global model to "
+                                        "refine it with")):
+                if given(name):
+                    raise InputError("--" + name, f"does not apply with --grid {args.grid} "
+                                                  f"(one patch {why})")
     if args.downscale is not None and not args.refine:   # (with --blind, --refine is refused)
         raise InputError("--downscale", "applies with --refine only")
     if args.workers is not None and not args.refine:
