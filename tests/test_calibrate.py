@@ -650,8 +650,16 @@ def test_the_given_parameters_stay_unless_the_found_ones_gain_the_margin(monkeyp
     assert _said(res, "the next best (xYz) scores only 3.1 worse")
     assert res.estimates["readout"][2] == pytest.approx(0.01)      # the given's Hessian
     assert not _said(res, "covers the exposure only")              # the log covers +-40 ms
+    assert res.kept_given
+    # a mapping that scores better than the kept given parameters is not "the next best"
+    better = {"candidates": {"Xyz": -100.0, "xYz": -96.0, "YXz": -90.0}, "winner": -105.0}
+    res, _ = _scripted(monkeypatch, dict(better, given=-95.1))
+    assert res.kept_given and res.estimates["axes"][2] == pytest.approx(-0.9)
+    assert _said(res, "another mapping (xYz) scores 0.9 better"), res.notes
+    assert not _said(res, "next best"), res.notes
     res, fit = _scripted(monkeypatch, dict(script, given=-94.9))
     assert not _said(res, "kept the given parameters"), res.notes
+    assert not res.kept_given
     assert res.capture.time_offset == pytest.approx(true.time_offset + 0.005)
     assert res.offset_rivals == [(true.time_offset + 0.01, true.readout_time, 0.5)]
     assert fit.twin_steps == 1 and res.prior_distance > 0
@@ -1138,9 +1146,9 @@ def test_cli_save_capture_failing_leaves_the_other_outputs_as_they_were(cli_dir,
 
     d = cli_dir
     given = load_capture(d / "cap.json")
-    fake = types.SimpleNamespace(capture=given, estimates=None, seconds=0.0)
+    fake = types.SimpleNamespace(capture=given, estimates=None, seconds=0.0, kept_given=False)
     monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", lambda *a, **k: fake)
-    monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est: [])
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est, kept=False: [])
 
     def refused(self, path, gyro_path=None):     # the disk fills as it is written
         def write(f):

@@ -1701,10 +1701,11 @@ def _no_calibration(monkeypatch) -> list:
 
     def as_given(images, captures, **kwargs):
         calls.append(len(images))
-        return SimpleNamespace(seconds=0.0, estimates=None, captures=list(captures))
+        return SimpleNamespace(seconds=0.0, estimates=None, captures=list(captures),
+                               kept_given=False)
 
     monkeypatch.setattr(calibrate_cli, "calibrate", as_given)
-    monkeypatch.setattr(calibrate_cli, "format_estimates", lambda est: [])
+    monkeypatch.setattr(calibrate_cli, "format_estimates", lambda est, kept=False: [])
     return calls
 
 
@@ -1781,6 +1782,14 @@ def test_the_estimates_report_gives_each_uncertainty_in_its_unit_or_says_fixed()
     assert lines[4].endswith("XYZ -> XYZ  (next best mapping: objective +30.0 higher)")
     fixed = {k: (b, a, None) for k, (b, a, _) in est.items()}
     assert all(line.endswith("(fixed)") for line in format_estimates(fixed))
+    # a mapping scoring better than the given one kept within its margin is not "the next
+    # best" (session 59's audit); kept given values are said to be the given ones
+    kept = dict(est, axes=("yxz", "yxz", -2.4))
+    lines = format_estimates(kept, kept_given=True)
+    assert lines[4].endswith("(another mapping: objective 2.4 lower, within the given one's "
+                             "margin: uncertain)"), lines[4]
+    assert lines[5].startswith("  (the given values kept") and len(lines) == 6
+    assert len(format_estimates(est)) == 5
 
 
 def test_calibrate_tells_each_photo_of_its_own_rotation(capture_dir, capsys, monkeypatch):

@@ -226,6 +226,11 @@ class CalibrationResult:
         coordinates (chi-square with as many degrees of freedom for errors of the priors'
         size); beyond its 95 % quantile the notes warn (0 when the given parameters were
         kept or none of them is free).
+    kept_given : bool
+        The given parameters were kept (step 5 of :func:`calibrate`): the best found
+        improved the objective by less than the keep margin, so the "after" values are
+        the given ones (the bias the log's, where it was taken from the log), not
+        estimates the photo pinned down.
     """
 
     captures: list
@@ -238,6 +243,7 @@ class CalibrationResult:
     offset_rivals: list = field(default_factory=list)
     blur_gain: float = float("nan")
     prior_distance: float = 0.0
+    kept_given: bool = False
 
     @property
     def capture(self) -> Capture:
@@ -602,7 +608,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                    f"moved the bias by a prior sd (at the given bias the best mappings were "
                    f"within {gap_first:.1f} of each other)")
         else:
-            why = (" the next best"
+            why = ((" the next best" if gap >= 0 else " another mapping")
                    + (f" ({axes_to_letters(runner) or 'given'})" if runner is not None else "")
                    + (f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g})" if gap >= 0
                       else f" scores {-gap:.1f} better, by less than the margin kept for the "
@@ -660,7 +666,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     notes.append(f"{fit.coarse.evaluations} coarse and {fit.fine.evaluations} fine cost "
                  f"evaluations, {secs:.1f} s")
     return CalibrationResult(out_caps, est, ranking, fit.fine.scale, fix, secs, notes, rivals,
-                             blur_gain, far)
+                             blur_gain, far, kept)
 
 
 def _with_bias_widened(fit, cand, steps, results, bar, bias_prior,

@@ -24,8 +24,10 @@ __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_ca
 _ZOOM_MIN_SIDE = 96
 
 
-def format_estimates(est: dict) -> list[str]:
-    """Human-readable lines: each parameter before -> after (+- uncertainty, or fixed)."""
+def format_estimates(est: dict, kept_given: bool = False) -> list[str]:
+    """Human-readable lines: each parameter before -> after (+- uncertainty, or fixed);
+    with ``kept_given`` (:attr:`~gyrodeblur.calibrate.CalibrationResult.kept_given`), a
+    last line saying that the "after" values are the given ones, kept."""
     lines = []
     b, a, u = est["offset"]
     change = f", a change of {(a - b) * 1e3:+.2f} ms" if abs(b) >= 1.0 else ""   # clock epochs
@@ -46,10 +48,13 @@ def format_estimates(est: dict) -> list[str]:
         conf = "only candidate"
     else:
         conf = (f"next best mapping: objective {gap:+.1f} higher" if gap >= 0 else
-                f"next best mapping: objective {-gap:.1f} lower, within the given one's margin")
+                f"another mapping: objective {-gap:.1f} lower, within the given one's margin")
         if gap < AXES_CONFIDENT_NATS:
             conf += ": uncertain"
     lines.append(f"  axes         {b} -> {a}  ({conf})")
+    if kept_given:
+        lines.append("  (the given values kept: the photo preferred no others by the keep "
+                     "margin; the uncertainties say how loosely it pins them)")
     return lines
 
 
@@ -190,7 +195,7 @@ def calibrate_command(args, say, load_capture) -> None:
                     transfer=curves, **calibration_options(args, photos, say))
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
-    for line in format_estimates(res.estimates):
+    for line in format_estimates(res.estimates, res.kept_given):
         say(line)
     save_captures(res.captures[:len(outputs)], outputs)
     say(f"wrote {', '.join(outputs)}")
