@@ -487,6 +487,31 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
         deblur_blind(photo, 7, grid="auto", transfer="linear")
 
 
+def test_a_blind_kernel_filling_its_support_is_said_to_be_too_small(monkeypatch):
+    """A blur longer than the kernel size is refused as "no better than no blur", like a
+    sharp photo: where the estimate fills its whole support the warning says the blur is
+    likely longer and to try a larger kernel size (session 59's audit: a 19 px blur given
+    13 px was told only "the photo shows little blur"); otherwise that is one reason
+    among the others."""
+    import gyrodeblur.blind as blind
+    import gyrodeblur.blur_evidence as evidence
+    from gyrodeblur.deblur import deblur_blind
+
+    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
+    photo = np.random.default_rng(8).uniform(0.1, 0.9, (64, 64)).astype(np.float32)
+    full = np.zeros((7, 7), np.float32)
+    full[3, :] = 1 / 7                                   # a streak over the whole support
+    short = np.zeros((7, 7), np.float32)
+    short[3, 2:5] = 1 / 3
+    for kernel, said in ((full, "fills its whole 7 px support"),
+                         (short, "longer than the 7 px kernel support")):
+        monkeypatch.setattr(blind, "estimate_kernel", lambda *a, _k=kernel, **k: _k.copy())
+        with pytest.warns(UserWarning, match="returned as it is") as got:
+            deblur_blind(photo, 7, transfer="linear")
+        text = " ".join(str(w.message) for w in got)
+        assert said in text and "try a larger kernel size" in text, text
+
+
 def test_a_blind_photo_returned_as_it_is_still_has_its_method_and_options_checked(monkeypatch):
     """A bad method is refused before the kernel is estimated, and a bad option of the
     method even where the photo comes back as it is (before, both were silently taken
@@ -584,15 +609,22 @@ def test_blind_patches_refine_the_photo_s_kernel_on_central_crops(monkeypatch):
 
 def test_a_blind_photo_too_small_to_judge_is_deconvolved_without_a_warning(monkeypatch):
     """Kills ``_shows_no_blur`` reading a ``nan`` gain (a photo too small for the spectral
-    check) as "no blur": it is "False when the photo is too small to tell"."""
+    check) or a ``nan`` sparsity ratio (no textured window) as "no blur": it is "False
+    when neither can tell". A photo too small for the spectral check is still judged by
+    the sparsity check."""
     import gyrodeblur.blur_evidence as evidence
     from gyrodeblur.deblur import deblur_blind
 
     monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: float("nan"))
+    monkeypatch.setattr(evidence, "kernel_sparsity_ratio", lambda *a, **k: float("nan"))
     photo = np.random.default_rng(8).uniform(0.1, 0.9, (48, 48)).astype(np.float32)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         deblur_blind(photo, 5, transfer="linear", method="wiener")
+    monkeypatch.setattr(evidence, "kernel_sparsity_ratio", lambda *a, **k: 1.2)
+    with pytest.warns(UserWarning, match="does not sharpen the photo"):
+        out, _ = deblur_blind(photo, 5, transfer="linear", method="wiener")
+    assert np.array_equal(out, photo)
 
 
 def test_blind_sizes_count_each_patch_s_share_of_max_pixels():

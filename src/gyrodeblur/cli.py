@@ -827,9 +827,14 @@ class _PhotoDeblur:
             raise
         e = field.extents
         gh, gw = given.pixels.shape[:2]
-        say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}{grid_txt}, "
-            f"method {self.method}, PSF extent {e.min()}-{e.max()} px, "
-            f"{time.perf_counter() - self.t0:.2f} s{self.calibrated_here}")
+        if args.blind and not args.no_blur_check and e.max() == 1:   # its check's delta
+            say(f"wrote {args.photo} as it is (its blind kernel did not fit it, as the "
+                f"warning says) -> {args.output}: {gw}x{gh}, "
+                f"{time.perf_counter() - self.t0:.2f} s")
+        else:
+            say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}"
+                f"{grid_txt}, method {self.method}, PSF extent {e.min()}-{e.max()} px, "
+                f"{time.perf_counter() - self.t0:.2f} s{self.calibrated_here}")
         if args.save_capture:
             first = (" (the first photo's: the others keep their own exposure start; give "
                      "one --save-capture per photo to write each)"

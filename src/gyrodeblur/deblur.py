@@ -691,9 +691,9 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
 
     The kernel is estimated by :func:`gyrodeblur.blind.estimate_kernel` (sec. 6.3.1:
     gradients, coarse-to-fine, L0 prior with a decreasing weight, positivity and support
-    constraints) on the linear-light luminance of the central ``max_pixels`` of the photo
-    (a crop keeps the time bounded on big photos), then the photo is deconvolved with it
-    by ``method``.
+    constraints) on the mean of the linear-light channels over the central ``max_pixels``
+    of the photo (a crop keeps the time bounded on big photos), then the photo is
+    deconvolved with it by ``method``.
 
     Parameters
     ----------
@@ -725,11 +725,14 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
         explains the most textured windows no better than no blur (by
         :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`) is a false estimate (a
         near-sharp photo, a page of text) or the blur varies too much for one kernel, and
-        deconvolving with it rings. The photo is then returned as it is (clipped to
-        [0, 1] with ``clip``), the field holds delta kernels, and a warning says so. With
-        a grid, the check is the photo kernel's, before the patches refine it (checked
-        patch by patch on the benchmark, the smaller windows' verdicts cost more than
-        they saved). ``False``: the kernels are used as estimated.
+        deconvolving with it rings; so is one that passes but does not sharpen those
+        windows (:func:`gyrodeblur.blur_evidence.kernel_sparsity_ratio` over
+        :data:`~gyrodeblur.blur_evidence.SPARSER_MAX`: a kernel shaped like a repeated
+        pattern or glyph, whose ``|H|`` fits the spectrum). The photo is then returned as
+        it is (clipped to [0, 1] with ``clip``), the field holds delta kernels, and a
+        warning says so. With a grid, the check is the photo kernel's, before the patches
+        refine it (checked patch by patch on the benchmark, the smaller windows' verdicts
+        cost more than they saved). ``False``: the kernels are used as estimated.
 
     Returns
     -------
@@ -820,16 +823,38 @@ def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
 def _shows_no_blur(image, psf, transfer) -> bool:
     """Whether ``image`` shows less of the blur ``psf`` than no blur at all would explain
     (:func:`gyrodeblur.blur_evidence.kernel_gain_over_no_blur` under
-    :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`; a warning says so). ``False`` when
-    the photo is too small to tell."""
-    from .blur_evidence import NO_BLUR_MARGIN, kernel_gain_over_no_blur
+    :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`), or is not sharpened by it
+    (:func:`~gyrodeblur.blur_evidence.kernel_sparsity_ratio` over
+    :data:`~gyrodeblur.blur_evidence.SPARSER_MAX`); a warning says which. ``False`` when
+    neither can tell (a photo too small for the first, with no textured window for the
+    second)."""
+    from .blur_evidence import (NO_BLUR_MARGIN, SPARSER_MAX, kernel_gain_over_no_blur,
+                                kernel_sparsity_ratio)
+    from .psf import psf_extent
 
     gain = kernel_gain_over_no_blur(image, psf, transfer=transfer)
     if not gain < NO_BLUR_MARGIN:
-        return False
+        ratio = kernel_sparsity_ratio(image, psf, transfer=transfer)
+        if not ratio > SPARSER_MAX:
+            return False
+        warnings.warn(f"the blind kernel does not sharpen the photo: deconvolved with it, "
+                      f"the most textured windows' edges are hardly sparser than with no "
+                      f"blur (their gradients' L1/L2 x{ratio:.2f} of that, over "
+                      f"{SPARSER_MAX:g}), as where a repeating pattern or text is taken for "
+                      f"the blur, or the photo shows little blur. Deconvolving with it would "
+                      f"add ghost edges. It is returned as it is (--no-blur-check, "
+                      f"check_blur=False: deconvolve anyway; with the camera's gyro log, "
+                      f"--capture gives the blur at every pixel)", stacklevel=3)
+        return True
+    side = psf.shape[0]
+    why = (f"the estimate fills its whole {side} px support, so the blur is likely longer "
+           f"than that: try a larger kernel size; or the photo shows little blur"
+           if psf_extent(psf) >= side - 2 else
+           f"the photo shows little blur, or its blur is longer than the {side} px kernel "
+           f"support (try a larger kernel size)")
     warnings.warn(f"the blind kernel explains the photo no better than no blur at all "
                   f"({gain:+.1f} nats per 9 windows, under {NO_BLUR_MARGIN:g}), so it does not "
-                  f"fit the photo: the photo shows little blur, or its blur is not one "
+                  f"fit the photo: {why}, or its blur is not one "
                   f"kernel's (a rolling shutter, a roll or a wide lens make it vary across "
                   f"the frame), or the scene misled the estimate (text, a few straight "
                   f"edges). Deconvolving with it would add ringing. It is returned as it is "
