@@ -250,7 +250,7 @@ def evaluate(case, bad, got, injected, res, secs, *, say, method=None) -> dict:
         "blur_gain": res.blur_gain,
         "prior_distance": res.prior_distance,
         "seconds": secs,
-        "estimates": format_estimates(res.estimates),
+        "estimates": format_estimates(res.estimates, res.kept_given),
         "notes": res.notes,
         # other offsets calibrate reported as scoring nearly as well: (their offset and
         # readout errors, ms; objective above the estimate's, nats). In a session every

@@ -466,7 +466,7 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
     from gyrodeblur.deblur import deblur_blind
     from gyrodeblur.errors import InputError
 
-    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
+    monkeypatch.setattr(evidence, "blind_kernel_evidence", lambda *a, **k: (-10.0, np.nan))
     rng = np.random.default_rng(6)
     photo = rng.uniform(0.1, 0.9, (64, 64)).astype(np.float32)
     photo[3, 4], photo[40, 50] = -0.1, 1.3          # undershoot and overshoot from earlier work
@@ -489,27 +489,29 @@ def test_a_blind_photo_returned_as_it_is_is_clipped_only_when_asked(monkeypatch)
 
 def test_a_blind_kernel_filling_its_support_is_said_to_be_too_small(monkeypatch):
     """A blur longer than the kernel size is refused as "no better than no blur", like a
-    sharp photo: where the estimate fills its whole support the warning says the blur is
-    likely longer and to try a larger kernel size (session 59's audit: a 19 px blur given
-    13 px was told only "the photo shows little blur"); otherwise that is one reason
-    among the others."""
+    sharp photo: the warning names it, with a larger kernel size to try (session 59's
+    audit: a 19 px blur given 13 px was told only "the photo shows little blur"), and
+    adds that the estimate suggests it where the estimate fills the support to within a
+    pixel (a 5 px estimate in a 7 px support does not: a sharp photo's false estimate can
+    be that long)."""
     import gyrodeblur.blind as blind
     import gyrodeblur.blur_evidence as evidence
     from gyrodeblur.deblur import deblur_blind
 
-    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
+    monkeypatch.setattr(evidence, "blind_kernel_evidence", lambda *a, **k: (-10.0, np.nan))
     photo = np.random.default_rng(8).uniform(0.1, 0.9, (64, 64)).astype(np.float32)
     full = np.zeros((7, 7), np.float32)
     full[3, :] = 1 / 7                                   # a streak over the whole support
     short = np.zeros((7, 7), np.float32)
-    short[3, 2:5] = 1 / 3
-    for kernel, said in ((full, "fills its whole 7 px support"),
-                         (short, "longer than the 7 px kernel support")):
+    short[3, 1:6] = 1 / 5
+    for kernel, fills in ((full, True), (short, False)):
         monkeypatch.setattr(blind, "estimate_kernel", lambda *a, _k=kernel, **k: _k.copy())
         with pytest.warns(UserWarning, match="returned as it is") as got:
             deblur_blind(photo, 7, transfer="linear")
         text = " ".join(str(w.message) for w in got)
-        assert said in text and "try a larger kernel size" in text, text
+        assert "longer than the 7 px kernel support" in text, text
+        assert "try a larger kernel size" in text, text
+        assert ("the estimate filling the whole support" in text) == fills, text
 
 
 def test_a_blind_photo_returned_as_it_is_still_has_its_method_and_options_checked(monkeypatch):
@@ -534,7 +536,7 @@ def test_a_blind_photo_returned_as_it_is_still_has_its_method_and_options_checke
         with pytest.raises(InputError, match="^max_pixels must be a whole number"):
             deblur_blind(photo, 7, max_pixels=bad)
     monkeypatch.setattr(blind, "estimate_kernel", real)
-    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: -10.0)
+    monkeypatch.setattr(evidence, "blind_kernel_evidence", lambda *a, **k: (-10.0, np.nan))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")            # "returned as it is"
         with pytest.raises(InputError, match="^phi: must be a positive number"):
@@ -615,13 +617,12 @@ def test_a_blind_photo_too_small_to_judge_is_deconvolved_without_a_warning(monke
     import gyrodeblur.blur_evidence as evidence
     from gyrodeblur.deblur import deblur_blind
 
-    monkeypatch.setattr(evidence, "kernel_gain_over_no_blur", lambda *a, **k: float("nan"))
-    monkeypatch.setattr(evidence, "kernel_sparsity_ratio", lambda *a, **k: float("nan"))
+    monkeypatch.setattr(evidence, "blind_kernel_evidence", lambda *a, **k: (np.nan, np.nan))
     photo = np.random.default_rng(8).uniform(0.1, 0.9, (48, 48)).astype(np.float32)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         deblur_blind(photo, 5, transfer="linear", method="wiener")
-    monkeypatch.setattr(evidence, "kernel_sparsity_ratio", lambda *a, **k: 1.2)
+    monkeypatch.setattr(evidence, "blind_kernel_evidence", lambda *a, **k: (np.nan, 1.2))
     with pytest.warns(UserWarning, match="does not sharpen the photo"):
         out, _ = deblur_blind(photo, 5, transfer="linear", method="wiener")
     assert np.array_equal(out, photo)

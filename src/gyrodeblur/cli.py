@@ -827,10 +827,10 @@ class _PhotoDeblur:
             raise
         e = field.extents
         gh, gw = given.pixels.shape[:2]
-        if args.blind and not args.no_blur_check and e.max() == 1:   # its check's delta
-            say(f"wrote {args.photo} as it is (its blind kernel did not fit it, as the "
-                f"warning says) -> {args.output}: {gw}x{gh}, "
-                f"{time.perf_counter() - self.t0:.2f} s")
+        if (args.blind and not args.no_blur_check and e.max() == 1     # the checks' deltas,
+                and np.array_equal(restored, np.clip(colour, 0.0, 1.0))):  # not deconvolved
+            say(f"wrote {args.photo} as it is (no blind kernel that fits it) -> "
+                f"{args.output}: {gw}x{gh}, {time.perf_counter() - self.t0:.2f} s")
         else:
             say(f"deblurred {args.photo} -> {args.output}: {gw}x{gh}, mode {mode_txt}"
                 f"{grid_txt}, method {self.method}, PSF extent {e.min()}-{e.max()} px, "
@@ -977,8 +977,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"blind kernel size, px (odd; default {BLIND_KERNEL_SIZE})")
     s.add_argument("--no-blur-check", action="store_true",
                    help="blind: deconvolve with the estimated kernel even where the photo's "
-                        "spectrum shows none of its blur (by default such a photo is left as "
-                        "it is, with a warning); with the gyro (without --refine): do not "
+                        "spectrum shows none of its blur or it does not sharpen the photo (by "
+                        "default such a photo is left as it is, with a warning); with the gyro (without --refine): do not "
                         "check that the photo shows the blur its log implies (by default a "
                         "warning says when it does not: a wrong time offset or log)")
     s.add_argument("--refine", action="store_true",

@@ -828,13 +828,11 @@ def _shows_no_blur(image, psf, transfer) -> bool:
     :data:`~gyrodeblur.blur_evidence.SPARSER_MAX`); a warning says which. ``False`` when
     neither can tell (a photo too small for the first, with no textured window for the
     second)."""
-    from .blur_evidence import (NO_BLUR_MARGIN, SPARSER_MAX, kernel_gain_over_no_blur,
-                                kernel_sparsity_ratio)
+    from .blur_evidence import NO_BLUR_MARGIN, SPARSER_MAX, blind_kernel_evidence
     from .psf import psf_extent
 
-    gain = kernel_gain_over_no_blur(image, psf, transfer=transfer)
+    gain, ratio = blind_kernel_evidence(image, psf, transfer=transfer)
     if not gain < NO_BLUR_MARGIN:
-        ratio = kernel_sparsity_ratio(image, psf, transfer=transfer)
         if not ratio > SPARSER_MAX:
             return False
         warnings.warn(f"the blind kernel does not sharpen the photo: deconvolved with it, "
@@ -847,11 +845,10 @@ def _shows_no_blur(image, psf, transfer) -> bool:
                       f"--capture gives the blur at every pixel)", stacklevel=3)
         return True
     side = psf.shape[0]
-    why = (f"the estimate fills its whole {side} px support, so the blur is likely longer "
-           f"than that: try a larger kernel size; or the photo shows little blur"
-           if psf_extent(psf) >= side - 2 else
-           f"the photo shows little blur, or its blur is longer than the {side} px kernel "
-           f"support (try a larger kernel size)")
+    why = (f"the photo shows little blur, or its blur is longer than the {side} px kernel "
+           f"support" + (", as the estimate filling the whole support suggests"
+                         if psf_extent(psf) >= side - 1 else "")
+           + " (try a larger kernel size)")
     warnings.warn(f"the blind kernel explains the photo no better than no blur at all "
                   f"({gain:+.1f} nats per 9 windows, under {NO_BLUR_MARGIN:g}), so it does not "
                   f"fit the photo: {why}, or its blur is not one "
