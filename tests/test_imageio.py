@@ -664,6 +664,45 @@ def test_jpeg_and_png_exif_blocks_pass_through_byte_for_byte(tmp_path):
                                   bit_depth=16)).exif == block
 
 
+def _exif_with_thumbnail(order: str) -> bytes:
+    """An EXIF block written by hand: IFD0 with the Orientation (6), then IFD1 holding a
+    small JPEG thumbnail, byte order ``"<"`` (II) or ``">"`` (MM)."""
+    import io
+
+    buf = io.BytesIO()
+    Image.new("RGB", (16, 12), (200, 30, 30)).save(buf, "JPEG")
+    thumb = buf.getvalue()
+    head = (b"II" if order == "<" else b"MM") + struct.pack(order + "HI", 42, 8)
+    ifd0 = struct.pack(order + "H", 1) + struct.pack(order + "HHIHH", 0x0112, 3, 1, 6, 0) \
+        + struct.pack(order + "I", 26)
+    ifd1 = struct.pack(order + "H", 2) + struct.pack(order + "HHII", 0x0201, 4, 1, 56) \
+        + struct.pack(order + "HHII", 0x0202, 4, 1, len(thumb)) + struct.pack(order + "I", 0)
+    return b"Exif\0\0" + head + ifd0 + ifd1 + thumb
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_the_blurred_photo_s_exif_thumbnail_is_not_carried(tmp_path, order):
+    """Session 59's audit: the EXIF block was carried byte for byte, its thumbnail with it:
+    a file browser showed the deblurred photo's preview blurred. IFD1 is now unlinked
+    from IFD0 (every other byte kept, so a maker's notes keep their offsets); the
+    Orientation stays."""
+    from PIL import ExifTags
+
+    block = _exif_with_thumbnail(order)
+    Image.new("RGB", (32, 24)).save(tmp_path / "in.jpg", exif=block)
+    src = read_photo(tmp_path / "in.jpg")
+    assert src.exif == block
+    with Image.open(tmp_path / "in.jpg") as im:                   # the thumbnail is there
+        assert 0x0201 in im.getexif().get_ifd(ExifTags.IFD.IFD1)
+    for name in ("a.jpg", "b.png"):
+        out = write_photo(tmp_path / name, src.pixels, like=src)
+        got = read_photo(out).exif
+        assert len(got) == len(block) and got != block
+        with Image.open(out) as im:
+            exif = im.getexif()
+            assert exif[0x0112] == 6 and not exif.get_ifd(ExifTags.IFD.IFD1)
+
+
 def test_icc_profile_of_the_wrong_colour_space_is_left_out(tmp_path):
     src = like(icc=SRGB)
     out = read_photo(write_photo(tmp_path / "grey.png", np.zeros((4, 4), np.float32), like=src))

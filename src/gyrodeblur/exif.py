@@ -52,6 +52,30 @@ def _normalise_exif(block: bytes | None) -> bytes | None:
     return block if block.startswith(_EXIF_HEADER) else _EXIF_HEADER + block
 
 
+def _without_thumbnail(block: bytes | None) -> bytes | None:
+    """``block`` with its second directory (IFD1: the thumbnail, a small JPEG of the photo
+    as it was read, blurred) unlinked from the first, so that no viewer shows the blurred
+    preview of a deblurred photo; every other byte as it was (a maker's notes keep their
+    offsets). As it is where it has no thumbnail or its directory cannot be read."""
+    if not block or not block.startswith(_EXIF_HEADER):
+        return block
+    tiff = block[len(_EXIF_HEADER):]
+    fmt = {b"II": "<", b"MM": ">"}.get(tiff[:2])
+    if fmt is None:
+        return block
+    try:
+        (ifd0,) = struct.unpack_from(fmt + "I", tiff, 4)
+        (entries,) = struct.unpack_from(fmt + "H", tiff, ifd0)
+        link = ifd0 + 2 + 12 * entries
+        (ifd1,) = struct.unpack_from(fmt + "I", tiff, link)
+    except struct.error:                # a truncated directory: carried as it is
+        return block
+    if ifd1 == 0:
+        return block
+    at = len(_EXIF_HEADER) + link
+    return block[:at] + b"\0\0\0\0" + block[at + 4:]
+
+
 #: The largest EXIF block (``Exif\0\0`` header included) a JPEG's APP1 segment holds.
 _JPEG_MAX_EXIF = 65533
 #: Exif tags a JPEG's EXIF may lose when the block is too long: MakerNote, UserComment.

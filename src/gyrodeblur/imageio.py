@@ -75,7 +75,7 @@ from gyrodeblur.atomicfile import atomic_write, check_folder_of, check_writable
 from gyrodeblur.errors import InputError
 from gyrodeblur.exif import (_EXIF_ERRORS, _IFD0_ASCII, _JPEG_MAX_EXIF, _ORIENTATION,
                              _exif_for_jpeg, _load_exif, _normalise_exif, _pillow_exif,
-                             _sub_ifds, _tiff_exif, exif_capture_hints)
+                             _sub_ifds, _tiff_exif, _without_thumbnail, exif_capture_hints)
 from gyrodeblur.images import PHOTO_MAX, PHOTO_MIN
 from gyrodeblur.pngwrite import _PNG_XMP_KEY, DEFLATE_LEVEL, _write_png
 
@@ -830,7 +830,7 @@ def write_photo(
         pixels = np.stack([pixels[..., :3].mean(axis=2), pixels[..., 3]], axis=2)
         channels = 2
     ints = _to_integers(pixels, depth)
-    exif = _normalise_exif(like.exif) if like is not None else None
+    exif = _without_thumbnail(_normalise_exif(like.exif)) if like is not None else None
     icc = like.icc_profile if like is not None else None
     if icc and not _icc_fits(icc, channels):
         icc = None
