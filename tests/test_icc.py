@@ -122,6 +122,10 @@ def test_the_photo_s_curve_and_what_is_said_of_it():
     assert curve is LINEAR and "'Linear Rec2020'" in note and "linear transfer" in note
     curve, note = photo_transfer_curve(_photo(make_icc(curv_gamma(1.8))))
     assert curve.name.startswith("gamma 1.8") and "gamma 1.8" in note
+    # a table's note reads as English (it was "declares a table of 300 transfer curve")
+    curve, note = photo_transfer_curve(_photo(make_icc(curv_table(
+        np.linspace(0, 1, 300) ** 2.0))))
+    assert "declares a 300-point tabulated transfer curve" in note, note
     lcms = ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB")).tobytes()
     assert photo_transfer_curve(_photo(lcms)) == (SRGB, None)
     assert photo_transfer_curve(_photo(None)) == (SRGB, None)

@@ -312,7 +312,8 @@ class TableCurve:
 
     def transfer_curve(self, name: str | None = None) -> TransferCurve:
         """This curve as a :class:`TransferCurve`."""
-        return TransferCurve(name or f"table of {self.samples.size}", self.decode, self.encode)
+        return TransferCurve(name or f"{self.samples.size}-point tabulated", self.decode,
+                             self.encode)
 
 
 @dataclass(frozen=True)
