@@ -127,15 +127,8 @@ def kernel_sparsity_ratio(image: np.ndarray, psf: np.ndarray, *, transfer="srgb"
 
     Parameters
     ----------
-    image : ndarray (H, W) or (H, W, C)
-        The blurred photo, float in [0, 1] (a last channel of 2 or 4 is alpha, ignored).
-    psf : ndarray (k, k)
-        The kernel, odd square, centred, at the photo's resolution (pixels).
-    transfer : str or TransferCurve
-        Transfer curve of the photo's values.
-    n_patches : int
-        Most textured, unclipped windows spread over the photo that are deconvolved
-        (:func:`gyrodeblur.calibration_patches.select_patch_centres`).
+    image, psf, transfer, n_patches
+        As for :func:`kernel_gain_over_no_blur` (the windows here are deconvolved).
 
     Returns
     -------
