@@ -756,13 +756,14 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                                            else f"{src} (gyro.orientation)"))
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
     from_exif = data.get("exposure_start") is None and "capture_time_text" in hints
-    unreadable = hints.get("unreadable", {})
-    for key, what, give in (("exposure_time", "a positive number of seconds",
-                             "exposure_time (s)"),
-                            ("exposure_start", "a date and time in EXIF's form, YYYY:MM:DD "
-                             "HH:MM:SS", "exposure_start on the gyro log's clock")):
-        said = unreadable.get("capture_time" if key == "exposure_start" else key)
-        if data.get(key) is None and said and not (key == "exposure_start" and from_exif):
+    unreadable = hints.get("unreadable", {})   # (a capture time there is none in hints)
+    for key, hint, what, give in (
+            ("exposure_time", "exposure_time", "a positive number of seconds",
+             "exposure_time (s)"),
+            ("exposure_start", "capture_time", "a date and time in EXIF's form, YYYY:MM:DD "
+             "HH:MM:SS", "exposure_start on the gyro log's clock")):
+        said = unreadable.get(hint)
+        if data.get(key) is None and said:
             raise InputError(src, f"missing {key!r}: the photo's EXIF {said} is not {what}; "
                                   f"give {give}")
     exposure_time = _get(data, "exposure_time", src)

@@ -978,9 +978,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-blur-check", action="store_true",
                    help="blind: deconvolve with the estimated kernel even where the photo's "
                         "spectrum shows none of its blur or it does not sharpen the photo (by "
-                        "default such a photo is left as it is, with a warning); with the gyro (without --refine): do not "
-                        "check that the photo shows the blur its log implies (by default a "
-                        "warning says when it does not: a wrong time offset or log)")
+                        "default such a photo is left as it is, with a warning); with the "
+                        "gyro (without --refine): do not check that the photo shows the blur "
+                        "its log implies (by default a warning says when it does not: a "
+                        "wrong time offset or log)")
     s.add_argument("--refine", action="store_true",
                    help="self-calibrate time offset, bias, readout, focal length and axes first "
                         "(a value given with --time-offset, --bias, --readout-time, --fx/--fy or "

@@ -820,6 +820,12 @@ def check_blind_sizes(shape: tuple[int, int], kernel_size: int, grid=(1, 1),
     return patches
 
 
+#: How both of :func:`_shows_no_blur`'s warnings end.
+_RETURNED_AS_IT_IS = ("It is returned as it is (--no-blur-check, check_blur=False: deconvolve "
+                      "anyway; with the camera's gyro log, --capture gives the blur at every "
+                      "pixel)")
+
+
 def _shows_no_blur(image, psf, transfer) -> bool:
     """Whether ``image`` shows less of the blur ``psf`` than no blur at all would explain
     (:func:`gyrodeblur.blur_evidence.kernel_gain_over_no_blur` under
@@ -840,9 +846,7 @@ def _shows_no_blur(image, psf, transfer) -> bool:
                       f"blur (their gradients' L1/L2 x{ratio:.2f} of that, over "
                       f"{SPARSER_MAX:g}), as where a repeating pattern or text is taken for "
                       f"the blur, or the photo shows little blur. Deconvolving with it would "
-                      f"add ghost edges. It is returned as it is (--no-blur-check, "
-                      f"check_blur=False: deconvolve anyway; with the camera's gyro log, "
-                      f"--capture gives the blur at every pixel)", stacklevel=3)
+                      f"add ghost edges. {_RETURNED_AS_IT_IS}", stacklevel=3)
         return True
     side = psf.shape[0]
     why = (f"the photo shows little blur, or its blur is longer than the {side} px kernel "
@@ -854,9 +858,8 @@ def _shows_no_blur(image, psf, transfer) -> bool:
                   f"fit the photo: {why}, or its blur is not one "
                   f"kernel's (a rolling shutter, a roll or a wide lens make it vary across "
                   f"the frame), or the scene misled the estimate (text, a few straight "
-                  f"edges). Deconvolving with it would add ringing. It is returned as it is "
-                  f"(--no-blur-check, check_blur=False: deconvolve anyway; with the camera's "
-                  f"gyro log, --capture gives the blur at every pixel)", stacklevel=3)
+                  f"edges). Deconvolving with it would add ringing. {_RETURNED_AS_IT_IS}",
+                  stacklevel=3)
     return True
 
 
