@@ -283,8 +283,8 @@ def test_csv_options_on_another_format_are_warned_of(capture_files):
     d, doc = capture_files
     doc["gyro"].update(time_unit="ms", rate_unit="deg/s")
     (d / "cap.json").write_text(json.dumps(doc))
-    with pytest.warns(UserWarning, match="gyro.gcsv: rate_unit, time_unit apply to CSV logs "
-                                         "only; this log is gcsv: ignored"):
+    with pytest.warns(UserWarning, match="gyro.gcsv: rate_unit, time_unit apply to CSV and JSON "
+                                         "logs only; this log is gcsv: ignored"):
         cap = load_capture(d / "cap.json")
     assert np.allclose(cap.log.omega[0], [0.01, 0.3, -0.02])
 

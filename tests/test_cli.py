@@ -1341,6 +1341,36 @@ def test_a_phone_photo_taller_than_wide_is_said_to_need_its_rotation(tmp_path, m
     assert len(seen) == 3
 
 
+def test_a_sensor_logger_json_export_serves_as_its_csv(tmp_path, capsys):
+    """``--gyro Gyroscope.json`` (Sensor Logger's JSON export, found by its first
+    character) gives the PSF its CSV export gives; a JSON file that is not a list of
+    samples is one line naming it, exit status 2."""
+    t = 1733380029.0 + np.arange(0, 3, 0.005)
+    w = np.stack([0.1 + 0.3 * np.sin(5 * t), 0.2 * np.cos(3 * t), 0.05 + 0 * t], axis=1)
+    (tmp_path / "Gyroscope.csv").write_text("time,seconds_elapsed,z,y,x\n" + "\n".join(
+        f"{int(round(a * 1e9))},{a - t[0]:.3f},{z:.9f},{y:.9f},{x:.9f}"
+        for a, (x, y, z) in zip(t, w)) + "\n")
+    (tmp_path / "Gyroscope.json").write_text(json.dumps([
+        {"sensor": "Gyroscope", "time": str(int(round(a * 1e9))), "seconds_elapsed":
+         f"{a - t[0]:.3f}", "z": f"{z:.9f}", "y": f"{y:.9f}", "x": f"{x:.9f}"}
+        for a, (x, y, z) in zip(t, w)]))
+    doc = {"exposure_start": 1733380030.0, "exposure_time": 0.03, "readout_time": 0.02,
+           "camera": {"fx": 300, "width": 320, "height": 240},
+           "gyro": {"path": "Gyroscope.csv", "orientation": "android-back-camera"}}
+    (tmp_path / "c.json").write_text(json.dumps(doc))
+    for log in ("Gyroscope.csv", "Gyroscope.json"):
+        assert main(["psf", "--capture", str(tmp_path / "c.json"), "--gyro",
+                     str(tmp_path / log), "--at", "40,200", "-o",
+                     str(tmp_path / f"{log}.npy")]) == 0
+    csv_psf, json_psf = (np.load(tmp_path / f"Gyroscope.{e}.npy") for e in ("csv", "json"))
+    assert csv_psf.shape[0] > 5 and np.array_equal(csv_psf, json_psf)
+    (tmp_path / "bad.json").write_text('{"Gyroscope": [{"time": 1}]}')
+    msg = _run_error(["psf", "--capture", str(tmp_path / "c.json"), "--gyro",
+                      str(tmp_path / "bad.json"), "--at", "40,200", "-o",
+                      str(tmp_path / "bad.npy")], capsys)
+    assert "bad.json: a JSON log must be a list of samples" in msg and "\n" not in msg
+
+
 def test_several_photos_are_deblurred_one_after_another_each_as_alone(capture_dir, capsys):
     """``deblur a b -o A -o B`` (or ``-o A,B``) gives each photo what deblurring it alone
     gives, with its own capture (one for all, or one per photo) and its own PSF drawing.

@@ -253,11 +253,17 @@ def test_shared_android_log(shared_data):
 
 @pytest.mark.parametrize("content,match", [
     ("t_s,x,y,z\n0,0,0,0\n0.01,0,0,0\n0.005,0,0,0\n",
-     r"not increasing \(sample 3: 0.005000 s after 0.010000 s\)"),
+     r"not increasing: sample 3 \(0.005000 s\) is earlier than sample 2 \(0.010000 s\) "
+     r"\(sort the log by time\)"),
     # without a unit, said before one is guessed (not as an interval that fits no rate)
     ("timestamp,x,y,z\n2.996237,0,0,0\n2.992646,0,0,0\n2.987381,0,0,0\n",
-     r"not increasing \(sample 2: 2.992646 after 2.996237\)"),
-    ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,1\n1.0,0,0,2\n", r"not increasing \(sample 2: 1 after 1\)"),
+     r"not increasing: sample 2 \(2.992646\) is earlier than sample 1 \(2.996237\)"),
+    ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,1\n1.0,0,0,2\n",
+     r"not increasing: sample 2 has the time of sample 1 \(1\) with other rates \(two "
+     r"samples at one time: remove one\)"),
+    # nanoseconds since 1970 said with every digit (1e-10 apart, they read alike to 10)
+    ("time,x,y,z\n1733380020406623488,0,0,0\n1733380020401865728,0,0,0\n",
+     r"sample 2 \(1733380020401865728\) is earlier than sample 1 \(1733380020406623488\)"),
     ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,0\n1.0,0,0,0\n", r"only 1 gyro sample\(s\)"),
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
     # epoch microseconds said to be seconds: rounding would eat the exposure
@@ -302,6 +308,103 @@ def test_missing_file_and_unknown_format(tmp_path):
         read_gyro_log(p, "bag")
 
 
+def _sensor_logger_json(trace, others=True) -> str:
+    """Sensor Logger's JSON export of ``trace``: one object per sample, values as text,
+    keys ``sensor, time, seconds_elapsed, z, y, x``; with ``others``, an accelerometer's
+    samples between them."""
+    import json
+
+    out = []
+    for a, (wx, wy, wz) in zip(trace.t, trace.omega):
+        t = str(int(round(a * 1e9)))
+        if others:
+            out.append({"sensor": "Accelerometer", "time": t, "seconds_elapsed": "0",
+                        "z": "9.8", "y": "0.1", "x": "-0.2"})
+        out.append({"sensor": "Gyroscope", "time": t,
+                    "seconds_elapsed": repr(float(a - trace.t[0])),
+                    "z": repr(float(wz)), "y": repr(float(wy)), "x": repr(float(wx))})
+    return json.dumps(out)             # one line, as long as the log
+
+
+def test_sensor_logger_json_export_reads_as_its_csv(tmp_path):
+    """Sensor Logger's JSON export (one long line: over the CSV reader's 128 KB field
+    limit here) reads as its CSV export does: the gyroscope's samples, by its keys, the
+    time in ns and the phone's device axes; its format is found from its first character."""
+    t = 1000.0 + np.arange(600) / 200.0
+    trace = GyroLog(t, np.stack([np.sin(t * 7), 0.3 * np.cos(t * 5), 0.1 * t - 100], axis=1))
+    p = tmp_path / "Gyroscope.json"
+    p.write_text(_sensor_logger_json(trace))
+    assert p.stat().st_size > 131072 and "\n" not in p.read_text()
+    log = read_gyro_log(p)
+    t_ns = [int(round(a * 1e9)) for a in trace.t]
+    wx, wy, wz = trace.omega.T
+    (tmp_path / "Gyroscope.csv").write_text(_csv_text("time,seconds_elapsed,z,y,x", t_ns,
+                                                      [trace.t - trace.t[0], wz, wy, wx]))
+    csv_log = read_gyro_log(tmp_path / "Gyroscope.csv")
+    assert np.array_equal(log.t, csv_log.t) and np.array_equal(log.omega, csv_log.omega)
+    assert np.allclose(log.t, trace.t, atol=1e-8)
+    assert log.meta["time_unit"] == "ns" and log.in_device_axes
+    assert log.meta["format"] == "json"
+    # numbers as numbers, and a sample cut short (no x) skipped with a warning
+    import json
+    samples = json.loads(_sensor_logger_json(trace, others=False))
+    for r in samples:
+        r.update(time=int(r["time"]), x=float(r["x"]), y=float(r["y"]), z=float(r["z"]))
+    del samples[-1]["x"]
+    p.write_text(json.dumps(samples, indent=1))
+    with pytest.warns(UserWarning, match="1 sample.* with a missing or NaN value skipped"):
+        log = read_gyro_log(p, "json")
+    assert np.allclose(log.omega, trace.omega[:-1], atol=1e-12)
+    # the CSV options apply: the elapsed seconds as the time
+    log = read_gyro_log(p, "json", time_column="seconds_elapsed")
+    assert np.allclose(log.t, trace.t[:-1] - trace.t[0], atol=1e-12)
+
+
+@pytest.mark.parametrize("content,match", [
+    ('{"Gyroscope": []}', r"must be a list of samples, one object each .*this file holds "
+                          r"one object \(keys: Gyroscope\)"),
+    ("[1, 2, 3]", "this file holds a list of int"),
+    ('[{"sensor": "Gyroscope", "time": 1, "x": 0,', r"not a JSON log: .*\(line 1, column"),
+    ("[]", "no samples"),
+    ('[{"sensor": "Accelerometer", "time": 1, "x": 0, "y": 0, "z": 0}]',
+     r"no gyroscope samples \(the samples' sensors: Accelerometer\)"),
+    ('[{"sensor": "Accelerometer", "time": 1},' * 1 + '{"sensor": "Gyroscope", "time": 5000000, '
+     '"x": 0, "y": 0, "z": 0}, {"sensor": "Gyroscope", "time": 10000000, "x": 0, "y": 0, '
+     '"z": [1]}]', r"Gyroscope.json: sample 2: column 'z' is not a number \('\[1\]'\)"),
+])
+def test_json_logs_that_are_not_a_list_of_gyro_samples_are_refused(tmp_path, content, match):
+    p = tmp_path / "Gyroscope.json"
+    p.write_text(content)
+    with pytest.raises(InputError, match=match):
+        read_gyro_log(p)
+
+
+def test_a_csv_line_the_reader_cannot_split_is_refused_by_line(tmp_path, trace):
+    """A value over the CSV reader's 128 KB limit (a quoted field) is an error naming the
+    file and the line, not the reader's traceback; so is a header line that long."""
+    p = tmp_path / "g.csv"
+    rows = _csv_text("t_s,wx,wy,wz", trace.t, trace.omega.T).splitlines()
+    rows.insert(3, f'1000.011,"{"9" * 200_000}",0,0')
+    p.write_text("\n".join(rows) + "\n")
+    with pytest.raises(InputError, match=r"g.csv: line 4 cannot be read as CSV \(field larger "):
+        read_gyro_log(p)
+    p.write_text(f't_s,"{"w" * 200_000}",wy,wz\n0,0,0,0\n')
+    with pytest.raises(InputError, match=r"g.csv: line 1 cannot be read as CSV"):
+        read_gyro_log(p)
+
+
+def test_a_log_split_by_spaces_with_a_header(tmp_path, trace):
+    """``timestamp x y z`` and rows split by runs of spaces read as the comma-separated
+    log does."""
+    t_ns = [int(round(a * 1e9)) for a in trace.t]
+    text = _csv_text("timestamp,x,y,z", t_ns, trace.omega.T)
+    (tmp_path / "c.csv").write_text(text)
+    (tmp_path / "s.txt").write_text(text.replace(",", "  "))
+    spaced, commas = read_gyro_log(tmp_path / "s.txt"), read_gyro_log(tmp_path / "c.csv")
+    assert np.array_equal(spaced.t, commas.t) and np.array_equal(spaced.omega, commas.omega)
+    assert np.allclose(spaced.omega, trace.omega, atol=1e-12)
+
+
 def test_coverage_and_gaps():
     t = np.concatenate([np.arange(0, 0.1, 0.005), np.arange(0.2, 0.3, 0.005)])
     log = GyroLog(t, np.zeros((t.size, 3)), "g.csv")
@@ -312,6 +415,15 @@ def test_coverage_and_gaps():
         check_coverage(log, 0.25, 0.4)
     with pytest.raises(InputError, match="g.csv.*covers"):     # starts before the log
         check_coverage(log, -0.05, 0.02)
+    # a start given in ms (or us, ns) where the log's seconds are: said so
+    with pytest.raises(InputError, match=r"covers 0.000000..0.295000 s but the exposure needs "
+                                         r"20.000000..20.030000 s .*; read as ms, the "
+                                         r"exposure's start falls in the log: give "
+                                         r"exposure_start in seconds\)"):
+        check_coverage(log, 20.0, 20.03)
+    with pytest.raises(InputError, match="covers") as e:          # not for any far time
+        check_coverage(log, 1e12, 1e12 + 0.03)
+    assert "read as" not in str(e.value)
 
 
 def test_a_coarse_log_is_told_its_rate_and_the_limit_is_inclusive():
@@ -410,7 +522,8 @@ def test_read_gyro_log_checks_its_format_and_options(tmp_path, trace):
         read_gyro_log(tmp_path / "g.gcsv", "tsv", time_unit="ms")
     with pytest.raises(TypeError, match="unknown option.*time_units"):
         read_gyro_log(tmp_path / "g.gcsv", time_units="ms")
-    with pytest.warns(UserWarning, match="time_unit applies to CSV logs only; this log is gcsv"):
+    with pytest.warns(UserWarning, match="time_unit applies to CSV and JSON logs only; this "
+                                         "log is gcsv"):
         read_gyro_log(tmp_path / "g.gcsv", time_unit="ms")
 
 

@@ -10,14 +10,14 @@ JSON schema (stable; other tools write it)::
       "camera": {"fx": 819.2, "fy": 819.2, "cx": 511.5, "cy": 381.5,
                  "width": 1024, "height": 764},          # pixels, OpenCV convention
       "gyro": {"path": "gyro.gcsv",    # relative to the JSON file
-               "format": "gcsv",       # gcsv | csv | android
+               "format": "gcsv",       # gcsv | csv | android | json
                "orientation": "XYZ",   # log axes -> camera axes (letters or 3x3 matrix)
                "time_offset": 0.0}     # s: camera_time = gyro_time + time_offset
     }
 
 Optional keys in ``gyro``: ``bias`` (``[bx, by, bz]`` rad/s in the camera frame, or
-``"auto"``), ``max_gap`` (s, default 0.05) and, for ``csv``, ``time_unit``, ``rate_unit``,
-``time_column``, ``rate_columns``. Row ``y`` starts exposing at
+``"auto"``), ``max_gap`` (s, default 0.05) and, for ``csv`` and ``json``, ``time_unit``,
+``rate_unit``, ``time_column``, ``rate_columns``. Row ``y`` starts exposing at
 ``exposure_start + readout_time * y / height``; without a ``readout_time``, a gcsv log's
 ``frame_readout_time`` header (ms) gives it, else it is 0 (a global shutter). Without an
 ``exposure_start``, a photo's EXIF capture time serves where the log runs on Unix time (a
@@ -242,7 +242,8 @@ class Capture:
         c = self.camera
         gyro = dict(self.gyro_spec)
         if not gyro and "time_unit" in self.log.meta:     # a capture made in code, of a CSV
-            gyro = {"format": "csv", "time_unit": self.log.meta["time_unit"],
+            gyro = {"format": self.log.meta.get("format", "csv"),
+                    "time_unit": self.log.meta["time_unit"],
                     "rate_unit": self.log.meta["rate_unit"]}
         if gyro_path is not None:
             gyro["path"] = gyro_path

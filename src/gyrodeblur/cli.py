@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from .errors import InputError
+from .gyrolog import FORMATS
 from .images import PHOTO_MAX, join_alpha, split_alpha, to_photo_layout, to_sensor_layout
 from .tiling import DEFAULT_OVERLAP
 
@@ -85,8 +86,8 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
         g.add_argument(f"--{k}", type=float, metavar="PX",
                        help=f"intrinsic {k} in pixels of the capture's camera.width x height "
                             "(the photo's when the capture gives no size)")
-    g.add_argument("--gyro", metavar="PATH", help="gyro log (gcsv, csv or android events)")
-    g.add_argument("--gyro-format", choices=("gcsv", "csv", "android"))
+    g.add_argument("--gyro", metavar="PATH", help="gyro log (gcsv, csv, android events or json)")
+    g.add_argument("--gyro-format", choices=FORMATS)
     g.add_argument("--orientation", metavar="AXES",
                    help="log axes -> camera axes: three letters, e.g. XYZ or yxz (lowercase "
                         "= negated), or a name: identity, android-back-camera (a phone's "

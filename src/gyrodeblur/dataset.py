@@ -47,7 +47,7 @@ from .atomicfile import atomic_write_text
 from .camera import Camera
 from .capture import Capture, load_capture
 from .errors import InputError
-from .gyrolog import GyroLog, read_gyro_log, write_gcsv
+from .gyrolog import FORMATS, GyroLog, read_gyro_log, write_gcsv
 from .psf import psf_extent, render_psf
 from .simulate import add_noise, quantize_8bit, simulate_blur, warp_samples
 from .tonecurve import linear_to_srgb, srgb_to_linear
@@ -547,7 +547,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", help="output folder")
     ap.add_argument("--photos", help="folder of sharp photos (default ../shared/data/photos)")
     ap.add_argument("--gyro", help="gyro log (default ../shared/data/gyro/handheld_phone_210hz.csv)")
-    ap.add_argument("--gyro-format", choices=("gcsv", "csv", "android"))
+    ap.add_argument("--gyro-format", choices=FORMATS)
     ap.add_argument("--exposure", type=_range, default=DEFAULTS["exposure"],
                     help="exposure time, s, or MIN,MAX sampled per case (default 0.01,0.04)")
     ap.add_argument("--readout", type=float, default=DEFAULTS["readout"], help="readout time, s")

@@ -28,12 +28,20 @@ Formats
 ``android``
     Android sensor-event dumps, one event per line, ``type timestamp_ns x y z``; only
     type 4 (``TYPE_GYROSCOPE``, rad/s, device axes) is kept.
+``json``
+    A JSON list of samples, one object each, as Sensor Logger's JSON export writes them
+    (``{"sensor": "Gyroscope", "time": "1733380020401865728", "seconds_elapsed": "0.0",
+    "z": ..., "y": ..., "x": ...}``, values as numbers or as text): where the objects name
+    their ``sensor``, only the gyroscope's are kept. Their keys are read as a CSV log's
+    column names, by the same rules and options (:func:`read_json_log`).
 """
 
 from __future__ import annotations
 
 import csv
 import inspect
+import io
+import json
 import os
 import warnings
 from collections.abc import Mapping
@@ -54,6 +62,7 @@ __all__ = [
     "read_gcsv",
     "read_csv_log",
     "read_android_events",
+    "read_json_log",
     "check_format",
     "write_gcsv",
     "check_coverage",
@@ -68,7 +77,7 @@ __all__ = [
     "RATE_UNITS",
 ]
 
-FORMATS = ("gcsv", "csv", "android")
+FORMATS = ("gcsv", "csv", "android", "json")
 #: A median rate above this (rad/s) almost surely means deg/s read as rad/s.
 IMPLAUSIBLE_MEDIAN_RATE = 35.0
 #: No gyro measures a rate above this (rad/s, about 11500 deg/s, well over the widest
@@ -165,8 +174,19 @@ def _check_increasing(t: np.ndarray, source: str | None, unit: str | None = "s")
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
         a, b = float(t[i + 1]), float(t[i])
-        said = f"{a:.6f} s after {b:.6f} s" if unit == "s" else f"{a:.10g} after {b:.10g}"
-        raise InputError(source, f"timestamps are not increasing (sample {i + 2}: {said})")
+
+        def said(v: float) -> str:         # every digit: ns times differ in the last ones
+            if unit == "s":
+                return f"{v:.6f} s"
+            return f"{int(v)}" if v.is_integer() and abs(v) < 1e19 else repr(v)
+
+        if a == b:
+            raise InputError(source, f"timestamps are not increasing: sample {i + 2} has the "
+                                     f"time of sample {i + 1} ({said(a)}) with other rates "
+                                     "(two samples at one time: remove one)")
+        raise InputError(source, f"timestamps are not increasing: sample {i + 2} "
+                                 f"({said(a)}) is earlier than sample {i + 1} ({said(b)}) "
+                                 "(sort the log by time)")
 
 
 def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
@@ -223,6 +243,11 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
             check = f"{units}; else {clocks}"
         else:                                      # longer than the whole log
             check = f"the durations: {units}"
+        scaled = next((unit for unit, f in (("ms", 1e3), ("us", 1e6), ("ns", 1e9))
+                       if log.t[0] <= t0 / f <= log.t[-1]), None)
+        if scaled is not None and span <= 1.0:     # a start given in ms where s belong
+            check += (f"; read as {scaled}, the exposure's start falls in the log: give "
+                      f"exposure_start in seconds")
         raise InputError(src, f"gyro log covers {_secs(log.t[0])}..{_secs(log.t[-1])} s but the "
                               f"{what} needs {_secs(t0)}..{_secs(t1)} s (check {check})")
     gap, at = largest_step(log, t0, t1)
@@ -298,7 +323,7 @@ def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
 
 def _secs(t: float) -> str:
     """A time for a message: microseconds, or 7 digits for an absurd one (a 1e300 offset)."""
-    return f"{t:.6f}" if abs(t) < 1e12 else f"{t:.6g}"
+    return f"{t:.6f}" if abs(t) < 1e19 else f"{t:.6g}"
 
 
 def rate_noise(log: GyroLog) -> float:
@@ -365,10 +390,12 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     Parameters
     ----------
     path : path-like
-    format : {"gcsv", "csv", "android"} or None
-        ``None`` guesses from the extension (``.gcsv``) or the first line.
+    format : {"gcsv", "csv", "android", "json"} or None
+        ``None`` guesses from the extension (``.gcsv``) or the first line (``[`` or ``{``
+        opens a JSON log).
     **options
-        Passed to :func:`read_csv_log` for ``csv``.
+        Passed to :func:`read_csv_log` for ``csv`` and to :func:`read_json_log` for
+        ``json``.
     """
     path = os.fspath(path)
     if os.path.isdir(path):
@@ -381,15 +408,22 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} "
                         f"(known: {', '.join(_CSV_OPTIONS)})")
-    if options and format != "csv":
+    if options and format not in _TABLE_FORMATS:
         verb = "applies" if len(options) == 1 else "apply"
-        warnings.warn(f"{path}: {', '.join(sorted(options))} {verb} to CSV logs only; this "
-                      f"log is {format}: ignored", stacklevel=2)
+        warnings.warn(f"{path}: {', '.join(sorted(options))} {verb} to CSV and JSON logs "
+                      f"only; this log is {format}: ignored", stacklevel=2)
     if format == "gcsv":
         return read_gcsv(path)
     if format == "csv":
         return read_csv_log(path, **options)
+    if format == "json":
+        return read_json_log(path, **options)
     return read_android_events(path)
+
+
+#: Formats whose columns are found by name (:mod:`gyrodeblur.log_columns`), and which take
+#: :func:`read_csv_log`'s options.
+_TABLE_FORMATS = ("csv", "json")
 
 
 def check_format(format, source: str | None = None) -> str:
@@ -408,6 +442,8 @@ def _guess_format(path: str) -> str:
     first = [ln for ln in _read_lines(path) if ln.strip() and not ln.lstrip().startswith("#")][:1]
     if first and first[0].strip().upper() in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
         return "gcsv"
+    if first and first[0].lstrip().startswith(("[", "{")):
+        return "json"
     values = first[0].split() if first else []
     if len(values) >= 2 and values[0].isdigit() and all(is_number(v) for v in values):
         return "android"        # "type timestamp_ns values...", whichever sensor comes first
@@ -415,8 +451,13 @@ def _guess_format(path: str) -> str:
 
 
 def _read_lines(path: str) -> list[str]:
-    """The lines of a text log: UTF-8 (a byte-order mark dropped), UTF-16 with its
-    byte-order mark (as Windows tools save "Unicode text"), else Windows-1252 (a European
+    """The lines of a text log (:func:`_read_text`)."""
+    return _read_text(path).splitlines()
+
+
+def _read_text(path: str) -> str:
+    """The text of a log: UTF-8 (a byte-order mark dropped), UTF-16 with its byte-order
+    mark (as Windows tools save "Unicode text"), else Windows-1252 (a European
     spreadsheet's export, whose ``°/s`` is one byte). Numbers and the names that matter are
     ASCII in all three; a file with NUL bytes and no UTF-16 mark is not text."""
     try:
@@ -426,16 +467,16 @@ def _read_lines(path: str) -> list[str]:
         raise InputError(path, f"cannot read ({exc.strerror})") from None
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
         try:
-            return raw.decode("utf-16").splitlines()
+            return raw.decode("utf-16")
         except UnicodeDecodeError:
             raise InputError(path, "not a text file (a UTF-16 mark, then bytes that are "
                                    "not UTF-16)") from None
     if b"\x00" in raw:
         raise InputError(path, "not a text file (it holds NUL bytes)")
     try:
-        return raw.decode("utf-8-sig").splitlines()
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
-        return raw.decode("cp1252", errors="replace").splitlines()
+        return raw.decode("cp1252", errors="replace")
 
 
 def read_gcsv(path: str | os.PathLike) -> GyroLog:
@@ -485,13 +526,15 @@ def read_gcsv(path: str | os.PathLike) -> GyroLog:
 
 
 def _parse_numeric_rows(path: str, lines: list[str], columns: list[int], *, first_line: int,
-                        sep: str | None, names: list[str] | None = None) -> np.ndarray:
+                        sep: str | None, names: list[str] | None = None,
+                        row: str = "line") -> np.ndarray:
     """The values of ``columns`` (indices) on each non-blank line, as float64 rows; other
     columns are not read (a logger's date or label column may hold text). ``names`` (the
-    header) name a column whose value is not a number."""
+    header) name a column whose value is not a number; ``row`` is what a message calls a
+    line (a JSON log's are its samples)."""
     rows = _plain_numeric_rows(lines, columns, sep, names)
     if rows is None:
-        rows = _numeric_rows_one_by_one(path, lines, columns, first_line, sep, names)
+        rows = _numeric_rows_one_by_one(path, lines, columns, first_line, sep, names, row)
     missing = np.isnan(rows).any(axis=1)      # (an infinite value is refused, not missing)
     if missing.any():          # phyphox writes NaN, a spreadsheet an empty cell
         rows = rows[~missing]
@@ -509,7 +552,7 @@ def _plain_numeric_rows(lines: list[str], columns: list[int], sep: str | None,
     once (a 10-minute 4 kHz log: 2.4 M lines); ``None`` for anything else (text, empty
     cells, quotes, a decimal comma, a ragged or cut line), which
     :func:`_numeric_rows_one_by_one` reads and, where it must, refuses by line."""
-    if sep not in (",", None):          # (a quote, never part of a number, fails the parse)
+    if sep not in (",", " ", None):     # (a quote, never part of a number, fails the parse)
         return None
     data = [line for line in lines if line.strip()]
     if not data:
@@ -517,8 +560,8 @@ def _plain_numeric_rows(lines: list[str], columns: list[int], sep: str | None,
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")           # NumPy's own warnings: read by line
-            table = np.loadtxt(data, dtype=np.float64, delimiter=sep, comments=None,
-                               ndmin=2)
+            table = np.loadtxt(data, dtype=np.float64, delimiter=None if sep == " " else sep,
+                               comments=None, ndmin=2)
     except (ValueError, Warning):
         return None
     if table.shape[1] < max(columns) + 1 or (names and table.shape[1] != len(names)):
@@ -528,22 +571,22 @@ def _plain_numeric_rows(lines: list[str], columns: list[int], sep: str | None,
 
 def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
                              first_line: int, sep: str | None,
-                             names: list[str] | None) -> np.ndarray:
+                             names: list[str] | None, row_word: str = "line") -> np.ndarray:
     """:func:`_parse_numeric_rows`' rows, line by line (missing values as NaN)."""
     out = []
     need = max(columns) + 1
     last = max((k for k, line in enumerate(lines) if line.strip()), default=-1)
-    decimal_comma = sep in (";", "\t")  # a comma that cannot split is a decimal mark
+    decimal_comma = sep in (";", "\t", " ")  # a comma that cannot split is a decimal mark
     for k, line in enumerate(lines):
         if not line.strip():
             continue
-        parts = _fields(line, sep)
+        parts = _fields(line, sep, path, f"{row_word} {first_line + k}")
         try:
             if len(parts) < need:
-                raise InputError(path, f"line {first_line + k}: expected {need} values, "
+                raise InputError(path, f"{row_word} {first_line + k}: expected {need} values, "
                                        f"got {len(parts)}")
             if names and len(parts) > len(names) and any(v.strip() for v in parts[len(names):]):
-                raise InputError(path, f"line {first_line + k}: {len(parts)} values where the "
+                raise InputError(path, f"{row_word} {first_line + k}: {len(parts)} values where the "
                                        f"header names {len(names)} columns, so the columns "
                                        f"cannot be told apart (a value holding the delimiter "
                                        f"{sep!r} without quotes?)")
@@ -556,26 +599,33 @@ def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
                     row.append(parse_number(parts[c], decimal_comma=decimal_comma))
                 except ValueError:
                     what = f"column {names[c]!r}" if names else f"value {c + 1}"
-                    raise InputError(path, f"line {first_line + k}: {what} is not a number "
+                    raise InputError(path, f"{row_word} {first_line + k}: {what} is not a number "
                                            f"({parts[c].strip()!r})") from None
             out.append(row)
         except InputError:
-            if k == last and out:      # a logger stopped in the middle of its last line
-                break
+            if k == last and out and row_word == "line":   # a logger stopped in the
+                break                                         # middle of its last line
             raise
     if not out:
         raise InputError(path, "no data rows")
     return np.asarray(out, dtype=np.float64)
 
 
-def _fields(line: str, sep: str | None) -> list[str]:
-    """The values of one line: split by ``sep`` (whitespace for ``None``), quotes
-    respected (a spreadsheet quotes a text value holding the delimiter)."""
-    if sep is None:
+def _fields(line: str, sep: str | None, path: str | None = None,
+            where: str = "a line") -> list[str]:
+    """The values of one line: split by ``sep`` (runs of whitespace for ``None`` or
+    ``" "``), quotes respected (a spreadsheet quotes a text value holding the delimiter);
+    a line the CSV reader cannot split (a value over 128 KB) is refused naming ``path``
+    and ``where`` it is."""
+    if sep is None or sep == " ":
         return line.split()
-    if '"' in line:
+    if '"' not in line:
+        return line.split(sep)
+    try:
         return next(csv.reader([line], delimiter=sep))
-    return line.split(sep)
+    except csv.Error as exc:
+        raise InputError(path, f"{where} cannot be read as CSV ({exc}): not a CSV gyro "
+                               "log?") from None
 
 
 def _without_repeats(rows: np.ndarray) -> np.ndarray:
@@ -615,7 +665,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         brackets (``gx [deg/s]``, refused when they state another unit), else rad/s.
     delimiter : str, optional
         Default: of comma, semicolon and tab, the one that splits the header line into the
-        most fields. Leading lines that start with ``#`` are comments, the last of them the
+        most fields; runs of spaces where the header holds none of them (``" "`` says
+        so). Leading lines that start with ``#`` are comments, the last of them the
         column names when the first other line holds only numbers (EuRoC's
         ``#timestamp [ns],w_RS_S_x [rad s^-1],...``, ``numpy.savetxt``'s ``# t,wx,wy,wz``);
         numbers may be quoted.
@@ -637,18 +688,27 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         raise InputError(path, "empty file")
     if delimiter is None:
         delimiter = sniff_delimiter(lines[0])
-    header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
+    header = [h.strip() for h in _fields(lines[0], delimiter, path, f"line {skip + 1}")]
     while len(header) > 1 and not header[-1]:     # a trailing delimiter names no column
         header.pop()
     if all(is_number(h) for h in header) and comment is not None:
         # the names on the last comment line ("#timestamp [ns],w_RS_S_x ..." as EuRoC
         # writes, "# t_s,wx,wy,wz" as numpy.savetxt does)
-        named = [h.strip() for h in next(csv.reader([comment], delimiter=delimiter))]
+        named = [h.strip() for h in _fields(comment, delimiter, path, "the column names")]
         if len(named) >= len(header) and not any(is_number(h) for h in named):
             header, lines, skip = named, [comment] + lines, skip - 1
     if all(is_number(h) for h in header):
         raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
+    return _log_from_table(path, header, lines[1:], skip + 2, delimiter, "line",
+                           time_column, rate_columns, time_unit, rate_unit)
 
+
+def _log_from_table(path: str, header: list[str], lines: list[str], first_line: int,
+                    delimiter: str | None, row_word: str, time_column, rate_columns,
+                    time_unit, rate_unit) -> GyroLog:
+    """A CSV or JSON log's samples, from its column names ``header`` and its data
+    ``lines`` split by ``delimiter``, the first of them ``first_line`` (what messages call
+    a line: ``row_word``); the other arguments are :func:`read_csv_log`'s."""
     def col(c, what: str) -> int:
         if isinstance(c, (int, np.integer)) and not isinstance(c, (bool, np.bool_)):
             i = int(c)
@@ -666,7 +726,8 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                                    "counted from 0)")
         return i
 
-    first_row = _fields(next((ln for ln in lines[1:] if ln.strip()), ""), delimiter)
+    first_row = _fields(next((ln for ln in lines if ln.strip()), ""), delimiter, path,
+                        f"{row_word} {first_line}")
     ti = (default_time_column(header, first_row) if time_column is None
           else col(time_column, "time_column"))
     if rate_columns is None:
@@ -706,9 +767,9 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
                                         ("rate unit", rate_unit, named_ru, header[ri[0]])):
         if given is not None and stated is not None and given != stated:
             warnings.warn(f"{path}: the {name} given, {given}, overrides the {stated} that "
-                          f"column {column!r} states", stacklevel=3)
-    rows = _parse_numeric_rows(path, lines[1:], [ti] + ri, first_line=skip + 2,
-                               sep=delimiter, names=header)     # time, x, y, z
+                          f"column {column!r} states", stacklevel=4)
+    rows = _parse_numeric_rows(path, lines, [ti] + ri, first_line=first_line,
+                               sep=delimiter, names=header, row=row_word)  # time, x, y, z
     meta = {}
     if from_a_phone_app(header, ri):
         meta["axes"] = "phone device"
@@ -739,12 +800,93 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             warnings.warn(f"{path}: rates read as rad/s (the column names state no unit), "
                           f"and their median over the whole log, {med:.2f} rad/s, is a fast "
                           "pan throughout; if they are deg/s, give --rate-unit deg/s "
-                          "(gyro.rate_unit)", stacklevel=3)
+                          "(gyro.rate_unit)", stacklevel=4)
     return log
 
 
 #: The options of :func:`read_csv_log`, which :func:`read_gyro_log` passes on.
 _CSV_OPTIONS = tuple(inspect.signature(read_csv_log).parameters)[1:]
+
+
+def read_json_log(path: str | os.PathLike, *, time_column: str | int | None = None,
+                  rate_columns: tuple | None = None, time_unit: str | None = None,
+                  rate_unit: str | None = None, delimiter: str | None = None) -> GyroLog:
+    """Read a JSON gyro log: a list of samples, one object each, as Sensor Logger's JSON
+    export writes them (``[{"sensor": "Gyroscope", "time": "1733380020401865728",
+    "seconds_elapsed": "0.0", "z": "0.44", "y": "-0.32", "x": "0.34"}, ...]``).
+
+    Where the samples name their ``sensor``, only the gyroscope's are kept (``Gyroscope``,
+    or else the one sensor whose name starts with ``gyro``, such as an uncalibrated
+    gyroscope's). The keys are the columns, in the order they first appear; values may be
+    numbers or numbers written as text, and a sample without a key the log is read from
+    is skipped, with a warning. Which key holds the time and which the rates, and their
+    units, are worked out from the keys as for a CSV log's column names, with the same
+    options (:func:`read_csv_log`; ``delimiter`` does not apply). Sensor Logger's keys
+    (``time`` in ns since 1970, ``x``, ``y``, ``z`` in rad/s, device axes) need none.
+    """
+    path = os.fspath(path)
+    try:
+        samples = json.loads(_read_text(path))
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"not a JSON log: {exc.msg} (line {exc.lineno}, column "
+                               f"{exc.colno})") from None
+    except RecursionError:
+        raise InputError(path, "not a JSON log: nested too deeply") from None
+    if isinstance(samples, dict):
+        keys = ", ".join(list(samples)[:6]) + (", ..." if len(samples) > 6 else "")
+        raise InputError(path, f"a JSON log must be a list of samples, one object each (as "
+                               f"Sensor Logger's JSON export); this file holds one object "
+                               f"(keys: {keys or 'none'})")
+    if not isinstance(samples, list) or not all(isinstance(r, dict) for r in samples):
+        kind = (type(samples).__name__ if not isinstance(samples, list) else "a list of "
+                + next(type(r).__name__ for r in samples if not isinstance(r, dict)))
+        raise InputError(path, f"a JSON log must be a list of samples, one object each (as "
+                               f"Sensor Logger's JSON export); this file holds {kind}")
+    samples = _gyroscope_samples(path, samples)
+    header: dict[str, None] = {}
+    for r in samples:
+        header.update(dict.fromkeys(r))
+    names = list(header)
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerows(
+        [_json_text(r.get(k)) for k in names] for r in samples)
+    lines = out.getvalue().splitlines()
+    log = _log_from_table(path, [str(k).strip() for k in names], lines, 1, ",", "sample",
+                          time_column, rate_columns, time_unit, rate_unit)
+    log.meta["format"] = "json"
+    return log
+
+
+def _gyroscope_samples(path: str, samples: list[dict]) -> list[dict]:
+    """The samples of a JSON log that are the gyroscope's, where they name a ``sensor``
+    (:func:`read_json_log`); all of them where none does."""
+    if not samples:
+        raise InputError(path, "no samples (an empty list)")
+    named = {str(r["sensor"]).strip() for r in samples if "sensor" in r}
+    if not named:
+        return samples
+    gyro = [n for n in named if n.lower() in ("gyroscope", "gyro")]
+    if not gyro:
+        gyro = [n for n in named if n.lower().startswith("gyro")]
+    if len(gyro) != 1:
+        said = ", ".join(sorted(named)[:8]) + (", ..." if len(named) > 8 else "")
+        problem = ("no gyroscope samples" if not gyro
+                   else "samples of several gyroscopes, and which to read is not clear")
+        raise InputError(path, f"{problem} (the samples' sensors: {said}); export the "
+                               "gyroscope's alone")
+    return [r for r in samples if str(r.get("sensor", "")).strip() == gyro[0]]
+
+
+def _json_text(value) -> str:
+    """A JSON sample's value as a CSV field: a number or text as written, none empty
+    (a missing value)."""
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (int, float, str)):
+        return str(value)
+    return json.dumps(value)[:40]
 
 
 def read_android_events(path: str | os.PathLike) -> GyroLog:

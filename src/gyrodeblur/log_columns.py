@@ -79,10 +79,18 @@ GUESSED_RATE_RANGE = (20.0, 2500.0)
 
 def sniff_delimiter(line: str) -> str:
     """Of comma, semicolon and tab, the one that splits the header ``line`` into the most
-    fields (quotes respected; comma on a tie)."""
-    counts = [(len(next(csv.reader([line], delimiter=d))), -k, d)
-              for k, d in enumerate((",", ";", "\t"))]
-    return max(counts)[2]
+    fields (quotes respected; comma on a tie); ``" "`` (runs of whitespace) for a line
+    that holds none of them but does hold spaces (``timestamp x y z``)."""
+    if not any(d in line for d in ",;\t") and len(line.split()) > 1:
+        return " "
+
+    def count(d: str) -> int:
+        try:
+            return len(next(csv.reader([line], delimiter=d)))
+        except csv.Error:              # a field the reader will not take: counted plainly
+            return len(line.split(d))
+
+    return max((count(d), -k, d) for k, d in enumerate((",", ";", "\t")))[2]
 
 
 def time_unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
