@@ -668,8 +668,13 @@ def test_the_photos_exif_time_starts_the_exposure_on_a_unix_clock_log(tmp_path):
     given = load_capture(tmp_path / "c.json", exif_hints=hints)
     assert given.exposure_start == 1733380031.0 and not given.exposure_start_from_exif
     (tmp_path / "c.json").write_text(json.dumps(doc))
-    with pytest.raises(InputError, match="c.json: missing 'exposure_start'$"):
+    # a photo with no capture time (its EXIF has none, or it has no EXIF) is told so
+    with pytest.raises(InputError, match="c.json: missing 'exposure_start' .*, and the photo "
+                                         "has no EXIF capture time .* to take it from"):
         load_capture(tmp_path / "c.json", exif_hints={})
+    for kw in ({}, {"exif_hints": hints, "exif_start": False}):   # no photo; a sharp scene's
+        with pytest.raises(InputError, match="c.json: missing 'exposure_start'$"):
+            load_capture(tmp_path / "c.json", **kw)
 
 
 def test_camera_rates_are_the_mapped_log_less_the_bias(capture_files):

@@ -803,6 +803,12 @@ def test_hints_offset_time_original_is_the_zone_before_offset_time():
                       x_9011="+01:00", x_9010="-08:00")
     assert hints["capture_time_unix"] == pytest.approx(1733380030.512, abs=1e-6)
     assert hints["capture_time_text"] == "2024:12:05 07:27:10.512 +01:00"
+    # an OffsetTimeOriginal written blank (EXIF's "unknown") leaves OffsetTime to say it
+    for blank in ("   :  ", "", "\x00"):
+        hints = hints_for((4, 4), x_9003="2024:12:05 07:27:10", x_9291="512",
+                          x_9011=blank, x_9010="+01:00")
+        assert hints["capture_time_unix"] == pytest.approx(1733380030.512, abs=1e-6)
+        assert hints["capture_time_text"] == "2024:12:05 07:27:10.512 +01:00"
 
 
 def test_hints_digital_zoom_only_where_the_camera_zoomed():

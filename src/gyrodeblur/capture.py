@@ -565,7 +565,7 @@ def check_capture(capture, what: str = "capture") -> "Capture":
 def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | None = None,
                  image_size: tuple[int, int] | None = None,
                  exif_hints: dict | None = None, report=None,
-                 logs: dict | None = None) -> Capture:
+                 logs: dict | None = None, exif_start: bool = True) -> Capture:
     """Build a :class:`Capture` from a JSON file, options and EXIF hints.
 
     Parameters
@@ -597,6 +597,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         Gyro logs already read, by file and reading options: a log found there is shared,
         not read again nor its units told again, and one read is added (several photos'
         captures naming one long log then hold one copy).
+    exif_start : bool
+        Whether a missing ``exposure_start`` may be the EXIF capture time (``False`` for
+        a sharp scene to be blurred: its time says nothing of an exposure).
     """
     data: dict = {}
     base = "."
@@ -756,8 +759,11 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     axes = parse_axes(orientation, source=("--orientation" if "orientation" in ov
                                            else f"{src} (gyro.orientation)"))
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
-    from_exif = data.get("exposure_start") is None and "capture_time_text" in hints
-    unreadable = hints.get("unreadable", {})   # (a capture time there is none in hints)
+    no_start = data.get("exposure_start") is None
+    from_exif = exif_start and no_start and "capture_time_text" in hints
+    unreadable = dict(hints.get("unreadable", {}))  # (a capture time there is none in hints)
+    if not exif_start:
+        unreadable.pop("capture_time", None)
     for key, hint, what, give in (
             ("exposure_time", "exposure_time", "a positive number of seconds",
              "exposure_time (s)"),
@@ -767,6 +773,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         if data.get(key) is None and said:
             raise InputError(src, f"missing {key!r}: the photo's EXIF {said} is not {what}; "
                                   f"give {give}")
+    if no_start and exif_start and exif_hints is not None and not from_exif:
+        raise InputError(src, "missing 'exposure_start' (s on the gyro log's clock: when the "
+                              "photo's first row started exposing), and the photo has no EXIF "
+                              "capture time (DateTimeOriginal) to take it from: give it")
     exposure_time = _get(data, "exposure_time", src)
     _warn_where_exif_disagrees(camera, exposure_time, hints, image_size, origin,
                                fx_given="fx" in (json_cam | set(ov)),

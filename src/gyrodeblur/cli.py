@@ -180,10 +180,8 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
         from .imageio import exif_capture_hints
         size = (photo.pixels.shape[1], photo.pixels.shape[0])
         hints = exif_capture_hints(photo)
-        if not exif_start:
-            hints = {k: v for k, v in hints.items() if not k.startswith("capture_time")}
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
-                       report=say, logs=getattr(args, "logs", None))
+                       report=say, logs=getattr(args, "logs", None), exif_start=exif_start)
     if photo is not None:
         if size[1] > size[0] and not getattr(args, "photo_rotation", 0) \
                 and cap.log.in_device_axes:

@@ -292,10 +292,16 @@ def _as_written(value) -> str:
         return repr(value)[:40]
 
 
+#: A time zone as EXIF's OffsetTime tags write it (``+01:00``; ``+0100``, ``+01`` and ``Z``
+#: read too).
+_ZONE = r"Z|[+-][0-9]{2}(:?[0-9]{2})?"
+
+
 def _capture_time(sub: dict, ifd0: dict) -> dict:
     """``capture_time_unix`` and ``capture_time_text`` of :func:`exif_capture_hints` from
     the Exif sub-IFD (or IFD0) tags; ``{}`` without a readable DateTimeOriginal. The zone
-    is OffsetTimeOriginal's, else OffsetTime's (the file's, which phones write alike)."""
+    is OffsetTimeOriginal's, else (where that is missing or blank) OffsetTime's (the
+    file's, which phones write alike)."""
     def text(tag):
         v = sub.get(tag, ifd0.get(tag))
         if isinstance(v, bytes):
@@ -303,7 +309,8 @@ def _capture_time(sub: dict, ifd0: dict) -> dict:
         return v.strip().strip("\x00").strip() if isinstance(v, str) else None
 
     stamp, frac = text(_DATETIME_ORIGINAL), text(_SUBSEC_ORIGINAL)
-    zone = text(_OFFSET_TIME_ORIGINAL) or text(_OFFSET_TIME)
+    zone = next((z for z in (text(_OFFSET_TIME_ORIGINAL), text(_OFFSET_TIME))
+                 if z and re.fullmatch(_ZONE, z)), None)    # not "   :  " (unknown)
     try:
         local = datetime.datetime.strptime(stamp or "", "%Y:%m:%d %H:%M:%S")
     except ValueError:
