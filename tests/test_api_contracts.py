@@ -146,12 +146,52 @@ def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
     own_method("serial", factory, thread_safe=False)
     deblur(blurred, cap, method="serial", grid=(3, 3))
     assert overlaps == []
+    # nor from two deblur() calls in two threads: the state it keeps is the process's
+    calls = [threading.Thread(target=deblur, args=(blurred, cap),
+                              kwargs=dict(method="serial", grid=(2, 2))) for _ in range(2)]
+    for c in calls:
+        c.start()
+    for c in calls:
+        c.join()
+    assert overlaps == []
+    # its flags are flags: "no" is not read as true (nor registered)
+    for flag in ("thread_safe", "default"):
+        with pytest.raises(TypeError, match=f"{flag} must be True or False, got 'no'"):
+            register_method("said no", factory, **{flag: "no"})
+    assert "said no" not in METHODS
     from gyrodeblur.fftutils import FFT_WORKERS
 
     if FFT_WORKERS > 1:                  # one core: no thread to overlap with
         own_method("parallel", factory)
         deblur(blurred, cap, method="parallel", grid=(3, 3))
         assert overlaps, "the default runs patches side by side (the test's own check)"
+
+
+def test_a_method_that_writes_its_input_cannot_change_the_callers_photo(
+        scene, make_capture, own_method):
+    """A method whose ``deconvolve`` works in place on its sub-image works on the deblur's
+    own copy, also in linear light (whose decoding is the caller's array itself), and the
+    photo as given reaches its factory read-only."""
+    cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
+    seen = []
+
+    def factory(image, encoded):
+        seen.append(encoded.flags.writeable)
+
+        def deconvolve(sub, psf):
+            sub *= 0.5                                    # in place
+            return sub
+        return deconvolve
+
+    own_method("in place", factory)
+    for transfer in ("linear", "srgb"):
+        photo = simulate_blur(scene, cap, transfer=transfer)
+        kept = photo.copy()
+        deblur(photo, cap, method="in place", transfer=transfer, grid=(2, 2))
+        assert np.array_equal(photo, kept), transfer
+    assert seen == [False, False]
+    with pytest.raises(InputError, match="unknown method ''"):    # not the default
+        deblur(photo, cap, method="")
 
 
 def test_options_that_do_not_apply_are_refused_and_defaults_fit_the_photo(

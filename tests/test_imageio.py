@@ -852,6 +852,18 @@ def test_bad_pixels_are_refused(tmp_path):
         write_photo(tmp_path / "a.png", np.zeros((4, 4, 5), np.float32))
     with pytest.raises(ValueError, match="NaN"):
         write_photo(tmp_path / "a.png", np.full((4, 4), np.nan, np.float32))
+    # infinite values and 0-255 values: no clipping makes them a photo
+    px = smooth((8, 8, 3))
+    ramp = px + np.linspace(-0.1, 0.1, 8, dtype=np.float32)[:, None, None]  # an overshoot:
+    write_photo(tmp_path / "ok.png", ramp)                                # written, clipped
+    os.remove(tmp_path / "ok.png")
+    inf = px.copy()
+    inf[0, 0, 0] = np.inf
+    with pytest.raises(ValueError, match="pixels contain infinite values"):
+        write_photo(tmp_path / "a.png", inf)
+    with pytest.raises(InputError, match=r"a.png: float samples up to .*most of them above 1; "
+                                         r"expected light in \[0, 1\] \(divide 0-255"):
+        write_photo(tmp_path / "a.png", px * 255)
     assert os.listdir(tmp_path) == []
 
 

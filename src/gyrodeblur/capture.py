@@ -581,8 +581,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         ignored.
     image_size : (width, height), optional
         The photo's size; gives the camera size when the JSON gives neither width nor
-        height, the principal point (image centre) when it is missing, and rescales the
-        intrinsics to the photo.
+        height (and with it the principal point, the image centre, when that is missing),
+        and the size at which EXIF's ``fx`` is. The capture keeps the JSON's camera size:
+        :meth:`Capture.scaled_to` rescales it to the photo (as :func:`deblur` does by
+        itself).
     exif_hints : dict, optional
         ``exposure_time`` (s), ``fx`` (pixels at ``image_size``) and the capture time
         (``capture_time_unix``, ``capture_time_text``) read from the photo

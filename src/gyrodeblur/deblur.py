@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
-from functools import partial
+from functools import partial, wraps
 from typing import Callable
 
 import numpy as np
@@ -89,8 +90,10 @@ METHODS: dict[str, Callable[..., Deconvolver]] = {"sparse": _sparse_factory,
 DEFAULT_METHOD = "sparse"
 
 
-#: Methods registered with ``thread_safe=False``: their patches run one at a time.
-_SERIAL_METHODS: set[str] = set()
+#: Methods registered with ``thread_safe=False``, and the lock that lets one call of each
+#: run at a time (its factory and its ``deconvolve``), whichever thread or :func:`deblur`
+#: call it comes from: their patches run one at a time.
+_SERIAL_METHODS: dict[str, threading.RLock] = {}
 
 
 def register_method(name: str, factory: Callable[..., Deconvolver], *, default: bool = False,
@@ -117,7 +120,14 @@ def register_method(name: str, factory: Callable[..., Deconvolver], *, default: 
         Whether ``deconvolve`` may run on several patches at once, in threads (the
         default: patches run concurrently, one thread per core). Give False for one that
         keeps state between calls (a shared buffer, a GPU context): its patches then run
-        one after the other.
+        one after the other, and so do its factory and ``deconvolve`` calls from
+        :func:`deblur` calls in other threads.
+
+    Notes
+    -----
+    The arrays the method is given must not be written to: ``image`` and the sub-images
+    are the deblur's own (never the caller's photo), but ``encoded`` is the caller's
+    photo itself, passed read-only.
     """
     global DEFAULT_METHOD
     if not isinstance(name, str) or not name:
@@ -125,11 +135,13 @@ def register_method(name: str, factory: Callable[..., Deconvolver], *, default: 
     if not callable(factory):
         raise TypeError(f"the factory of method {name!r} must be callable "
                         f"(factory(image, **options) -> deconvolve), got {factory!r}")
+    default, thread_safe = check_flag(default, "default"), check_flag(thread_safe,
+                                                                       "thread_safe")
     METHODS[name] = factory
     if thread_safe:
-        _SERIAL_METHODS.discard(name)
+        _SERIAL_METHODS.pop(name, None)
     else:
-        _SERIAL_METHODS.add(name)
+        _SERIAL_METHODS.setdefault(name, threading.RLock())
     if default:
         DEFAULT_METHOD = name
 
@@ -332,7 +344,7 @@ def _displacement_slope(displacement) -> float:
 
 def _checked_method(method: str | None) -> str:
     """``method``, or the default for ``None``; an unknown name refused."""
-    method = method or DEFAULT_METHOD
+    method = DEFAULT_METHOD if method is None else method
     if method not in METHODS:
         raise InputError.of_argument(
             "method", f"unknown method {method!r} (known: {', '.join(METHODS)})")
@@ -346,8 +358,20 @@ def _deconvolver(method: str, img: np.ndarray, encoded: np.ndarray, clip: bool, 
     if _takes_keyword(factory, "clip"):               # the method clips (or not) itself
         options = {**options, "clip": clip}
     if _takes_keyword(factory, "encoded"):
+        encoded = encoded.view()                      # the caller's photo: not to write to
+        encoded.flags.writeable = False
         options = {**options, "encoded": encoded}
-    return factory(img, **options)
+    lock = _SERIAL_METHODS.get(method)
+    if lock is None:
+        return factory(img, **options)
+    with lock:
+        deconvolve = factory(img, **options)
+
+    @wraps(deconvolve)                                # (its signature: ``unknown``)
+    def one_at_a_time(*args, **kwargs):
+        with lock:
+            return deconvolve(*args, **kwargs)
+    return one_at_a_time
 
 
 def _checked_displacement(displacement, shape: tuple[int, int]) -> tuple:
@@ -442,6 +466,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     if displacement is not None:
         displacement = _checked_displacement(displacement, checked.shape[:2])
     img = curve.decode(encoded)
+    if np.may_share_memory(img, image):      # the linear curve: patches are cut from it
+        img = img.copy()
     deconvolve = _deconvolver(method, img, encoded, clip, options)
     unknown = None
     if displacement is not None:
@@ -655,7 +681,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     warn_of_steps(capture.log, *capture.log_window)
     if align is not None:
         align = check_flag(align, "align")
-    method = method or DEFAULT_METHOD
+    method = _checked_method(method)
     defaults = METHOD_DEFAULTS.get(method, _OTHER_DEFAULTS)
     if mode == "invariant":
         for name, value in (("grid", grid), ("overlap", overlap),
@@ -770,7 +796,8 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     patches = check_blind_sizes((H, W), kernel_size, grid, overlap, max_pixels)
     psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
     if check_blur and _shows_no_blur(image, psfs[0], transfer):
-        _deconvolver(method, lin, encoded, clip, options)   # its options refused as always
+        _deconvolver(method, lin.copy() if np.may_share_memory(lin, image) else lin,
+                     encoded, clip, options)             # its options refused as always
         delta = np.zeros_like(psfs[0])
         delta[kernel_size // 2, kernel_size // 2] = 1.0
         out = np.array(image, np.float32)

@@ -735,12 +735,13 @@ def _to_float(path: str, arr: np.ndarray, keep_bright: bool = False) -> tuple[np
                      "use 8 or 16 bits")
 
 
-def _refuse_far_outside(path: str, values: np.ndarray, keep_bright: bool) -> None:
+def _refuse_far_outside(path: str, values: np.ndarray, keep_bright: bool,
+                        keep_dark: bool = False) -> None:
     """Refuse float samples that no clipping makes a photo of: most of them above 1, beyond
     :data:`~gyrodeblur.images.PHOTO_MAX` (0-255 or 0-65535 values; a photo's or a scene's
     lights above white are kept or clipped), or more than 1 % below
     :data:`~gyrodeblur.images.PHOTO_MIN` (an offset or negated image; a stray cold pixel is
-    clipped), the limits ``deblur()`` holds an array to."""
+    clipped; not with ``keep_dark``), the limits ``deblur()`` holds an array to."""
     if not values.size:
         return
     high = float(values.max())
@@ -749,7 +750,7 @@ def _refuse_far_outside(path: str, values: np.ndarray, keep_bright: bool) -> Non
         raise InputError(path, f"float samples up to {high:.4g}, most of them above 1; "
                                "expected light in [0, 1] (divide 0-255 values by 255, "
                                "0-65535 ones by 65535)")
-    if np.count_nonzero(values < PHOTO_MIN) > 0.01 * values.size:
+    if not keep_dark and np.count_nonzero(values < PHOTO_MIN) > 0.01 * values.size:
         raise InputError(path, f"float samples down to {float(values.min()):.4g}; expected "
                                "light in [0, 1] (light is never below black: is it offset "
                                "or negated?)")
@@ -779,6 +780,8 @@ def write_photo(
         Output file; ``.jpg``/``.jpeg``, ``.png`` or ``.tif``/``.tiff`` selects the format.
     pixels : ndarray, shape (H, W), (H, W, 1), (H, W, 2), (H, W, 3) or (H, W, 4)
         Floating-point samples; clipped to ``[0, 1]`` and rounded to the nearest integer.
+        Samples no clipping makes a photo of are refused, as :func:`read_photo` refuses
+        them in a float TIFF: most above 1 and some above 2 (0-255 values).
         ``(H, W, 2)`` is grey + alpha, written as such; so is RGBA when ``like`` was read
         from a grey + alpha file (its colours averaged: they are equal there).
     like : Photo, optional
@@ -806,13 +809,16 @@ def write_photo(
         is the input photo, alpha channel for JPEG, 16-bit JPEG, or the OS refused the
         write (permissions, disk full). No partial file is left behind.
     ValueError
-        ``pixels`` is not a float array of a supported shape or holds NaN, or
-        ``bit_depth``/``quality`` is out of range.
+        ``pixels`` is not a float array of a supported shape, holds NaN or infinite
+        values, or values far outside ``[0, 1]`` (an :class:`InputError` naming
+        ``path``), or ``bit_depth``/``quality`` is out of range.
     """
     p = os.fspath(path)
     _refuse_empty_name(p)
     fmt = _format_of(p)
     pixels = _check_pixels(pixels)
+    # 0-255 values refused; an unclipped deblur's ringing far below black is clipped
+    _refuse_far_outside(p, pixels, keep_bright=False, keep_dark=True)
     depth = _choose_bit_depth(p, fmt, bit_depth, like)
     if not (is_whole(quality) and 1 <= quality <= 100):   # not "hi", 95.7 or True
         raise ValueError(f"quality must be a whole number within 1-100, not {quality!r}")
@@ -873,6 +879,8 @@ def _check_pixels(pixels) -> np.ndarray:
         raise ValueError(f"pixels must have shape (H, W) or (H, W, 1 to 4), not {arr.shape}")
     if np.isnan(arr).any():
         raise ValueError("pixels contain NaN")
+    if np.isinf(arr).any():
+        raise ValueError("pixels contain infinite values")
     return arr
 
 
