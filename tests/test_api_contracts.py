@@ -147,13 +147,25 @@ def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
     deblur(blurred, cap, method="serial", grid=(3, 3))
     assert overlaps == []
     # nor from two deblur() calls in two threads: the state it keeps is the process's
-    calls = [threading.Thread(target=deblur, args=(blurred, cap),
-                              kwargs=dict(method="serial", grid=(2, 2))) for _ in range(2)]
+    done = []
+
+    def call():
+        done.append(deblur(blurred, cap, method="serial", grid=(2, 2)).shape)
+
+    calls = [threading.Thread(target=call) for _ in range(2)]
     for c in calls:
         c.start()
     for c in calls:
         c.join()
-    assert overlaps == []
+    assert overlaps == [] and done == [blurred.shape] * 2
+    # the built-in sparse method registered so keeps its global model
+    sparse = METHODS["sparse"]
+    alone = deblur(blurred, cap, grid=(2, 2), model="global")
+    try:
+        register_method("sparse", sparse, thread_safe=False)
+        assert np.array_equal(deblur(blurred, cap, grid=(2, 2), model="global"), alone)
+    finally:
+        register_method("sparse", sparse)
     # its flags are flags: "no" is not read as true (nor registered)
     for flag in ("thread_safe", "default"):
         with pytest.raises(TypeError, match=f"{flag} must be True or False, got 'no'"):

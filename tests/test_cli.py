@@ -659,6 +659,12 @@ def test_simulate_blurs_light_brighter_than_white_and_refuses_16_bit_jpeg_first(
     assert bright.max() <= 1.0
     # 8x the light spreads a blurred streak that clips where 1x stays below white
     assert (bright[80:105, 105:140] >= 0.999).sum() > 2 * (dim[80:105, 105:140] >= 0.999).sum()
+    # a scene mostly above white (an over-exposure in linear light): clipped, then written
+    tifffile.imwrite(d / "over.tif", 3 * scene + 0.5, photometric="rgb", metadata=None)
+    assert main(["simulate", str(d / "over.tif"), "--capture", str(d / "cap.json"), "-o",
+                 str(d / "b_over.tif"), "--transfer", "linear"]) == 0
+    over = read_photo(d / "b_over.tif").pixels
+    assert over.max() <= 1.0 and np.median(over) == 1.0
     msg = _run_error(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
                       "-o", str(d / "x.jpg"), "--bit-depth", "16"], capsys)
     assert "x.jpg: JPEG stores 8 bits per sample" in msg

@@ -370,13 +370,14 @@ def test_sensor_logger_json_export_reads_as_its_csv(tmp_path):
      r"no gyroscope samples \(the samples' sensors: Accelerometer\)"),
     ('[{"sensor": "Accelerometer", "time": 1},' * 1 + '{"sensor": "Gyroscope", "time": 5000000, '
      '"x": 0, "y": 0, "z": 0}, {"sensor": "Gyroscope", "time": 10000000, "x": 0, "y": 0, '
-     '"z": [1]}]', r"Gyroscope.json: sample 2: column 'z' is not a number \('\[1\]'\)"),
+     '"z": [1]}]', r"Gyroscope.json: sample 3: 'z' is not a number \('\[1\]'\)"),
+    ('{"t_s": 0, "wx": 0}\n{"t_s": [0.1', r"not a JSON log: .*\(in one of its lines"),
 ])
 def test_json_logs_that_are_not_a_list_of_gyro_samples_are_refused(tmp_path, content, match):
     p = tmp_path / "Gyroscope.json"
     p.write_text(content)
     with pytest.raises(InputError, match=match):
-        read_gyro_log(p)
+        read_gyro_log(p, "json")
 
 
 def test_a_csv_line_the_reader_cannot_split_is_refused_by_line(tmp_path, trace):
@@ -395,14 +396,45 @@ def test_a_csv_line_the_reader_cannot_split_is_refused_by_line(tmp_path, trace):
 
 def test_a_log_split_by_spaces_with_a_header(tmp_path, trace):
     """``timestamp x y z`` and rows split by runs of spaces read as the comma-separated
-    log does."""
+    log does; a row missing a value is refused (the values after it would move into its
+    column), also the last one (not taken for a line cut short)."""
     t_ns = [int(round(a * 1e9)) for a in trace.t]
-    text = _csv_text("timestamp,x,y,z", t_ns, trace.omega.T)
+    text = _csv_text("timestamp,x,y,z,temp", t_ns, [*trace.omega.T, 0 * trace.t + 31.5])
     (tmp_path / "c.csv").write_text(text)
     (tmp_path / "s.txt").write_text(text.replace(",", "  "))
     spaced, commas = read_gyro_log(tmp_path / "s.txt"), read_gyro_log(tmp_path / "c.csv")
     assert np.array_equal(spaced.t, commas.t) and np.array_equal(spaced.omega, commas.omega)
     assert np.allclose(spaced.omega, trace.omega, atol=1e-12)
+    rows = text.replace(",", " ").splitlines()
+    short = rows[5].split()
+    rows[5] = " ".join(short[:2] + short[3:])                      # y left out
+    (tmp_path / "s.txt").write_text("\n".join(rows) + "\n")
+    with pytest.raises(InputError, match="s.txt: line 6: 4 values where the header names 5 "
+                                         "columns: split by spaces"):
+        read_gyro_log(tmp_path / "s.txt")
+
+
+def test_json_lines_a_bracketed_csv_header_and_samples_that_name_no_sensor(tmp_path, trace):
+    """One JSON object per line reads as a list of them; a CSV whose header starts with
+    a bracket is not taken for JSON; samples without a ``sensor`` among named ones are
+    left out with a warning; text in a key not read (newlines, commas) is no matter."""
+    import json
+
+    samples = json.loads(_sensor_logger_json(trace, others=False))
+    for r in samples:
+        r["note"] = "a, b\nc\u2028d"
+    (tmp_path / "g.jsonl").write_text("\n".join(json.dumps(r) for r in samples) + "\n")
+    log = read_gyro_log(tmp_path / "g.jsonl")
+    assert log.meta["format"] == "json" and np.allclose(log.omega, trace.omega, atol=1e-12)
+    (tmp_path / "g.json").write_text(json.dumps(samples + [{"time": "1", "x": "9"}]))
+    with pytest.warns(UserWarning, match="g.json: 1 sample.* name no sensor, where the others "
+                                         "do: left out"):
+        log = read_gyro_log(tmp_path / "g.json")
+    assert np.allclose(log.omega, trace.omega, atol=1e-12)
+    p = tmp_path / "b.csv"
+    p.write_text(_csv_text("[time] [ms],x,y,z", [float(a * 1e3) for a in trace.t],
+                           trace.omega.T))
+    assert np.allclose(read_gyro_log(p).t, trace.t, atol=1e-9)
 
 
 def test_coverage_and_gaps():
@@ -417,13 +449,14 @@ def test_coverage_and_gaps():
         check_coverage(log, -0.05, 0.02)
     # a start given in ms (or us, ns) where the log's seconds are: said so
     with pytest.raises(InputError, match=r"covers 0.000000..0.295000 s but the exposure needs "
-                                         r"20.000000..20.030000 s .*; read as ms, the "
-                                         r"exposure's start falls in the log: give "
-                                         r"exposure_start in seconds\)"):
-        check_coverage(log, 20.0, 20.03)
-    with pytest.raises(InputError, match="covers") as e:          # not for any far time
-        check_coverage(log, 1e12, 1e12 + 0.03)
-    assert "read as" not in str(e.value)
+                                         r"200.000000..200.030000 s .*; if exposure_start is "
+                                         r"in ms, give it in seconds: read as ms it falls in "
+                                         r"the log\)"):
+        check_coverage(log, 200.0, 200.03)
+    for t0 in (1e12, 2.0):       # neither in the log read as ms, nor far beyond the log
+        with pytest.raises(InputError, match="covers") as e:
+            check_coverage(log, t0, t0 + 0.03)
+        assert "read as" not in str(e.value)
 
 
 def test_a_coarse_log_is_told_its_rate_and_the_limit_is_inclusive():

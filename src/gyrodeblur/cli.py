@@ -97,8 +97,10 @@ def _add_capture_options(p: argparse.ArgumentParser, required: bool = False,
                    help="seconds: camera_time = gyro_time + offset")
     g.add_argument("--bias", metavar="auto|bx,by,bz",
                    help="gyro bias to subtract, rad/s in the camera frame, or 'auto'")
-    g.add_argument("--time-unit", choices=("s", "ms", "us", "ns"), help="csv time unit")
-    g.add_argument("--rate-unit", choices=("rad/s", "deg/s"), help="csv rate unit")
+    g.add_argument("--time-unit", choices=("s", "ms", "us", "ns"),
+                   help="time unit of a csv or json log")
+    g.add_argument("--rate-unit", choices=("rad/s", "deg/s"),
+                   help="rate unit of a csv or json log")
     g.add_argument("--max-gap", type=float, metavar="S",
                    help="largest gap between gyro samples allowed inside the exposure (default 0.05)")
 
@@ -435,6 +437,7 @@ def cmd_simulate(args, say) -> None:
     colour, alpha = split_alpha(photo.pixels)
     blurred = simulate_blur(colour, cap, snr_db=args.snr_db, seed=args.seed,
                             order={"cubic": 3, "bilinear": 1}[args.sampling], transfer=curve)
+    blurred = np.clip(blurred, 0.0, 1.0)         # lights above white: clipped after the blur
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
     blurred = to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)

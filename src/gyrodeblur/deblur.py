@@ -11,13 +11,14 @@ turns the whole photo (to estimate e.g. its noise level once) and its options in
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import inspect
 import threading
 import time
 import warnings
 from dataclasses import dataclass, field
-from functools import partial, wraps
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -126,8 +127,8 @@ def register_method(name: str, factory: Callable[..., Deconvolver], *, default: 
     Notes
     -----
     The arrays the method is given must not be written to: ``image`` and the sub-images
-    are the deblur's own (never the caller's photo), but ``encoded`` is the caller's
-    photo itself, passed read-only.
+    are the deblur's own (never the caller's photo), but ``encoded``, the photo as given,
+    may be the caller's array itself, and is passed read-only.
     """
     global DEFAULT_METHOD
     if not isinstance(name, str) or not name:
@@ -361,17 +362,13 @@ def _deconvolver(method: str, img: np.ndarray, encoded: np.ndarray, clip: bool, 
         encoded = encoded.view()                      # the caller's photo: not to write to
         encoded.flags.writeable = False
         options = {**options, "encoded": encoded}
-    lock = _SERIAL_METHODS.get(method)
-    if lock is None:
-        return factory(img, **options)
-    with lock:
-        deconvolve = factory(img, **options)
+    return factory(img, **options)
 
-    @wraps(deconvolve)                                # (its signature: ``unknown``)
-    def one_at_a_time(*args, **kwargs):
-        with lock:
-            return deconvolve(*args, **kwargs)
-    return one_at_a_time
+
+def _one_call_at_a_time(method: str):
+    """The lock a method registered ``thread_safe=False`` holds while its factory and
+    deconvolver run (a context that does nothing for any other)."""
+    return _SERIAL_METHODS.get(method) or contextlib.nullcontext()
 
 
 def _checked_displacement(displacement, shape: tuple[int, int]) -> tuple:
@@ -468,29 +465,30 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     img = curve.decode(encoded)
     if np.may_share_memory(img, image):      # the linear curve: patches are cut from it
         img = img.copy()
-    deconvolve = _deconvolver(method, img, encoded, clip, options)
-    unknown = None
-    if displacement is not None:
-        box = max(p.shape[0] * p.shape[1] for p in psfs)
-        warp = partial(warp_by_displacement, img, displacement, clipped=CLIPPED,
-                       light_area=int(LIGHT_AREA * box))
-        if _takes_unknown(deconvolve):  # mirrored samples are not data: no data term
-            img, outside = warp(return_outside=True)
-            unknown = outside if outside.any() else None
+    with _one_call_at_a_time(method):       # the method's state: one call at a time
+        deconvolve = _deconvolver(method, img, encoded, clip, options)
+        unknown = None
+        if displacement is not None:
+            box = max(p.shape[0] * p.shape[1] for p in psfs)
+            warp = partial(warp_by_displacement, img, displacement, clipped=CLIPPED,
+                           light_area=int(LIGHT_AREA * box))
+            if _takes_unknown(deconvolve):  # mirrored samples are not data: no data term
+                img, outside = warp(return_outside=True)
+                unknown = outside if outside.any() else None
+            else:
+                img = warp()
+        if len(patches) == 1 and patches[0].shape == img.shape[:2]:
+            out = (deconvolve(img, psfs[0]) if unknown is None
+                   else deconvolve(img, psfs[0], unknown=unknown))
+            if progress:
+                progress(1, 1)
+        elif model == "global":
+            out = _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress,
+                                       longest)
         else:
-            img = warp()
-    if len(patches) == 1 and patches[0].shape == img.shape[:2]:
-        out = (deconvolve(img, psfs[0]) if unknown is None
-               else deconvolve(img, psfs[0], unknown=unknown))
-        if progress:
-            progress(1, 1)
-    elif model == "global":
-        out = _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress,
-                                   longest)
-    else:
-        out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
-                                   unknown=unknown,
-                                   workers=1 if method in _SERIAL_METHODS else None)
+            out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
+                                       unknown=unknown,
+                                       workers=1 if method in _SERIAL_METHODS else None)
     out = np.asarray(out, np.float32)
     if out.shape != img.shape:
         raise ValueError(f"method {method!r} returned an image of shape {out.shape} for a "
@@ -796,8 +794,9 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
     patches = check_blind_sizes((H, W), kernel_size, grid, overlap, max_pixels)
     psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
     if check_blur and _shows_no_blur(image, psfs[0], transfer):
-        _deconvolver(method, lin.copy() if np.may_share_memory(lin, image) else lin,
-                     encoded, clip, options)             # its options refused as always
+        with _one_call_at_a_time(method):                # its options refused as always
+            _deconvolver(method, lin.copy() if np.may_share_memory(lin, image) else lin,
+                         encoded, clip, options)
         delta = np.zeros_like(psfs[0])
         delta[kernel_size // 2, kernel_size // 2] = 1.0
         out = np.array(image, np.float32)

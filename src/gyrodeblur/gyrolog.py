@@ -31,21 +31,23 @@ Formats
 ``json``
     A JSON list of samples, one object each, as Sensor Logger's JSON export writes them
     (``{"sensor": "Gyroscope", "time": "1733380020401865728", "seconds_elapsed": "0.0",
-    "z": ..., "y": ..., "x": ...}``, values as numbers or as text): where the objects name
-    their ``sensor``, only the gyroscope's are kept. Their keys are read as a CSV log's
-    column names, by the same rules and options (:func:`read_json_log`).
+    "z": ..., "y": ..., "x": ...}``, values as numbers or as text), or one object per line
+    (JSON Lines): where the objects name their ``sensor``, only the gyroscope's are kept.
+    Their keys are read as a CSV log's column names, by the same rules and options
+    (:func:`read_json_log`).
 """
 
 from __future__ import annotations
 
 import csv
 import inspect
-import io
 import json
 import os
+import re
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -175,8 +177,8 @@ def _check_increasing(t: np.ndarray, source: str | None, unit: str | None = "s")
         i = int(np.argmax(dt <= 0))
         a, b = float(t[i + 1]), float(t[i])
 
-        def said(v: float) -> str:         # every digit: ns times differ in the last ones
-            if unit == "s":
+        def said(v: float) -> str:     # all its digits (ns times differ in the last ones,
+            if unit == "s":           # as float64 holds them: to 256 ns since 1970)
                 return f"{v:.6f} s"
             return f"{int(v)}" if v.is_integer() and abs(v) < 1e19 else repr(v)
 
@@ -245,9 +247,10 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
             check = f"the durations: {units}"
         scaled = next((unit for unit, f in (("ms", 1e3), ("us", 1e6), ("ns", 1e9))
                        if log.t[0] <= t0 / f <= log.t[-1]), None)
-        if scaled is not None and span <= 1.0:     # a start given in ms where s belong
-            check += (f"; read as {scaled}, the exposure's start falls in the log: give "
-                      f"exposure_start in seconds")
+        far = abs(t0) > 10 * max(abs(log.t[0]), abs(log.t[-1]), 1.0)
+        if scaled is not None and far and span <= 1.0:    # a start in ms where s belong?
+            check += (f"; if exposure_start is in {scaled}, give it in seconds: read as "
+                      f"{scaled} it falls in the log")
         raise InputError(src, f"gyro log covers {_secs(log.t[0])}..{_secs(log.t[-1])} s but the "
                               f"{what} needs {_secs(t0)}..{_secs(t1)} s (check {check})")
     gap, at = largest_step(log, t0, t1)
@@ -417,6 +420,9 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if format == "csv":
         return read_csv_log(path, **options)
     if format == "json":
+        if options.pop("delimiter", None) is not None:
+            warnings.warn(f"{path}: delimiter applies to CSV logs only; this log is json: "
+                          "ignored", stacklevel=2)
         return read_json_log(path, **options)
     return read_android_events(path)
 
@@ -442,7 +448,7 @@ def _guess_format(path: str) -> str:
     first = [ln for ln in _read_lines(path) if ln.strip() and not ln.lstrip().startswith("#")][:1]
     if first and first[0].strip().upper() in ("GYROFLOW IMU LOG", "CAMERA IMU LOG"):
         return "gcsv"
-    if first and first[0].lstrip().startswith(("[", "{")):
+    if first and re.match(r'\s*(\{\s*("|$)|\[\s*(\{|\]|$))', first[0]):  # not "[t] [ms],x"
         return "json"
     values = first[0].split() if first else []
     if len(values) >= 2 and values[0].isdigit() and all(is_number(v) for v in values):
@@ -526,22 +532,26 @@ def read_gcsv(path: str | os.PathLike) -> GyroLog:
 
 
 def _parse_numeric_rows(path: str, lines: list[str], columns: list[int], *, first_line: int,
-                        sep: str | None, names: list[str] | None = None,
-                        row: str = "line") -> np.ndarray:
+                        sep: str | None, names: list[str] | None = None) -> np.ndarray:
     """The values of ``columns`` (indices) on each non-blank line, as float64 rows; other
     columns are not read (a logger's date or label column may hold text). ``names`` (the
-    header) name a column whose value is not a number; ``row`` is what a message calls a
-    line (a JSON log's are its samples)."""
+    header) name a column whose value is not a number."""
     rows = _plain_numeric_rows(lines, columns, sep, names)
     if rows is None:
-        rows = _numeric_rows_one_by_one(path, lines, columns, first_line, sep, names, row)
+        rows = _numeric_rows_one_by_one(path, lines, columns, first_line, sep, names)
+    return _complete_rows(path, rows)
+
+
+def _complete_rows(path: str, rows: np.ndarray) -> np.ndarray:
+    """``rows`` without those with a missing (NaN) value, which a warning counts, and
+    without repeated ones (:func:`_without_repeats`)."""
     missing = np.isnan(rows).any(axis=1)      # (an infinite value is refused, not missing)
     if missing.any():          # phyphox writes NaN, a spreadsheet an empty cell
         rows = rows[~missing]
         if len(rows) == 0:
             raise InputError(path, "no data row holds a time and three rates")
         warnings.warn(f"{path}: {int(missing.sum())} sample(s) with a missing or NaN value "
-                      "skipped; an exposure they fall in sees a gap in the log", stacklevel=4)
+                      "skipped; an exposure they fall in sees a gap in the log", stacklevel=5)
     return _without_repeats(rows)
 
 
@@ -571,7 +581,7 @@ def _plain_numeric_rows(lines: list[str], columns: list[int], sep: str | None,
 
 def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
                              first_line: int, sep: str | None,
-                             names: list[str] | None, row_word: str = "line") -> np.ndarray:
+                             names: list[str] | None) -> np.ndarray:
     """:func:`_parse_numeric_rows`' rows, line by line (missing values as NaN)."""
     out = []
     need = max(columns) + 1
@@ -580,13 +590,18 @@ def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
     for k, line in enumerate(lines):
         if not line.strip():
             continue
-        parts = _fields(line, sep, path, f"{row_word} {first_line + k}")
+        parts = _fields(line, sep, path, f"line {first_line + k}")
         try:
             if len(parts) < need:
-                raise InputError(path, f"{row_word} {first_line + k}: expected {need} values, "
+                raise InputError(path, f"line {first_line + k}: expected {need} values, "
                                        f"got {len(parts)}")
+            if names and sep in (None, " ") and len(parts) != len(names):
+                raise InputError(path, f"line {first_line + k}: {len(parts)} values where the "
+                                       f"header names {len(names)} columns: split by spaces, "
+                                       "a missing value would move the others into its "
+                                       "column")
             if names and len(parts) > len(names) and any(v.strip() for v in parts[len(names):]):
-                raise InputError(path, f"{row_word} {first_line + k}: {len(parts)} values where the "
+                raise InputError(path, f"line {first_line + k}: {len(parts)} values where the "
                                        f"header names {len(names)} columns, so the columns "
                                        f"cannot be told apart (a value holding the delimiter "
                                        f"{sep!r} without quotes?)")
@@ -599,12 +614,12 @@ def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
                     row.append(parse_number(parts[c], decimal_comma=decimal_comma))
                 except ValueError:
                     what = f"column {names[c]!r}" if names else f"value {c + 1}"
-                    raise InputError(path, f"{row_word} {first_line + k}: {what} is not a number "
+                    raise InputError(path, f"line {first_line + k}: {what} is not a number "
                                            f"({parts[c].strip()!r})") from None
             out.append(row)
         except InputError:
-            if k == last and out and row_word == "line":   # a logger stopped in the
-                break                                         # middle of its last line
+            if k == last and out:      # a logger stopped in the middle of its last line
+                break
             raise
     if not out:
         raise InputError(path, "no data rows")
@@ -699,16 +714,19 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
             header, lines, skip = named, [comment] + lines, skip - 1
     if all(is_number(h) for h in header):
         raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
-    return _log_from_table(path, header, lines[1:], skip + 2, delimiter, "line",
-                           time_column, rate_columns, time_unit, rate_unit)
+    first_row = _fields(next((ln for ln in lines[1:] if ln.strip()), ""), delimiter, path,
+                        f"line {skip + 2}")
+    return _log_from_table(path, header, first_row, partial(
+        _parse_numeric_rows, path, lines[1:], first_line=skip + 2, sep=delimiter,
+        names=header), time_column, rate_columns, time_unit, rate_unit)
 
 
-def _log_from_table(path: str, header: list[str], lines: list[str], first_line: int,
-                    delimiter: str | None, row_word: str, time_column, rate_columns,
-                    time_unit, rate_unit) -> GyroLog:
-    """A CSV or JSON log's samples, from its column names ``header`` and its data
-    ``lines`` split by ``delimiter``, the first of them ``first_line`` (what messages call
-    a line: ``row_word``); the other arguments are :func:`read_csv_log`'s."""
+def _log_from_table(path: str, header: list[str], first_row: list[str], read_rows,
+                    time_column, rate_columns, time_unit, rate_unit) -> GyroLog:
+    """A CSV or JSON log's samples, from its column names ``header``, the text of its
+    first sample's values ``first_row``, and ``read_rows(columns)``, the float64 values of
+    those columns (indices) in every complete sample (:func:`_complete_rows`); the other
+    arguments are :func:`read_csv_log`'s."""
     def col(c, what: str) -> int:
         if isinstance(c, (int, np.integer)) and not isinstance(c, (bool, np.bool_)):
             i = int(c)
@@ -726,8 +744,6 @@ def _log_from_table(path: str, header: list[str], lines: list[str], first_line: 
                                    "counted from 0)")
         return i
 
-    first_row = _fields(next((ln for ln in lines if ln.strip()), ""), delimiter, path,
-                        f"{row_word} {first_line}")
     ti = (default_time_column(header, first_row) if time_column is None
           else col(time_column, "time_column"))
     if rate_columns is None:
@@ -768,8 +784,7 @@ def _log_from_table(path: str, header: list[str], lines: list[str], first_line: 
         if given is not None and stated is not None and given != stated:
             warnings.warn(f"{path}: the {name} given, {given}, overrides the {stated} that "
                           f"column {column!r} states", stacklevel=4)
-    rows = _parse_numeric_rows(path, lines, [ti] + ri, first_line=first_line,
-                               sep=delimiter, names=header, row=row_word)  # time, x, y, z
+    rows = read_rows([ti] + ri)                                          # time, x, y, z
     meta = {}
     if from_a_phone_app(header, ri):
         meta["axes"] = "phone device"
@@ -810,30 +825,60 @@ _CSV_OPTIONS = tuple(inspect.signature(read_csv_log).parameters)[1:]
 
 def read_json_log(path: str | os.PathLike, *, time_column: str | int | None = None,
                   rate_columns: tuple | None = None, time_unit: str | None = None,
-                  rate_unit: str | None = None, delimiter: str | None = None) -> GyroLog:
+                  rate_unit: str | None = None) -> GyroLog:
     """Read a JSON gyro log: a list of samples, one object each, as Sensor Logger's JSON
     export writes them (``[{"sensor": "Gyroscope", "time": "1733380020401865728",
-    "seconds_elapsed": "0.0", "z": "0.44", "y": "-0.32", "x": "0.34"}, ...]``).
+    "seconds_elapsed": "0.0", "z": "0.44", "y": "-0.32", "x": "0.34"}, ...]``), or one
+    object per line (JSON Lines).
 
     Where the samples name their ``sensor``, only the gyroscope's are kept (``Gyroscope``,
     or else the one sensor whose name starts with ``gyro``, such as an uncalibrated
-    gyroscope's). The keys are the columns, in the order they first appear; values may be
-    numbers or numbers written as text, and a sample without a key the log is read from
-    is skipped, with a warning. Which key holds the time and which the rates, and their
-    units, are worked out from the keys as for a CSV log's column names, with the same
-    options (:func:`read_csv_log`; ``delimiter`` does not apply). Sensor Logger's keys
-    (``time`` in ns since 1970, ``x``, ``y``, ``z`` in rad/s, device axes) need none.
+    gyroscope's; samples that name none are left out, with a warning). The keys are the
+    columns, in the order they first appear; values may be numbers or numbers written as
+    text, and a sample without a value the log is read from is skipped, with a warning.
+    Which key holds the time and which the rates, and their units, are worked out from
+    the keys as for a CSV log's column names, with the same options
+    (:func:`read_csv_log`). Sensor Logger's keys (``time`` in ns since 1970, ``x``, ``y``,
+    ``z`` in rad/s, device axes) need none. Messages count the file's objects from 1.
     """
     path = os.fspath(path)
+    numbered = list(enumerate(_json_samples(path, _read_text(path)), start=1))
+    numbered = _gyroscope_samples(path, numbered)
+    header: dict = {}
+    for _, r in numbered:
+        header.update(dict.fromkeys(r))
+    keys = list(header)
+    first = numbered[0][1]
+    first_row = [_json_text(first.get(k)) for k in keys]
+
+    def read_rows(columns: list[int]) -> np.ndarray:
+        return _complete_rows(path, _json_values(path, numbered, [keys[c] for c in columns]))
+
+    log = _log_from_table(path, [str(k).strip() for k in keys], first_row, read_rows,
+                          time_column, rate_columns, time_unit, rate_unit)
+    log.meta["format"] = "json"
+    return log
+
+
+def _json_samples(path: str, text: str) -> list:
+    """The samples of a JSON log's ``text``: its list of objects, or its lines' objects
+    (JSON Lines); refused naming ``path`` where it is neither."""
     try:
-        samples = json.loads(_read_text(path))
+        samples = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise InputError(path, f"not a JSON log: {exc.msg} (line {exc.lineno}, column "
-                               f"{exc.colno})") from None
+        if exc.msg == "Extra data" and text.lstrip().startswith("{"):   # JSON Lines
+            try:
+                samples = [json.loads(ln) for ln in text.splitlines() if ln.strip()]
+            except json.JSONDecodeError as exc2:
+                raise InputError(path, f"not a JSON log: {exc2.msg} (in one of its lines, "
+                                       f"column {exc2.colno})") from None
+        else:
+            raise InputError(path, f"not a JSON log: {exc.msg} (line {exc.lineno}, column "
+                                   f"{exc.colno})") from None
     except RecursionError:
         raise InputError(path, "not a JSON log: nested too deeply") from None
     if isinstance(samples, dict):
-        keys = ", ".join(list(samples)[:6]) + (", ..." if len(samples) > 6 else "")
+        keys = ", ".join(map(str, list(samples)[:6])) + (", ..." if len(samples) > 6 else "")
         raise InputError(path, f"a JSON log must be a list of samples, one object each (as "
                                f"Sensor Logger's JSON export); this file holds one object "
                                f"(keys: {keys or 'none'})")
@@ -842,51 +887,73 @@ def read_json_log(path: str | os.PathLike, *, time_column: str | int | None = No
                 + next(type(r).__name__ for r in samples if not isinstance(r, dict)))
         raise InputError(path, f"a JSON log must be a list of samples, one object each (as "
                                f"Sensor Logger's JSON export); this file holds {kind}")
-    samples = _gyroscope_samples(path, samples)
-    header: dict[str, None] = {}
-    for r in samples:
-        header.update(dict.fromkeys(r))
-    names = list(header)
-    out = io.StringIO()
-    csv.writer(out, lineterminator="\n").writerows(
-        [_json_text(r.get(k)) for k in names] for r in samples)
-    lines = out.getvalue().splitlines()
-    log = _log_from_table(path, [str(k).strip() for k in names], lines, 1, ",", "sample",
-                          time_column, rate_columns, time_unit, rate_unit)
-    log.meta["format"] = "json"
-    return log
-
-
-def _gyroscope_samples(path: str, samples: list[dict]) -> list[dict]:
-    """The samples of a JSON log that are the gyroscope's, where they name a ``sensor``
-    (:func:`read_json_log`); all of them where none does."""
     if not samples:
         raise InputError(path, "no samples (an empty list)")
-    named = {str(r["sensor"]).strip() for r in samples if "sensor" in r}
-    if not named:
-        return samples
-    gyro = [n for n in named if n.lower() in ("gyroscope", "gyro")]
+    return samples
+
+
+def _gyroscope_samples(path: str, numbered: list) -> list:
+    """The ``(number, sample)`` pairs of a JSON log that are the gyroscope's, where the
+    samples name a ``sensor`` (:func:`read_json_log`); all of them where none does."""
+    as_written = {str(r["sensor"]).strip() for _, r in numbered if "sensor" in r}
+    if not as_written:
+        return numbered
+    named = {n.lower() for n in as_written}            # "Gyroscope" and "gyroscope" alike
+    gyro = [n for n in named if n in ("gyroscope", "gyro")]
     if not gyro:
-        gyro = [n for n in named if n.lower().startswith("gyro")]
+        gyro = [n for n in named if n.startswith("gyro")]
     if len(gyro) != 1:
-        said = ", ".join(sorted(named)[:8]) + (", ..." if len(named) > 8 else "")
+        said = ", ".join(sorted(as_written)[:8]) + (", ..." if len(as_written) > 8 else "")
         problem = ("no gyroscope samples" if not gyro
                    else "samples of several gyroscopes, and which to read is not clear")
         raise InputError(path, f"{problem} (the samples' sensors: {said}); export the "
                                "gyroscope's alone")
-    return [r for r in samples if str(r.get("sensor", "")).strip() == gyro[0]]
+    unnamed = sum("sensor" not in r for _, r in numbered)
+    if unnamed:
+        warnings.warn(f"{path}: {unnamed} sample(s) name no sensor, where the others do: "
+                      f"left out (only the {gyro[0]} samples are read)", stacklevel=4)
+    return [(n, r) for n, r in numbered if str(r.get("sensor", "")).strip().lower() == gyro[0]]
+
+
+def _json_values(path: str, numbered: list, keys: list) -> np.ndarray:
+    """The values of ``keys`` in each ``(number, sample)`` pair, as float64 rows (NaN where
+    missing, null or empty); one that is not a number is refused by its sample's number."""
+    out = np.empty((len(numbered), len(keys)))
+    for j, k in enumerate(keys):
+        values = [r.get(k) for _, r in numbered]
+        if not any(isinstance(v, bool) for v in values):
+            try:                                  # numbers, or numbers as text: at once
+                out[:, j] = np.asarray(values, dtype=np.float64)
+                continue
+            except (TypeError, ValueError, OverflowError):
+                pass                              # (None, "", "0,5", text): one by one
+        _json_column_one_by_one(path, numbered, k, out[:, j])
+    return out
+
+
+def _json_column_one_by_one(path: str, numbered: list, k, out: np.ndarray) -> None:
+    """:func:`_json_values`' column of key ``k`` into ``out``, sample by sample."""
+    for i, (n, r) in enumerate(numbered):
+        v = r.get(k)
+        if v is None or (isinstance(v, str) and not v.strip()):
+            out[i] = np.nan
+            continue
+        try:
+            if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+                raise ValueError
+            out[i] = parse_number(v) if isinstance(v, str) else float(v)
+        except (ValueError, OverflowError):
+            raise InputError(path, f"sample {n}: {k!r} is not a number "
+                                   f"({_json_text(v)[:40]!r})") from None
 
 
 def _json_text(value) -> str:
-    """A JSON sample's value as a CSV field: a number or text as written, none empty
-    (a missing value)."""
+    """A JSON value as its text (a number or a string as written; none empty)."""
     if value is None:
         return ""
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, (int, float, str)):
-        return str(value)
-    return json.dumps(value)[:40]
+    if isinstance(value, str):
+        return value
+    return json.dumps(value)
 
 
 def read_android_events(path: str | os.PathLike) -> GyroLog:

@@ -749,7 +749,7 @@ def _refuse_far_outside(path: str, values: np.ndarray, keep_bright: bool,
     if not keep_bright and high > PHOTO_MAX and float(np.median(some)) > 1.0:
         raise InputError(path, f"float samples up to {high:.4g}, most of them above 1; "
                                "expected light in [0, 1] (divide 0-255 values by 255, "
-                               "0-65535 ones by 65535)")
+                               "0-65535 ones by 65535; scale or clip an HDR image)")
     if not keep_dark and np.count_nonzero(values < PHOTO_MIN) > 0.01 * values.size:
         raise InputError(path, f"float samples down to {float(values.min()):.4g}; expected "
                                "light in [0, 1] (light is never below black: is it offset "
