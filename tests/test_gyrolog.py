@@ -610,6 +610,14 @@ def test_a_log_of_several_sensors_takes_the_gyros_own_timestamps(tmp_path, trace
     # a column named by the caller is taken as it is
     log = read_gyro_log(p, time_column="accelerometerTimestamp_sinceReboot(s)")
     np.testing.assert_allclose(log.t, trace.t + 0.006, atol=1e-9)
+    # an export of Core Motion's rates alone: theirs, with their own time
+    keep = [0] + [i for i, n in enumerate(names) if n.startswith("motion")]
+    p.write_text(",".join(names[i] for i in keep) + "\n" + "\n".join(
+        ",".join(r.split(",")[i] for i in keep) for r in rows) + "\n")
+    log = read_gyro_log(p)
+    np.testing.assert_allclose(log.t, trace.t + 0.001, atol=1e-9)
+    np.testing.assert_allclose(log.omega, 0.9 * trace.omega)
+    assert log.meta.get("axes") == "phone device"
 
 
 @pytest.mark.parametrize("names", [

@@ -112,11 +112,12 @@ def time_unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
 
 #: What may come before a rate column's axis letter (lower case, letters only): ``x``,
 #: ``wx``, ``gx``, ``gyro_x``, ``gyroX``, ``omega_x``, ``rotationRateX``, ``gyroRotationX``
-#: (the iOS SensorLog app),
+#: and ``motionRotationRateX`` (the iOS SensorLog app's gyroscope and Core Motion's
+#: bias-corrected rate of it),
 #: ``angular_velocity_x`` (an accelerometer's ``ax`` or ``acc_x`` is none of them).
 _RATE_PREFIXES = frozenset({"", "w", "g", "gyr", "gyro", "gyroscope", "omega", "rot",
                             "rotation", "rotationrate", "rate", "angularvelocity", "angvel",
-                            "gyrorotation", "gyrorotationrate"})
+                            "gyrorotation", "gyrorotationrate", "motionrotationrate"})
 #: What may follow the axis letter instead: ``x_gyro``, ``xGyro``, ``x_rate``.
 _RATE_SUFFIXES = frozenset({"gyr", "gyro", "gyroscope", "omega", "rate", "rot"})
 
@@ -222,12 +223,19 @@ def _is_numeric_field(row: list[str] | None, i: int) -> bool:
 def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
     """The x, y, z rate columns of a CSV header when none are given: by name when the names
     say which axis each column holds, whatever their order (Sensor Logger writes
-    ``time,seconds_elapsed,z,y,x``); else the three columns after the time column, unless a
-    name there contradicts that (an axis out of place, or a time) or the file has other
-    columns too (which three would be a guess)."""
+    ``time,seconds_elapsed,z,y,x``), the gyroscope's where two sensors' names do (iOS
+    SensorLog's ``gyroRotationX``, not Core Motion's ``motionRotationRateX``); else the
+    three columns after the time column, unless a name there contradicts that (an axis out
+    of place, or a time) or the file has other columns too (which three would be a guess)."""
     named = {a: [i for i, h in enumerate(header) if i != ti and rate_axis(h) == a]
              for a in "xyz"}
     where = "; name them in the capture's gyro.rate_columns"
+    sensors = {i: _sensor_of(header[i]) for cols in named.values() for i in cols}
+    if any(len(cols) > 1 for cols in named.values()) and all(sensors.values()):
+        gyro = {a: [i for i in cols if sensors[i] == _GYRO_WORDS]   # each names its sensor:
+                for a, cols in named.items()}                       # the gyroscope's own
+        if all(len(cols) == 1 for cols in gyro.values()):
+            return [gyro[a][0] for a in "xyz"]    # SensorLog's gyroRotationX, not motion's
     for a, cols in named.items():
         if len(cols) > 1:
             raise InputError(path, f"columns {', '.join(header[i] for i in cols)} could each "
