@@ -16,7 +16,9 @@ Methods (the registry :func:`registry`, ``name -> (callable(case) -> image, note
 * ``skimage-wiener``: ``skimage.restoration.wiener`` (balance 0.01, its default Laplacian
   regulariser; the best of 0.005-0.1 on 4 cases at 512 px, by < 0.2 dB)
   and ``skimage-rl``: ``skimage.restoration.richardson_lucy`` (30 iterations),
-  both given the true PSF at the image centre (the one ``wiener-invariant`` uses), per
+  both given the true PSF at the image centre (the one ``wiener-invariant`` uses; for
+  Richardson-Lucy, which needs a kernel without negative values, its windowed-sinc
+  lobes clipped at 0 and the rest normalised: with them it diverged, session 60), per
   channel, in linear light like ours; no padding (scikit-image's wiener wraps around
   periodically, richardson_lucy's convolutions assume zeros outside), as a user would
   call them;
@@ -102,7 +104,8 @@ def _skimage_wiener(case):
 def _skimage_rl(case):
     from skimage.restoration import richardson_lucy
 
-    psf = centre_psf(case).astype(np.float64)
+    psf = np.clip(centre_psf(case).astype(np.float64), 0.0, None)   # RL's kernel is >= 0
+    psf /= psf.sum()
     return _per_channel_linear(case.blurred, lambda ch: richardson_lucy(
         ch, psf, num_iter=SKIMAGE_RL_ITERATIONS, clip=False))
 
@@ -159,7 +162,8 @@ def registry() -> dict[str, tuple[Callable, str]]:
                            "true centre PSF, per channel, linear light, no padding"),
         "skimage-rl": (_skimage_rl,
                        f"skimage.restoration.richardson_lucy, {SKIMAGE_RL_ITERATIONS} "
-                       "iterations, true centre PSF, per channel, linear light, no padding"),
+                       "iterations, true centre PSF clipped at 0, per channel, linear light, "
+                       "no padding"),
     }
     if _supports("align"):
         reg["wiener-aligned"] = (_deblur("wiener", "variant", grid="auto", align=True),

@@ -1566,20 +1566,31 @@ def test_a_psf_field_npy_is_the_field_for_the_overlap_given_each_psf_centred(cap
         o = (k - p.shape[0]) // 2
         np.testing.assert_array_equal(stack[i, o:o + p.shape[0], o:o + p.shape[1]], p)
         assert stack[i].sum() == pytest.approx(1.0, abs=1e-5)
+    # a .npz keeps each PSF's pixel and the grid beside the same stack
+    assert main(["psf", "--capture", str(d / "cap.json"), "--grid", "3x4", "--overlap", "0",
+                 "-o", str(d / "f.npz")]) == 0
+    with np.load(d / "f.npz") as saved:
+        np.testing.assert_array_equal(saved["psfs"], stack)
+        np.testing.assert_array_equal(saved["centres_xy"], fields[0.0].points)
+        assert saved["grid"].tolist() == [3, 4]
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "30,40", "-o",
+                 str(d / "p.npz")]) == 0
+    with np.load(d / "p.npz") as saved:
+        assert saved["psfs"].shape[0] == 1 and saved["centres_xy"].tolist() == [[30, 40]]
 
 
 def test_psf_takes_one_of_at_and_grid_a_pixel_of_the_frame_and_npy_or_png(capture_dir, capsys):
     """``--at`` and ``--grid`` together (or neither) are refused; ``--at`` must be a pixel
     centre of the frame: x up to width - 1 and y up to height - 1, not the width; the
-    output is a .npy or a .png, nothing else."""
+    output is a .npy, a .npz or a .png, nothing else."""
     d = capture_dir
     base = ["psf", "--capture", str(d / "cap.json"), "-o", str(d / "p.npy")]
     for extra in (["--at", "5,5", "--grid", "2x2"], []):
         assert "give exactly one of --at X,Y or --grid RxC" in _run_error(base + extra, capsys)
     for at in ("256,0", "0,192"):
         assert "is not a pixel of the 256x192 frame" in _run_error(base + ["--at", at], capsys)
-    for name in ("p.jpg", "p.npz"):                          # the two formats only
-        assert f"{name}: output must end in .npy or .png" in _run_error(
+    for name in ("p.jpg", "p.npx"):                          # the three formats only
+        assert f"{name}: output must end in .npy, .npz or .png" in _run_error(
             ["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "-o", str(d / name)],
             capsys)
     assert not [p for p in d.iterdir() if p.name.startswith("p.")]

@@ -86,6 +86,8 @@ def test_fixed_exposure_and_options():
 def test_layout_on_disk(on_disk, cases):
     index = json.loads((on_disk / "dataset.json").read_text())
     assert index["cases"] == [c.name for c in cases]
+    assert index["made_with"]["gyrodeblur"]             # the defaults' paths, resolved:
+    assert None not in index["made_with"].values()      # the record of what was used
     for c in cases:
         folder = on_disk / c.name
         assert {p.name for p in folder.iterdir()} == FILES
@@ -285,6 +287,9 @@ def test_a_rebuild_replaces_the_dataset_and_records_absolute_paths(tmp_path, mon
     index = json.loads((tmp_path / "ds" / "dataset.json").read_text())
     assert index["options"]["gyro"] == str(tmp_path / "shake.gcsv")
     assert index["options"]["photos"] == str(tmp_path / "photos")
+    from gyrodeblur import __version__
+    assert index["made_with"] == {"gyrodeblur": __version__, "gyro": str(tmp_path / "shake.gcsv"),
+                                  "photos": str(tmp_path / "photos")}
     assert [c.name for c in load_dataset(tmp_path / "ds")] == ["a_w0"]
 
 
@@ -408,3 +413,20 @@ def test_a_rebuild_removes_only_former_case_folders(tmp_path):
     assert (outer / "case.json").is_file() and (ds / "mine" / "notes.txt").is_file()
     assert sorted(p.name for p in ds.iterdir()) == ["a_w0", "case.json", "dataset.json",
                                                     "mine"]
+
+
+@pytest.mark.parametrize("options,what", [
+    (["--snr", "nan"], "snr_db: must be a finite number of dB"),
+    (["--snr", "inf"], "snr_db: must be a finite number of dB"),     # "Infinity" in case.json
+    (["--windows", "0"], "windows_per_photo: must be a whole number >= 1, got 0"),
+    (["--max-photos", "-2"], "max_photos: must be a whole number >= 1, got -2"),
+])
+def test_build_numbers_no_case_could_be_built_with_are_refused_first(tmp_path, capsys,
+                                                                     options, what):
+    """A NaN SNR had failed deep in the first case (a traceback, a half-written folder),
+    an infinite one had been written as JSON's invalid ``Infinity``, and no windows had
+    written an empty dataset with exit status 0."""
+    from gyrodeblur.dataset import main
+    assert main([str(tmp_path / "ds"), *options]) == 2
+    assert what in capsys.readouterr().err
+    assert not (tmp_path / "ds").exists()

@@ -364,8 +364,8 @@ def cmd_psf(args, say) -> None:
     if args.at is not None and args.overlap is not None:
         raise InputError("--overlap", "applies with --grid only (one PSF at --at has no patches)")
     out = args.output
-    if not out.lower().endswith((".npy", ".png")):
-        raise InputError(out, "output must end in .npy or .png")
+    if not out.lower().endswith((".npy", ".npz", ".png")):
+        raise InputError(out, "output must end in .npy, .npz or .png")
     _check_output(out, None, args.overwrite, image=out.lower().endswith(".png"))
     at = None if args.at is None else _pair(args.at, "--at", float, sep=",")
     grid = None if args.grid is None else _pair(args.grid, "--grid")
@@ -380,6 +380,9 @@ def cmd_psf(args, say) -> None:
         psf = render_psf(cap, x, y)
         if out.lower().endswith(".npy"):
             _atomic_npy(out, psf)
+        elif out.lower().endswith(".npz"):
+            _atomic_npz(out, psfs=psf[None], centres_xy=np.array([[x, y]]),
+                        grid=np.array([1, 1]))
         else:
             _write_picture(out, psf_image(psf), args.overwrite)
         say(f"PSF at ({x:g}, {y:g}): {psf.shape[0]}x{psf.shape[1]} px -> {out}")
@@ -388,17 +391,27 @@ def cmd_psf(args, say) -> None:
     _, field, notes = plan_psf_field(cap, (cam.height, cam.width), grid=grid,
                                      overlap=DEFAULT_OVERLAP if args.overlap is None
                                      else args.overlap, max_fraction=np.inf)
-    if out.lower().endswith(".npy"):
+    if out.lower().endswith((".npy", ".npz")):
         k = max(p.shape[0] for p in field.psfs)
         stack = np.zeros((len(field.psfs), k, k), np.float32)
         for i, p in enumerate(field.psfs):
             o = (k - p.shape[0]) // 2
             stack[i, o:o + p.shape[0], o:o + p.shape[1]] = p
-        _atomic_npy(out, stack)
+        if out.lower().endswith(".npy"):
+            _atomic_npy(out, stack)
+        else:
+            _atomic_npz(out, psfs=stack, centres_xy=np.asarray(field.points, np.float64),
+                        grid=np.array(field.grid))
     else:
         _write_picture(out, field_image(field, cam.width, cam.height), args.overwrite)
     e = field.extents
     say(f"PSF field {grid[0]}x{grid[1]} over {cam.width}x{cam.height}: extent {e.min()}-{e.max()} px -> {out}")
+
+
+def _atomic_npz(path: str, **arrays) -> None:
+    """``arrays`` in one ``.npz`` file at ``path``, atomically."""
+    from .atomicfile import atomic_write
+    atomic_write(path, lambda f: np.savez(f, **arrays))
 
 
 def _atomic_npy(path: str, array: np.ndarray) -> None:
@@ -900,12 +913,14 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Render the point-spread function the gyro log implies: at one "
                        "pixel (--at X,Y, pixels) or on a patch grid (--grid RxC). Output .npy "
                        "(float32, sums to 1, odd-sized, centred on the pixel; a grid gives an "
-                       "N x K x K stack, row-major) or .png (a picture). " + FRAMES_HELP)
+                       "N x K x K stack, row-major), .npz (that stack as 'psfs', with "
+                       "'centres_xy', each PSF's pixel (x, y), and 'grid', rows and columns) "
+                       "or .png (a picture). " + FRAMES_HELP)
     s.add_argument("--at", metavar="X,Y", help="pixel position (x right, y down, pixels)")
     s.add_argument("--grid", metavar="RxC", help="patch grid, e.g. 6x8")
     s.add_argument("--overlap", type=float, default=None,
                    help=f"patch overlap fraction, with --grid (default {DEFAULT_OVERLAP:g})")
-    s.add_argument("-o", "--output", required=True, metavar="OUT.npy|OUT.png")
+    s.add_argument("-o", "--output", required=True, metavar="OUT.npy|OUT.npz|OUT.png")
     s.add_argument("--overwrite", action="store_true",
                    help="write over an existing output file (never over an input)")
     _add_capture_options(s)

@@ -386,6 +386,10 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
     Returns
     -------
     ndarray, float32, shape (2r+1, 2r+1), sums to 1.
+        Each trace sample is spread by a windowed sinc (Lanczos), the band-limited blur a
+        pixel grid holds, so the PSF rings a little below zero beside a thin trace. A
+        method that needs a kernel without negative values (Richardson-Lucy) wants it
+        clipped at 0 and normalised again: ``k = np.clip(psf, 0, None); k /= k.sum()``.
 
     Raises
     ------

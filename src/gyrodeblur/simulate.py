@@ -185,7 +185,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         operator).
     snr_db : float, optional
         Signal-to-noise ratio of the result (dB): white Gaussian noise is added to the
-        blurred light (as a sensor's), before the curve, with the one standard deviation
+        blurred light (as a sensor's read noise; there is no shot noise, which grows with
+        the light), before the curve, with the one standard deviation
         that makes its rms after the curve ``std(result) / 10**(snr_db / 20)`` (to first
         order: dark pixels, where sRGB is steep, get more of it, and what falls below
         black is clipped). With ``transfer="linear"`` that is ``std(blurred) /
@@ -303,9 +304,9 @@ _NOISE_STEPS = 8
 
 def _add_light_noise(light: np.ndarray, curve: TransferCurve, snr_db: float,
                      seed=None) -> np.ndarray:
-    """White Gaussian noise added to ``light`` (linear, as a sensor's), its one standard
-    deviation chosen so that the photo ``curve`` encodes from it (light below black
-    clipped) has ``snr_db``: the std of the noise after the curve is ``std(encoded) /
+    """White Gaussian noise added to ``light`` (linear, as a sensor's read noise), its one
+    standard deviation chosen so that the photo ``curve`` encodes from it (light below
+    black clipped) has ``snr_db``: the std of the noise after the curve is ``std(encoded) /
     10**(snr_db / 20)``. Dark pixels, where sRGB is steep, get more of it, as in a
     camera's photo. The first guess scales by the curve's rms slope; then the noise drawn
     is rescaled until its std after the curve is within 0.5 % of that (up to
