@@ -1935,3 +1935,21 @@ def test_the_wiener_method_says_when_it_raises_its_phi(capture_dir, capsys):
     assert main(["deblur", str(d / "clean.png"), "--capture", str(d / "cap.json"),
                  "--method", "wiener", "-o", str(d / "clean_out.png")]) == 0
     assert "Wiener filter: phi" not in capsys.readouterr().out
+
+
+def test_simulate_adds_shot_noise_given_a_full_well(capture_dir, capsys):
+    """``--full-well N`` adds photon shot noise (with or without ``--snr-db``; ``--seed``
+    then applies), said in the summary; a count that is no sensor's is refused."""
+    d = capture_dir
+    base = ["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "--bit-depth",
+            "16"]
+    assert main(base + ["-o", str(d / "clean.png")]) == 0
+    for name in ("a", "b"):
+        assert main(base + ["-o", str(d / f"{name}.png"), "--full-well", "300",
+                            "--seed", "7"]) == 0
+    assert "shot noise of 300 e- at white" in capsys.readouterr().out
+    clean, a, b = (read_photo(d / f"{n}.png").pixels for n in ("clean", "a", "b"))
+    assert np.array_equal(a, b) and 0.005 < np.std(a - clean) < 0.05
+    for bad in ("0", "nan"):
+        assert "--full-well: must be 1 to 1e9 electrons" in _run_error(
+            base + ["-o", str(d / "x.png"), "--full-well", bad], capsys)

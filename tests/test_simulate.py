@@ -332,3 +332,29 @@ def test_snr_db_is_the_encoded_photos_with_the_noise_added_as_light(make_capture
     dark, bright = clean < 0.15, clean > 0.6
     assert dark.mean() > 0.05 and bright.mean() > 0.05
     assert err[dark].std() > 3 * err[bright].std()
+
+
+def test_shot_noise_grows_with_the_light_and_leaves_the_read_noise_as_it_was(make_capture):
+    """``full_well``: each pixel's light L becomes Poisson(L * full_well) / full_well, so
+    its variance is L / full_well (measured on flat bands of three levels, in linear
+    light, where a blur changes nothing); the read noise of ``snr_db`` is drawn as
+    without it (a seed gives the same), and bad counts are refused before the work."""
+    cap = make_capture((0.0, 0.3, 0.0), width=240, height=180, f=200.0)
+    levels = (0.05, 0.2, 0.8)
+    sharp = np.repeat(np.repeat(np.array(levels, np.float32), 60)[:, None], 240, axis=1)
+    clean = simulate_blur(sharp, cap, transfer="linear")
+    shot = simulate_blur(sharp, cap, transfer="linear", full_well=400.0, seed=2)
+    for k, level in enumerate(levels):
+        band = (shot - clean)[60 * k + 15:60 * k + 45, 20:-20]
+        assert abs(band.mean()) < 0.05 * np.sqrt(level / 400.0)
+        assert band.var() == pytest.approx(level / 400.0, rel=0.1), level
+    read = simulate_blur(sharp, cap, transfer="linear", snr_db=30.0, seed=5)
+    both = simulate_blur(sharp, cap, transfer="linear", snr_db=30.0, seed=5, full_well=1e9)
+    assert np.abs(both - read).max() < 1e-3 < np.abs(read - clean).max()   # ~3e-5 of shot
+    assert np.array_equal(simulate_blur(sharp, cap, transfer="linear", full_well=400.0,
+                                        seed=2), shot)
+    for bad in (0.5, np.nan, 1e12):
+        with pytest.raises(ValueError, match="full_well must be"):
+            simulate_blur(sharp, cap, full_well=bad)
+    with pytest.raises(TypeError, match="full_well must be a number"):
+        simulate_blur(sharp, cap, full_well="400")

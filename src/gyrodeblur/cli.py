@@ -432,8 +432,13 @@ def cmd_simulate(args, say) -> None:
         raise InputError("--snr-db", f"must be a finite number of dB, got {args.snr_db!r}")
     if args.seed is not None and args.seed < 0:
         raise InputError("--seed", f"must be a non-negative integer, got {args.seed}")
-    if args.seed is not None and args.snr_db is None:
-        raise InputError("--seed", "seeds the noise: it applies with --snr-db only")
+    if args.full_well is not None and not (np.isfinite(args.full_well)
+                                           and 1 <= args.full_well <= 1e9):
+        raise InputError("--full-well", f"must be 1 to 1e9 electrons at white, got "
+                                        f"{args.full_well!r}")
+    if args.seed is not None and args.snr_db is None and args.full_well is None:
+        raise InputError("--seed", "seeds the noise: it applies with --snr-db or --full-well "
+                                   "only")
     cap = _load_capture(args, photo, say, exif_start=False)
     _check_not_over_capture(cap, args.overwrite, args.output)
     curve = said_transfer_curve(given, args.transfer, say)
@@ -449,14 +454,17 @@ def cmd_simulate(args, say) -> None:
     t0 = time.perf_counter()
     colour, alpha = split_alpha(photo.pixels)
     blurred = simulate_blur(colour, cap, snr_db=args.snr_db, seed=args.seed,
-                            order={"cubic": 3, "bilinear": 1}[args.sampling], transfer=curve)
+                            order={"cubic": 3, "bilinear": 1}[args.sampling], transfer=curve,
+                            full_well=args.full_well)
     blurred = np.clip(blurred, 0.0, 1.0)         # lights above white: clipped after the blur
     if args.bit_depth == 8 or (args.bit_depth is None and photo.bit_depth == 8):
         blurred = quantize_8bit(blurred)
     blurred = to_photo_layout(join_alpha(blurred, alpha), args.photo_rotation)
     write_photo(args.output, blurred, like=given, bit_depth=args.bit_depth,
                 overwrite=args.overwrite)
-    snr = "no noise" if args.snr_db is None else f"SNR {args.snr_db:g} dB"
+    noise = ([] if args.snr_db is None else [f"SNR {args.snr_db:g} dB"]) + (
+        [] if args.full_well is None else [f"shot noise of {args.full_well:g} e- at white"])
+    snr = ", ".join(noise) or "no noise"
     gh, gw = given.pixels.shape[:2]
     say(f"simulated {args.sharp} -> {args.output}: {gw}x{gh}, {snr}, {time.perf_counter() - t0:.2f} s")
 
@@ -935,6 +943,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--snr-db", type=float, default=None,
                    help="add Gaussian noise to the blurred light, so that the photo written "
                         "has this SNR (dB: its std over the noise's)")
+    s.add_argument("--full-well", type=float, default=None, metavar="ELECTRONS",
+                   help="add photon shot noise too: the electrons a pixel collects at white "
+                        "(a phone: several thousand at base ISO, hundreds at a high one); "
+                        "bright pixels get more noise than dark ones, in light")
     s.add_argument("--seed", type=int, default=None, help="noise seed")
     s.add_argument("--sampling", choices=("cubic", "bilinear"), default="cubic",
                    help="sampling of the sharp photo between pixels: cubic spline (default; a "

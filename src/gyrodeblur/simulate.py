@@ -156,7 +156,8 @@ def warp_samples(capture: Capture, max_step: float = MAX_STEP_PX) -> int:
 def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None = None,
                   seed: int | None = None, quantize: bool = False,
                   n_samples: int | None = None, order: int = 3,
-                  transfer: str | TransferCurve = "srgb") -> np.ndarray:
+                  transfer: str | TransferCurve = "srgb",
+                  full_well: float | None = None) -> np.ndarray:
     """Blur ``sharp`` by the camera rotation recorded in ``capture``.
 
     Parameters
@@ -192,8 +193,16 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         black is clipped). With ``transfer="linear"`` that is ``std(blurred) /
         10**(snr_db / 20)`` in the image's own values. (The benchmark datasets instead add
         noise of that std to the encoded photo, :func:`gyrodeblur.dataset.render_case`.)
+    full_well : float, optional
+        Photon shot noise as well: the electrons a pixel collects at white (light 1),
+        e.g. several thousand for a phone's sensor at its base ISO, a few hundred at a
+        high one. Each pixel's blurred light ``L`` (each channel on its own) becomes
+        ``Poisson(L * full_well) / full_well``, its variance ``L / full_well``: bright
+        pixels get more noise than dark ones, in light. Added to ``snr_db``'s read noise
+        (which it does not change); ``None`` (default): none.
     seed : int, sequence of int, numpy Generator or SeedSequence, optional
-        Seed of the noise generator.
+        Seed of the noise generator (the read noise is drawn first, as without
+        ``full_well``, so that a seed gives the same read noise either way).
     quantize : bool
         Clip to [0, 1] and round to 8-bit levels (k / 255).
     n_samples : int, optional
@@ -220,7 +229,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     TypeError
         ``capture``, ``snr_db``, ``seed`` or ``quantize`` of the wrong kind.
     ValueError
-        A bad ``order``, ``n_samples`` or ``snr_db``, an image whose aspect ratio is not
+        A bad ``order``, ``n_samples``, ``snr_db`` or ``full_well``, an image whose aspect
+        ratio is not
         the camera's (an :class:`InputError`), or a rotation that carries pixels to
         infinity (by 90 degrees or more).
 
@@ -248,6 +258,10 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         snr_db = check_real(snr_db, "snr_db")
         if not -100.0 <= snr_db <= 300.0:     # checked before the work, not after it
             raise ValueError(f"snr_db must be -100 to 300 dB, got {snr_db!r}")
+    if full_well is not None:
+        full_well = check_real(full_well, "full_well")
+        if not 1.0 <= full_well <= 1e9:       # a count of electrons
+            raise ValueError(f"full_well must be 1 to 1e9 electrons at white, got {full_well!r}")
     check_seed(seed)
     quantize = check_flag(quantize, "quantize")
     check_capture(capture)
@@ -285,9 +299,13 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     capture.orientation              # integrated once, before the bands share it
     for_row_bands(band, H)           # np.take and ufuncs release the GIL: one band per core
     out = np.ascontiguousarray(np.moveaxis(acc, 0, -1) / n).reshape(img.shape)
+    rng = np.random.default_rng(seed)          # (a Generator given is used as it is)
+    clean = out
     if snr_db is not None:
-        out = (add_noise(out, snr_db, seed) if linear
-               else _add_light_noise(out, curve, snr_db, seed))
+        out = (add_noise(out, snr_db, rng) if linear
+               else _add_light_noise(out, curve, snr_db, rng))
+    if full_well is not None:
+        out = out + _shot_noise(clean, full_well, rng)
     if not linear:          # an encoded photo holds no light below black, as a camera's
         np.maximum(out, 0.0, out=out)
     out = curve.encode(out)
@@ -323,6 +341,13 @@ def _add_light_noise(light: np.ndarray, curve: TransferCurve, snr_db: float,
             break
         sigma *= target / got
     return (light + sigma * z).astype(np.float32)
+
+
+def _shot_noise(light: np.ndarray, full_well: float, rng) -> np.ndarray:
+    """Photon shot noise of ``light`` (linear; 1 = white): ``Poisson(L * full_well) /
+    full_well - L`` per sample, float32 (light below black collects no photons)."""
+    lit = np.maximum(light, 0.0).astype(np.float64)
+    return (rng.poisson(lit * full_well) / full_well - lit).astype(np.float32)
 
 
 def add_noise(image: np.ndarray, snr_db: float, seed: int | None = None) -> np.ndarray:
