@@ -125,7 +125,7 @@ def test_a_method_of_ones_own_gets_what_it_names(scene, make_capture, own_method
 
 
 def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
-        scene, make_capture, own_method):
+        scene, make_capture, own_method, monkeypatch):
     cap = make_capture([0.0, 0.4, 0.1], width=128, height=96, f=120.0)
     blurred = simulate_blur(scene, cap, transfer="linear")
     busy = threading.Lock()
@@ -158,14 +158,24 @@ def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
     for c in calls:
         c.join()
     assert overlaps == [] and done == [blurred.shape] * 2
-    # the built-in sparse method registered so keeps its global model
-    sparse = METHODS["sparse"]
+    # the built-in sparse method registered so keeps its global model, whose patch-wise
+    # start then solves its patches one at a time too
+    import gyrodeblur.deblur as deblur_module
+
+    sparse, patchwise, workers = METHODS["sparse"], deblur_module.deconvolve_patchwise, []
+
+    def spy(*args, **kwargs):
+        workers.append(kwargs.get("workers"))
+        return patchwise(*args, **kwargs)
+
+    monkeypatch.setattr(deblur_module, "deconvolve_patchwise", spy)
     alone = deblur(blurred, cap, grid=(2, 2), model="global")
     try:
         register_method("sparse", sparse, thread_safe=False)
         assert np.array_equal(deblur(blurred, cap, grid=(2, 2), model="global"), alone)
     finally:
         register_method("sparse", sparse)
+    assert workers == [None, 1]
     # its flags are flags: "no" is not read as true (nor registered)
     for flag in ("thread_safe", "default"):
         with pytest.raises(TypeError, match=f"{flag} must be True or False, got 'no'"):

@@ -288,8 +288,11 @@ def test_a_rebuild_replaces_the_dataset_and_records_absolute_paths(tmp_path, mon
     assert index["options"]["gyro"] == str(tmp_path / "shake.gcsv")
     assert index["options"]["photos"] == str(tmp_path / "photos")
     from gyrodeblur import __version__
-    assert index["made_with"] == {"gyrodeblur": __version__, "gyro": str(tmp_path / "shake.gcsv"),
-                                  "photos": str(tmp_path / "photos")}
+    made_with = index["made_with"]
+    commit = made_with.pop("commit", "0" * 40)        # where the source is a git checkout
+    assert len(commit) == 40 and int(commit, 16) >= 0
+    assert made_with == {"gyrodeblur": __version__, "gyro": str(tmp_path / "shake.gcsv"),
+                         "photos": str(tmp_path / "photos")}
     assert [c.name for c in load_dataset(tmp_path / "ds")] == ["a_w0"]
 
 
@@ -420,6 +423,7 @@ def test_a_rebuild_removes_only_former_case_folders(tmp_path):
     (["--snr", "inf"], "snr_db: must be a finite number of dB"),     # "Infinity" in case.json
     (["--windows", "0"], "windows_per_photo: must be a whole number >= 1, got 0"),
     (["--max-photos", "-2"], "max_photos: must be a whole number >= 1, got -2"),
+    (["--snr", str(2 ** 64)], "snr_db: must be a finite number of dB"),
 ])
 def test_build_numbers_no_case_could_be_built_with_are_refused_first(tmp_path, capsys,
                                                                      options, what):
@@ -429,4 +433,10 @@ def test_build_numbers_no_case_could_be_built_with_are_refused_first(tmp_path, c
     from gyrodeblur.dataset import main
     assert main([str(tmp_path / "ds"), *options]) == 2
     assert what in capsys.readouterr().err
+    assert not (tmp_path / "ds").exists()
+
+
+def test_an_empty_list_of_photos_is_refused(tmp_path):
+    with pytest.raises(InputError, match="photos: an empty list"):
+        build_dataset(tmp_path / "ds", photos=[])
     assert not (tmp_path / "ds").exists()

@@ -199,6 +199,10 @@ def test_csv_units_in_brackets(tmp_path, trace):
 
 @pytest.mark.parametrize("header,match", [
     ("t_s,x,y,z,wx,wy,wz", "columns x, wx could each be the x rate"),
+    # an orientation beside the rates: no preference for a "rotation" (only SensorLog's
+    # gyroscope is preferred to its Core Motion rates)
+    ("t_s,rotation_x,rotation_y,rotation_z,angular_velocity_x,angular_velocity_y,"
+     "angular_velocity_z", "columns rotation_x, angular_velocity_x could each be the x rate"),
     ("t_s,seconds_elapsed,c1,c2", "'seconds_elapsed' would be read as the x rate"),
     ("t_s,y,x,q", "'y' would be read as the x rate"),
 ])
@@ -372,7 +376,8 @@ def test_sensor_logger_json_export_reads_as_its_csv(tmp_path):
     ('[{"sensor": "Accelerometer", "time": 1},' * 1 + '{"sensor": "Gyroscope", "time": 5000000, '
      '"x": 0, "y": 0, "z": 0}, {"sensor": "Gyroscope", "time": 10000000, "x": 0, "y": 0, '
      '"z": [1]}]', r"Gyroscope.json: sample 3: 'z' is not a number \('\[1\]'\)"),
-    ('{"t_s": 0, "wx": 0}\n{"t_s": [0.1', r"not a JSON log: .*\(in one of its lines"),
+    ('{"t_s": 0, "wx": 0}\n{"t_s": [0.1', r"not a JSON log: .*\(line 2, column 13\)"),
+    ('{"t_s": 0, "wx": 0}\n' + "[" * 100_000, "not a JSON log: line 2 nested too deeply"),
 ])
 def test_json_logs_that_are_not_a_list_of_gyro_samples_are_refused(tmp_path, content, match):
     p = tmp_path / "Gyroscope.json"
@@ -398,7 +403,8 @@ def test_a_csv_line_the_reader_cannot_split_is_refused_by_line(tmp_path, trace):
 def test_a_log_split_by_spaces_with_a_header(tmp_path, trace):
     """``timestamp x y z`` and rows split by runs of spaces read as the comma-separated
     log does; a row missing a value is refused (the values after it would move into its
-    column), also the last one (not taken for a line cut short)."""
+    column), as many values as the first row has being the rule (a header may end in a
+    unit word: ``t x y z (rad/s)``)."""
     t_ns = [int(round(a * 1e9)) for a in trace.t]
     text = _csv_text("timestamp,x,y,z,temp", t_ns, [*trace.omega.T, 0 * trace.t + 31.5])
     (tmp_path / "c.csv").write_text(text)
@@ -410,9 +416,12 @@ def test_a_log_split_by_spaces_with_a_header(tmp_path, trace):
     short = rows[5].split()
     rows[5] = " ".join(short[:2] + short[3:])                      # y left out
     (tmp_path / "s.txt").write_text("\n".join(rows) + "\n")
-    with pytest.raises(InputError, match="s.txt: line 6: 4 values where the header names 5 "
-                                         "columns: split by spaces"):
+    with pytest.raises(InputError, match="s.txt: line 6: 4 values where line 2 has 5: split "
+                                         "by spaces"):
         read_gyro_log(tmp_path / "s.txt")
+    t_s = text.replace(",", " ").splitlines()[1:]
+    (tmp_path / "u.txt").write_text("t_ns x y z temp (degC)\n" + "\n".join(t_s) + "\n")
+    assert np.array_equal(read_gyro_log(tmp_path / "u.txt", time_unit="ns").omega, commas.omega)
 
 
 def test_json_lines_a_bracketed_csv_header_and_samples_that_name_no_sensor(tmp_path, trace):
@@ -427,9 +436,12 @@ def test_json_lines_a_bracketed_csv_header_and_samples_that_name_no_sensor(tmp_p
     (tmp_path / "g.jsonl").write_text("\n".join(json.dumps(r) for r in samples) + "\n")
     log = read_gyro_log(tmp_path / "g.jsonl")
     assert log.meta["format"] == "json" and np.allclose(log.omega, trace.omega, atol=1e-12)
-    (tmp_path / "g.json").write_text(json.dumps(samples + [{"time": "1", "x": "9"}]))
-    with pytest.warns(UserWarning, match="g.json: 1 sample.* name no sensor, where the others "
-                                         "do: left out"):
+    for r in samples[::2]:
+        r["sensor"] = "GYROSCOPE"                    # its name in any case
+    (tmp_path / "g.json").write_text(json.dumps(samples + [{"time": "1", "x": "9"},
+                                                           {"sensor": None, "time": "2"}]))
+    with pytest.warns(UserWarning, match="g.json: 2 sample.* name no sensor, where the others "
+                                         "do: left out \\(only the GYROSCOPE samples"):
         log = read_gyro_log(tmp_path / "g.json")
     assert np.allclose(log.omega, trace.omega, atol=1e-12)
     p = tmp_path / "b.csv"

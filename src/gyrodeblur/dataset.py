@@ -391,6 +391,8 @@ def build_cases(photos=None, gyro=None, *, exposure=DEFAULTS["exposure"],
     _check_build_numbers(snr_db, windows_per_photo, max_photos)
     if isinstance(photos, (list, tuple)):
         paths = [Path(p) for p in photos]
+        if not paths:
+            raise InputError("photos", "an empty list: name at least one photo")
         _refuse_shared_stems(paths)
     else:
         paths = list_photos(photos or _default_photos())
@@ -428,7 +430,8 @@ def _check_build_numbers(snr_db, windows_per_photo, max_photos) -> None:
     """Refuse :func:`build_cases`' counts and SNR that no case could be built with (a NaN
     or infinite SNR, no windows), before any work, naming the argument."""
     if snr_db is not None and not (isinstance(snr_db, (int, float, np.integer, np.floating))
-                                   and not isinstance(snr_db, bool) and np.isfinite(snr_db)):
+                                   and not isinstance(snr_db, bool)
+                                   and -1e6 < float(snr_db) < 1e6):      # (not NaN)
         raise InputError("snr_db", f"must be a finite number of dB, or None for no noise, "
                                    f"got {snr_db!r}")
     for name, v in (("windows_per_photo", windows_per_photo), ("max_photos", max_photos)):
@@ -486,8 +489,8 @@ def load_case(folder: str | os.PathLike) -> Case:
 def build_dataset(out_dir: str | os.PathLike, **options) -> list[Path]:
     """:func:`build_cases` with ``options`` and write each case to ``out_dir/<name>/``,
     plus ``out_dir/dataset.json`` (the options, with the photo and gyro paths absolute;
-    under ``made_with`` the package's version and the photos and log used, defaults
-    resolved; and the case list).
+    under ``made_with`` the package's version, its git commit where it has one, and the
+    photos and log used, defaults resolved; and the case list).
 
     Built again into the same folder, the cases of the former index that the new one
     lacks are removed (their folders only), so that the folder holds one dataset."""
@@ -518,12 +521,30 @@ def build_dataset(out_dir: str | os.PathLike, **options) -> list[Path]:
 
     opts = {k: plain(k, v) for k, v in options.items() if k != "progress"}
     from . import __version__
+    gyro = options.get("gyro") or default_gyro()
     used = {"gyrodeblur": __version__,        # what the defaults (None) were, for the record
             "photos": plain("photos", options.get("photos") or _default_photos()),
-            "gyro": plain("gyro", options.get("gyro") or default_gyro())}
+            "gyro": plain("gyro", gyro.source if isinstance(gyro, GyroLog) and gyro.source
+                          else gyro)}
+    commit = _source_commit()
+    if commit:
+        used["commit"] = commit
     index = {"options": opts, "made_with": used, "cases": [c.name for c in cases]}
     atomic_write_text(out / "dataset.json", json.dumps(index, indent=2) + "\n")
     return folders
+
+
+def _source_commit() -> str | None:
+    """The git commit of the package's own source, where it is a git checkout (an
+    installed copy has none), else ``None``."""
+    import subprocess
+    try:
+        done = subprocess.run(["git", "-C", str(Path(__file__).resolve().parent), "rev-parse",
+                               "HEAD"], capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    head = done.stdout.strip()
+    return head if done.returncode == 0 and len(head) == 40 else None
 
 
 def _indexed_cases(folder: Path) -> list[str]:

@@ -368,7 +368,7 @@ def _deconvolver(method: str, img: np.ndarray, encoded: np.ndarray, clip: bool, 
 def _one_call_at_a_time(method: str):
     """The lock a method registered ``thread_safe=False`` holds while its factory and
     deconvolver run (a context that does nothing for any other)."""
-    return _SERIAL_METHODS.get(method) or contextlib.nullcontext()
+    return _SERIAL_METHODS.get(method, contextlib.nullcontext())
 
 
 def _checked_displacement(displacement, shape: tuple[int, int]) -> tuple:
@@ -465,6 +465,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     img = curve.decode(encoded)
     if np.may_share_memory(img, image):      # the linear curve: patches are cut from it
         img = img.copy()
+    workers = 1 if method in _SERIAL_METHODS else None      # its patches one at a time
     with _one_call_at_a_time(method):       # the method's state: one call at a time
         deconvolve = _deconvolver(method, img, encoded, clip, options)
         unknown = None
@@ -484,11 +485,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
                 progress(1, 1)
         elif model == "global":
             out = _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress,
-                                       longest)
+                                       longest, workers)
         else:
             out = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=progress,
-                                       unknown=unknown,
-                                       workers=1 if method in _SERIAL_METHODS else None)
+                                       unknown=unknown, workers=workers)
     out = np.asarray(out, np.float32)
     if out.shape != img.shape:
         raise ValueError(f"method {method!r} returned an image of shape {out.shape} for a "
@@ -533,11 +533,13 @@ def _check_model(model, method: str, patches, shape) -> str:
     return model if len(patches) > 1 else "patches"
 
 
-def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress, extent):
+def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress, extent,
+                         workers=None):
     """The patch-wise sparse result refined under the interpolated-PSF model of the whole
     photo (:func:`gyrodeblur.spacevariant.refine_globally`), with the patch-wise solver's
     own prior weight and clipped-pixel handling, for the budget of the longest PSF's
-    ``extent`` (px; one budget for the run and the progress it announces)."""
+    ``extent`` (px; one budget for the run and the progress it announces); the patches
+    solved in ``workers`` threads (:func:`deconvolve_patchwise`'s)."""
     from .sparse import SparseSettings, _clipping
     from .spacevariant import InterpolatedBlur, refine_globally, refinement_budget
     if not isinstance(deconvolve, SparseSettings):
@@ -549,7 +551,7 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress, exte
     total = len(patches) + outer * channels
     report = None if progress is None else (lambda done, _: progress(done, total))
     start = deconvolve_patchwise(img, patches, psfs, deconvolve, progress=report,
-                                 unknown=unknown)
+                                 unknown=unknown, workers=workers)
     gc = np.moveaxis(img, 2, 0) if img.ndim == 3 else img[None]
     middle = psfs[len(psfs) // 2]
     sat = _clipping(gc, settings.saturation_level, settings.saturation_dilation,

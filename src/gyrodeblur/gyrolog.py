@@ -394,8 +394,8 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     ----------
     path : path-like
     format : {"gcsv", "csv", "android", "json"} or None
-        ``None`` guesses from the extension (``.gcsv``) or the first line (``[`` or ``{``
-        opens a JSON log).
+        ``None`` guesses from the extension (``.gcsv``) or the first line (a list of
+        objects, or an object, opens a JSON log).
     **options
         Passed to :func:`read_csv_log` for ``csv`` and to :func:`read_json_log` for
         ``json``.
@@ -586,6 +586,8 @@ def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
     out = []
     need = max(columns) + 1
     last = max((k for k, line in enumerate(lines) if line.strip()), default=-1)
+    first = next((k for k, line in enumerate(lines) if line.strip()), -1)
+    width = len(lines[first].split()) if sep in (None, " ") and first >= 0 else None
     decimal_comma = sep in (";", "\t", " ")  # a comma that cannot split is a decimal mark
     for k, line in enumerate(lines):
         if not line.strip():
@@ -595,11 +597,10 @@ def _numeric_rows_one_by_one(path: str, lines: list[str], columns: list[int],
             if len(parts) < need:
                 raise InputError(path, f"line {first_line + k}: expected {need} values, "
                                        f"got {len(parts)}")
-            if names and sep in (None, " ") and len(parts) != len(names):
-                raise InputError(path, f"line {first_line + k}: {len(parts)} values where the "
-                                       f"header names {len(names)} columns: split by spaces, "
-                                       "a missing value would move the others into its "
-                                       "column")
+            if width is not None and len(parts) != width:
+                raise InputError(path, f"line {first_line + k}: {len(parts)} values where line "
+                                       f"{first_line + first} has {width}: split by spaces, a "
+                                       "missing value would move the others into its column")
             if names and len(parts) > len(names) and any(v.strip() for v in parts[len(names):]):
                 raise InputError(path, f"line {first_line + k}: {len(parts)} values where the "
                                        f"header names {len(names)} columns, so the columns "
@@ -863,20 +864,28 @@ def read_json_log(path: str | os.PathLike, *, time_column: str | int | None = No
 def _json_samples(path: str, text: str) -> list:
     """The samples of a JSON log's ``text``: its list of objects, or its lines' objects
     (JSON Lines); refused naming ``path`` where it is neither."""
+    lines = None
     try:
         samples = json.loads(text)
     except json.JSONDecodeError as exc:
-        if exc.msg == "Extra data" and text.lstrip().startswith("{"):   # JSON Lines
-            try:
-                samples = [json.loads(ln) for ln in text.splitlines() if ln.strip()]
-            except json.JSONDecodeError as exc2:
-                raise InputError(path, f"not a JSON log: {exc2.msg} (in one of its lines, "
-                                       f"column {exc2.colno})") from None
-        else:
+        if not (exc.msg == "Extra data" and text.lstrip().startswith("{")):
             raise InputError(path, f"not a JSON log: {exc.msg} (line {exc.lineno}, column "
                                    f"{exc.colno})") from None
+        lines = text.splitlines()                                      # JSON Lines
     except RecursionError:
         raise InputError(path, "not a JSON log: nested too deeply") from None
+    if lines is not None:
+        samples = []
+        for k, line in enumerate(lines, start=1):
+            if not line.strip():
+                continue
+            try:
+                samples.append(json.loads(line))
+            except json.JSONDecodeError as exc:
+                raise InputError(path, f"not a JSON log: {exc.msg} (line {k}, column "
+                                       f"{exc.colno})") from None
+            except RecursionError:
+                raise InputError(path, f"not a JSON log: line {k} nested too deeply") from None
     if isinstance(samples, dict):
         keys = ", ".join(map(str, list(samples)[:6])) + (", ..." if len(samples) > 6 else "")
         raise InputError(path, f"a JSON log must be a list of samples, one object each (as "
@@ -895,7 +904,11 @@ def _json_samples(path: str, text: str) -> list:
 def _gyroscope_samples(path: str, numbered: list) -> list:
     """The ``(number, sample)`` pairs of a JSON log that are the gyroscope's, where the
     samples name a ``sensor`` (:func:`read_json_log`); all of them where none does."""
-    as_written = {str(r["sensor"]).strip() for _, r in numbered if "sensor" in r}
+    def sensor(r) -> str:                     # "" where the sample names none
+        v = r.get("sensor")
+        return "" if v is None else str(v).strip()
+
+    as_written = {sensor(r) for _, r in numbered} - {""}
     if not as_written:
         return numbered
     named = {n.lower() for n in as_written}            # "Gyroscope" and "gyroscope" alike
@@ -908,11 +921,12 @@ def _gyroscope_samples(path: str, numbered: list) -> list:
                    else "samples of several gyroscopes, and which to read is not clear")
         raise InputError(path, f"{problem} (the samples' sensors: {said}); export the "
                                "gyroscope's alone")
-    unnamed = sum("sensor" not in r for _, r in numbered)
+    unnamed = sum(not sensor(r) for _, r in numbered)
     if unnamed:
+        name = min(n for n in as_written if n.lower() == gyro[0])
         warnings.warn(f"{path}: {unnamed} sample(s) name no sensor, where the others do: "
-                      f"left out (only the {gyro[0]} samples are read)", stacklevel=4)
-    return [(n, r) for n, r in numbered if str(r.get("sensor", "")).strip().lower() == gyro[0]]
+                      f"left out (only the {name} samples are read)", stacklevel=4)
+    return [(n, r) for n, r in numbered if sensor(r).lower() == gyro[0]]
 
 
 def _json_values(path: str, numbered: list, keys: list) -> np.ndarray:

@@ -230,12 +230,13 @@ def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
     named = {a: [i for i, h in enumerate(header) if i != ti and rate_axis(h) == a]
              for a in "xyz"}
     where = "; name them in the capture's gyro.rate_columns"
-    sensors = {i: _sensor_of(header[i]) for cols in named.values() for i in cols}
-    if any(len(cols) > 1 for cols in named.values()) and all(sensors.values()):
-        gyro = {a: [i for i in cols if sensors[i] == _GYRO_WORDS]   # each names its sensor:
-                for a, cols in named.items()}                       # the gyroscope's own
-        if all(len(cols) == 1 for cols in gyro.values()):
-            return [gyro[a][0] for a in "xyz"]    # SensorLog's gyroRotationX, not motion's
+    if any(len(cols) > 1 for cols in named.values()):   # SensorLog's gyroRotationX beside
+        sensors = {i: _sensor_of(header[i]) for cols in named.values() for i in cols}
+        gyro = {a: [i for i in cols if sensors[i] == _GYRO_WORDS]     # motionRotationRateX:
+                for a, cols in named.items()}                         # the gyroscope's own
+        others = {sensors[i] for cols in named.values() for i in cols} - {_GYRO_WORDS}
+        if others == {frozenset({"motion"})} and all(len(c) == 1 for c in gyro.values()):
+            return [gyro[a][0] for a in "xyz"]
     for a, cols in named.items():
         if len(cols) > 1:
             raise InputError(path, f"columns {', '.join(header[i] for i in cols)} could each "
