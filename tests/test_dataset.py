@@ -419,11 +419,11 @@ def test_a_rebuild_removes_only_former_case_folders(tmp_path):
 
 
 @pytest.mark.parametrize("options,what", [
-    (["--snr", "nan"], "snr_db: must be a finite number of dB"),
-    (["--snr", "inf"], "snr_db: must be a finite number of dB"),     # "Infinity" in case.json
-    (["--windows", "0"], "windows_per_photo: must be a whole number >= 1, got 0"),
-    (["--max-photos", "-2"], "max_photos: must be a whole number >= 1, got -2"),
-    (["--snr", str(2 ** 64)], "snr_db: must be a finite number of dB"),
+    (["--snr", "nan"], "--snr: must be a finite number of dB"),
+    (["--snr", "inf"], "--snr: must be a finite number of dB"),     # "Infinity" in case.json
+    (["--windows", "0"], "--windows: must be a whole number >= 1, got 0"),
+    (["--max-photos", "-2"], "--max-photos: must be a whole number >= 1, got -2"),
+    (["--snr", str(2 ** 64)], "--snr: must be a finite number of dB"),
 ])
 def test_build_numbers_no_case_could_be_built_with_are_refused_first(tmp_path, capsys,
                                                                      options, what):

@@ -615,10 +615,18 @@ def main(argv: list[str] | None = None) -> int:
             max_size=args.max_size, max_photos=args.max_photos,
             progress=lambda i, n, name: print(f"[{i}/{n}] {name}", flush=True))
     except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        option = _OPTIONS.get(exc.source)        # named as the command line spells it
+        print(f"error: {exc if option is None else f'{option}: {exc.problem}'}",
+              file=sys.stderr)
         return 2
     print(f"wrote {len(folders)} cases to {args.out}")
     return 0
+
+
+#: :func:`build_cases`' arguments, by the options of :func:`main` that set them.
+_OPTIONS = {"snr_db": "--snr", "windows_per_photo": "--windows", "max_photos": "--max-photos",
+            "max_size": "--max-size", "readout": "--readout", "focal": "--focal",
+            "exposure": "--exposure", "orientation": "--orientation"}
 
 
 if __name__ == "__main__":
