@@ -1953,3 +1953,38 @@ def test_simulate_adds_shot_noise_given_a_full_well(capture_dir, capsys):
     for bad in ("0", "nan"):
         assert "--full-well: must be 1 to 1e9 electrons" in _run_error(
             base + ["-o", str(d / "x.png"), "--full-well", bad], capsys)
+
+
+def test_the_readmes_python_api_example_runs_on_a_short_description(capture_dir, capsys):
+    """README's "The same as a Python API" block, run as written (file names aside) on a
+    JPEG whose EXIF gives the exposure time and the focal length, with a description that
+    leaves both out: it reads them from the EXIF, as the command line does, and deblurs."""
+    import re
+    from pathlib import Path
+
+    from gyrodeblur.metrics import psnr
+
+    d = capture_dir
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "b.png"), "--snr-db", "40", "--seed", "1"]) == 0
+    exif = Image.Exif()
+    sub = exif.get_ifd(0x8769)
+    sub[0x829A], sub[0xA405] = IFDRational(3, 100), 27      # 30 ms; 27 mm: fx 199.7 px
+    Image.open(d / "b.png").save(d / "photo.jpg", exif=exif.tobytes(), quality=95)
+    doc = json.loads((d / "cap.json").read_text())
+    del doc["exposure_time"], doc["camera"]
+    (d / "short.json").write_text(json.dumps(doc))
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    code = re.search(r"The same as a Python API:\n\n```python\n(.*?)```", readme, re.S)[1]
+    for name, path in (("photo.jpg", "photo.jpg"), ("capture.json", "short.json"),
+                       ("sharp.jpg", "out.jpg")):
+        assert f'"{name}"' in code
+        code = code.replace(f'"{name}"', repr(str(d / path)))
+    capsys.readouterr()
+    exec(compile(code, "README.md", "exec"), {})
+    said = capsys.readouterr().out
+    assert "exposure_time = 0.03 s (from EXIF)" in said and "fx = 199.7 px" in said
+    sharp = read_photo(d / "sharp.jpg").pixels
+    gain = (psnr(read_photo(d / "out.jpg").pixels, sharp, border=16)
+            - psnr(read_photo(d / "photo.jpg").pixels, sharp, border=16))
+    assert gain > 3, gain

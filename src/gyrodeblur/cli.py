@@ -294,7 +294,8 @@ def _add_transfer_option(p: argparse.ArgumentParser) -> None:
                         "linear or gamma 2.2; sRGB without a profile), srgb or linear")
 
 
-def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) -> None:
+def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False,
+                         writes_photos: bool = True) -> None:
     what = ("degrees clockwise the photos' pixels were turned from the sensor's layout, one "
             "for all or one per photo, comma-separated or the option repeated" if per_photo else
             "degrees clockwise the photo's pixels were turned from the sensor's layout")
@@ -303,8 +304,9 @@ def _add_rotation_option(p: argparse.ArgumentParser, per_photo: bool = False) ->
                    action="append" if per_photo else "store",
                    help=what + " (an export that applied a portrait orientation; 0, 90, 180 "
                         "or 270): the photo is turned back for the work, so that its rows are "
-                        "the sensor's readout rows and the capture's camera fits, and the "
-                        "result is turned like the input")
+                        "the sensor's readout rows and the capture's camera fits"
+                        + (", and the result is turned like the input" if writes_photos
+                           else ""))
 
 
 def _rotation(text: str) -> int:
@@ -1069,7 +1071,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=OFFSET_RANGE_HELP)
     s.add_argument("--mappings", choices=("phone", "all"), default=None, help=MAPPINGS_HELP)
     _add_transfer_option(s)
-    _add_rotation_option(s, per_photo=True)
+    _add_rotation_option(s, per_photo=True, writes_photos=False)     # calibrate
     s.add_argument("--overwrite", action="store_true",
                    help="write over an existing output file (never over an input)")
     _add_capture_options(s, required=True, per_photo=True)
