@@ -365,6 +365,14 @@ def _deconvolver(method: str, img: np.ndarray, encoded: np.ndarray, clip: bool, 
     return factory(img, **options)
 
 
+def _light_of(encoded: np.ndarray, curve: TransferCurve, image: np.ndarray) -> np.ndarray:
+    """``encoded`` (the colours of the caller's ``image``) decoded to light by ``curve``,
+    in an array of the deblur's own: the linear curve's decoding is ``encoded`` itself,
+    copied, so that a method writing to its input cannot change the caller's photo."""
+    light = curve.decode(encoded)
+    return light.copy() if np.may_share_memory(light, image) else light
+
+
 def _one_call_at_a_time(method: str):
     """The lock a method registered ``thread_safe=False`` holds while its factory and
     deconvolver run (a context that does nothing for any other)."""
@@ -462,9 +470,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
                                    "another size of photo?)")
     if displacement is not None:
         displacement = _checked_displacement(displacement, checked.shape[:2])
-    img = curve.decode(encoded)
-    if np.may_share_memory(img, image):      # the linear curve: patches are cut from it
-        img = img.copy()
+    img = _light_of(encoded, curve, image)   # patches are cut from it
     workers = 1 if method in _SERIAL_METHODS else None      # its patches one at a time
     with _one_call_at_a_time(method):       # the method's state: one call at a time
         deconvolve = _deconvolver(method, img, encoded, clip, options)
@@ -791,14 +797,13 @@ def deblur_blind(image: np.ndarray, kernel_size: int, *, grid=(1, 1),
                                              "deblur has no gyro for: give RxC (e.g. 2x3)")
     grid = check_grid(grid)
     encoded = split_alpha(image)[0]                  # not the mask
-    lin = get_transfer_curve(transfer).decode(encoded)
+    lin = _light_of(encoded, get_transfer_curve(transfer), image)
     lum = lin.mean(axis=2) if lin.ndim == 3 else lin
     patches = check_blind_sizes((H, W), kernel_size, grid, overlap, max_pixels)
     psfs = [estimate_kernel(_central(lum, max_pixels), kernel_size)]
     if check_blur and _shows_no_blur(image, psfs[0], transfer):
         with _one_call_at_a_time(method):                # its options refused as always
-            _deconvolver(method, lin.copy() if np.may_share_memory(lin, image) else lin,
-                         encoded, clip, options)
+            _deconvolver(method, lin, encoded, clip, options)
         delta = np.zeros_like(psfs[0])
         delta[kernel_size // 2, kernel_size // 2] = 1.0
         out = np.array(image, np.float32)
