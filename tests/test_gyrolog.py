@@ -472,6 +472,23 @@ def test_coverage_and_gaps():
         assert "read as" not in str(e.value)
 
 
+def test_a_window_ending_on_the_last_sample_is_covered_despite_rounding():
+    """A window computed as start + readout + exposure can end one rounding step past a
+    log's last sample (0.5 + 0.03 + 0.04 = 0.5700000000000001), or start one before its
+    first on a Unix clock: still covered. A millisecond beyond is not."""
+    t = np.linspace(0.0, 0.57, 115)
+    log = GyroLog(t, np.zeros((t.size, 3)), "g.csv")
+    check_coverage(log, 0.5, 0.5 + 0.03 + 0.04)
+    with pytest.raises(InputError, match="g.csv.*covers"):
+        check_coverage(log, 0.5, 0.571)
+    unix = 1.7e9 + np.arange(0.0, 1.0, 0.005)
+    log = GyroLog(unix, np.zeros((unix.size, 3)), "u.csv")
+    start = (unix[0] + 0.4) - 0.4            # the first sample, give or take a rounding step
+    check_coverage(log, np.nextafter(start, 0.0), start + 0.05)
+    with pytest.raises(InputError, match="u.csv.*covers"):
+        check_coverage(log, unix[0] - 1e-3, unix[0] + 0.05)
+
+
 def test_a_coarse_log_is_told_its_rate_and_the_limit_is_inclusive():
     """A 20 Hz log (steps of 50 ms, as read from text: not exactly 0.05) meets a 50 ms
     limit; under a 40 ms limit it is refused for its rate, not for a gap it does not

@@ -222,6 +222,12 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
 #: s: times that differ by less are equal (a 20 Hz log's 0.05 s steps read from text)
 _TIME_TOLERANCE = 1e-9
 
+#: s: how far beyond its first or last sample a log still covers a window, for
+#: :func:`check_coverage`: a few rounding steps of a Unix time (2.4e-7 s near 1.7e9 s), so
+#: that a window computed as ``start + readout + exposure`` ending on the last sample is
+#: covered (beyond the log, its last rate is held).
+_EDGE_TOLERANCE = 1e-6
+
 
 def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
                    what: str = "exposure") -> None:
@@ -235,7 +241,7 @@ def check_coverage(log: GyroLog, t0: float, t1: float, *, max_gap: float = 0.05,
         (a log sampled that coarsely throughout is told so, not said to have a gap).
     """
     src = log.source
-    if log.t[0] > t0 or log.t[-1] < t1:
+    if log.t[0] > t0 + _EDGE_TOLERANCE or log.t[-1] < t1 - _EDGE_TOLERANCE:
         span, clocks = t1 - t0, "time_offset and exposure_start"
         units = (f"the {what} lasts {span:.6g} s: exposure_time and readout_time are seconds, "
                  "not ms")

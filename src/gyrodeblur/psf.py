@@ -161,9 +161,12 @@ def landing_pixel(capture: Capture, x0, y0, *, row=None, n: int = 32) -> np.ndar
     sweep or more), Newton's method finishes it. The solution is unique while the map
     ``p -> p - mean_t (p - x0_p(t))`` does not fold (content moving along the sweep more
     slowly than the shutter, or against it at any speed). Where it folds (a telephoto lens
-    tilting fast with a short exposure), or the light lands outside the frame, the point
-    falls back to its own position: its PSF is then timed by its own row, as a global
-    shutter would have it.
+    tilting fast with a short exposure), the point falls back to its own position: its PSF
+    is then timed by its own row, as a global shutter would have it. So does a point whose
+    Newton root lies outside the frame (such a root is not trusted). A landing pixel the
+    fixed-point iteration settles on is kept even a little past the frame's edge (its
+    row's time extrapolated beyond the readout), so that the PSFs stay continuous up to
+    the border: that light is not recorded, but the pixels beside it are.
     """
     check_capture(capture)
     x0 = np.asarray(x0, np.float64)
