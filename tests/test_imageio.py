@@ -1048,6 +1048,35 @@ def test_truncated_files(tmp_path, name, bits):
         read_photo(tmp_path / name)
 
 
+@pytest.mark.parametrize("layout", ["pixels first", "directory first", "float RGB"])
+def test_a_tiff_cut_short_is_refused_as_truncated(tmp_path, recwarn, layout):
+    """A TIFF cut short (an interrupted copy) is told as such, whether the cut loses its
+    directory (Pillow writes it after the pixels) or its pixels (tifffile writes the
+    directory first), and whichever decoder would read it, with no other warning; an
+    empty file is told as empty."""
+    rng = np.random.default_rng(3)
+    full = tmp_path / "full.tif"
+    if layout == "pixels first":
+        Image.fromarray(rng.integers(0, 255, (96, 96, 3), np.uint8)).save(
+            full, compression="tiff_lzw")
+    else:
+        pixels = rng.random((96, 96, 3)).astype(np.float32 if layout == "float RGB"
+                                                 else np.float64)
+        tifffile.imwrite(full, pixels if layout == "float RGB" else
+                         (pixels * 65535).astype(np.uint16), photometric="rgb",
+                         metadata=None)
+    data = full.read_bytes()
+    (tmp_path / "cut.tif").write_bytes(data[: len(data) * 6 // 10])
+    where = "first directory is at byte" if layout == "pixels first" else "image data runs to"
+    with pytest.raises(InputError, match=rf"cut.tif: truncated: the file has "
+                                         rf"{len(data) * 6 // 10} bytes, but its {where}"):
+        read_photo(tmp_path / "cut.tif")
+    assert not recwarn.list
+    (tmp_path / "empty.jpg").write_bytes(b"")
+    with pytest.raises(InputError, match=r"empty.jpg: the file is empty \(0 bytes\)"):
+        read_photo(tmp_path / "empty.jpg")
+
+
 def test_unsupported_formats_and_modes(tmp_path):
     Image.new("RGB", (4, 4)).save(tmp_path / "a.gif")
     with pytest.raises(InputError, match="a.gif.*GIF"):
@@ -1238,6 +1267,34 @@ def _read_without_tifffile(path, monkeypatch):
     with monkeypatch.context() as m:
         m.setattr(imageio, "_read_tiff_tifffile", cannot)
         return read_photo(path)
+
+
+@pytest.mark.parametrize("kind", ["float RGB", "16-bit planar"])
+def test_a_tiff_needing_imagecodecs_is_refused_saying_what_to_do(tmp_path, monkeypatch,
+                                                                 kind):
+    """Where tifffile cannot decode a TIFF for want of imagecodecs (LZW on float samples,
+    the floating-point predictor, LZW on colour planes) and Pillow cannot either, the
+    message names what needs it and how to get it, not tifffile's internals."""
+    k = np.arange(8 * 8 * 3).reshape(8, 8, 3)
+    if kind == "float RGB":               # Pillow cannot open float colour at all
+        tifffile.imwrite(tmp_path / "a.tif", (k / k.max()).astype(np.float32),
+                         photometric="rgb", metadata=None)
+        need = r"FLOATINGPOINT predictor"
+        text = "<PREDICTOR.FLOATINGPOINT: 3> requires the 'imagecodecs' package"
+    else:                                 # Pillow opens it, but not 16-bit planes
+        tifffile.imwrite(tmp_path / "a.tif", np.moveaxis(k.astype(np.uint16), -1, 0),
+                         photometric="rgb", planarconfig="separate", metadata=None)
+        need = r"LZW compression"
+        text = "<COMPRESSION.LZW: 5> requires the 'imagecodecs' package"
+
+    def cannot(p):
+        raise ValueError(text)
+
+    monkeypatch.setattr(imageio, "_read_tiff_tifffile", cannot)
+    with pytest.raises(InputError, match=rf"a.tif: its {need} needs the package "
+                                         r"imagecodecs.*pip install imagecodecs.*or save the "
+                                         r"TIFF uncompressed"):
+        read_photo(tmp_path / "a.tif")
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])

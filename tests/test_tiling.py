@@ -297,6 +297,12 @@ def test_large_psf_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         deconvolve_patchwise(img, patches, [_line_psf(3, 0.0)] * 4, lambda s, p: s)
+    # a PSF longer than the photo's shorter side: no grid can help, and the warning says
+    # so rather than asking for a coarser one
+    strip = _scene((40, 400))
+    patches = patch_grid(strip.shape, (1, 4), 0.25)
+    with pytest.warns(UserWarning, match="shorter side is only 40 px, so no grid helps"):
+        deconvolve_patchwise(strip, patches, [_line_psf(61, 0.0)] * 4, lambda s, p: s)
 
 
 def test_psf_radius():

@@ -60,6 +60,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import struct
 import sys
 import warnings
@@ -208,6 +209,8 @@ def read_photo(path: str | os.PathLike, *, scene: bool = False) -> Photo:
     except PermissionError:
         raise InputError(p, "cannot read the file: permission denied") from None
     except UnidentifiedImageError:
+        if os.path.getsize(p) == 0:
+            raise InputError(p, "the file is empty (0 bytes)") from None
         raise InputError(p, "not a JPEG, PNG or TIFF image (or the file is damaged)") from None
     except Image.DecompressionBombError as exc:
         raise InputError(p, f"image too large to read safely ({exc})") from None
@@ -257,13 +260,18 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
     """(format, samples, EXIF block, ICC profile, JPEG quantisation tables, PNG file
     gamma, the other metadata carried: :class:`Photo`'s ``dpi``, ``xmp`` and
     ``png_text``) of a file; decoder errors propagate."""
+    if _is_tiff(p):
+        _refuse_truncated_tiff(p)            # before Pillow reads tags past the end
     try:
         im = _open_within_size_limit(p)
     except UnidentifiedImageError:
         if not _is_tiff(p):
             raise
-        ints, icc, carried = _read_tiff_tifffile(p)  # e.g. float RGB, which Pillow cannot
-        return "TIFF", ints, None, icc, None, None, carried     # open
+        try:                                 # e.g. float RGB, which Pillow cannot open
+            ints, icc, carried = _read_tiff_tifffile(p)
+        except Exception as exc:
+            raise _codec_missing(p, exc) or exc
+        return "TIFF", ints, None, icc, None, None, carried
     with im:
         fmt = {"MPO": "JPEG"}.get(im.format, im.format)
         if fmt not in ("JPEG", "PNG", "TIFF"):
@@ -597,6 +605,62 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
         return _read_tiff_tifffile(path)[0]
     except Exception as exc:
         tifffile_error = exc
+    try:
+        return _read_tiff_by_pillow(path, im, tifffile_error)
+    except Exception as exc:
+        refusal = _codec_missing(path, tifffile_error)
+        if refusal is None:
+            raise
+        raise refusal from exc
+
+
+def _refuse_truncated_tiff(path: str) -> None:
+    """Refuse a TIFF cut short (a copy or download interrupted), saying so: one whose
+    first directory (its tags, which a writer may put after the pixels) lies past the
+    end of the file, or whose first image's strips or tiles run past it. The decoders
+    would say only "(0)" or "decoder error -2", Pillow would warn of corrupt EXIF, and
+    libtiff would print its own line. A directory tifffile cannot parse otherwise is
+    left to the decoders."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        head = f.read(16)
+    order = "<" if head[:2] == b"II" else ">"
+    big = head[2:4] in (b"+\x00", b"\x00+")
+    if len(head) == 16:
+        first = struct.unpack(order + ("Q" if big else "I"), head[8:16] if big else head[4:8])[0]
+        if first >= size:
+            raise InputError(path, f"truncated: the file has {size} bytes, but its first "
+                                   f"directory is at byte {first} (an incomplete copy or "
+                                   "download?)")
+    try:
+        with _tifffile_quiet(), tifffile.TiffFile(path) as tif:
+            page = tif.pages.first
+            end = max((int(o) + int(n) for o, n in zip(page.dataoffsets, page.databytecounts)
+                       if n), default=0)
+    except Exception:
+        return
+    if end > size:
+        raise InputError(path, f"truncated: the file has {size} bytes, but its image data "
+                               f"runs to byte {end} (an incomplete copy or download?)")
+
+
+def _codec_missing(path: str, exc: BaseException) -> InputError | None:
+    """The error to raise where tifffile could not decode the TIFF ``path`` for want of
+    ``imagecodecs`` (``exc`` reads ``"<COMPRESSION.LZW: 5> requires the 'imagecodecs'
+    package"``), naming what needs it and what to do; ``None`` for any other failure."""
+    text = str(exc)
+    if "imagecodecs" not in text:
+        return None
+    found = re.search(r"<(COMPRESSION|PREDICTOR)\.(\w+)", text)
+    what = f"{found[2]} {found[1].lower()}" if found else "encoding"
+    return InputError(path, f"its {what} needs the package imagecodecs, which is not "
+                            "installed: `pip install imagecodecs` (or gyrodeblur's `tiff` "
+                            "extra), or save the TIFF uncompressed")
+
+
+def _read_tiff_by_pillow(path: str, im: Image.Image, tifffile_error: Exception) -> np.ndarray:
+    """:func:`_read_tiff_pixels`' fallback: the pixels as Pillow (libtiff) decodes them, its
+    rotation undone; ``tifffile_error`` re-raised where Pillow cannot hold the samples."""
     tags = im.tag_v2
     bits = tags.get(258, (1,))
     bits = bits if isinstance(bits, tuple) else (bits,)

@@ -496,8 +496,11 @@ def _warn_large_psfs(patches: Sequence[Patch], psfs: Sequence[np.ndarray]) -> No
     bad = [(e, p) for p, e in zip(patches, extents) if e > min(p.shape)]
     if bad:
         extent, patch = max(bad, key=lambda t: t[0])
+        side = min(max(p.y1 for p in patches), max(p.x1 for p in patches))
+        advice = ("use a coarser grid" if extent <= side else
+                  f"the photo's shorter side is only {side} px, so no grid helps")
         warnings.warn(
             f"PSF extent up to {extent} px exceeds the patch window "
             f"({patch.shape[0]}x{patch.shape[1]} px) in {len(bad)} of {len(patches)} patches: "
-            "deblurring will be poor there; use a coarser grid",
+            f"deblurring will be poor there; {advice}",
             UserWarning, stacklevel=3)
