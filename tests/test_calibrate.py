@@ -1818,3 +1818,26 @@ def test_the_far_estimates_threshold_is_the_chi_square_quantile():
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_clipped_log_and_a_gap_in_the_exposure_are_warned_of(case):
+    """The log the search reads clipped at its range (the rate flat at its largest value
+    on an axis, reached at a slope that would have gone beyond it) and, at the calibrated
+    parameters, a 35 ms gap inside the exposure: calibrate notes both, naming the log
+    (each had gone unsaid: a held-out log clipped at 0.5 rad/s took an offset 34 ms off,
+    stated +-2 ms)."""
+    _, true, blurred = case
+    log = true.log
+    t0, t1 = true.log_window
+    omega = np.clip(log.omega, -0.5, 0.5)
+    keep = ~((log.t > t0 + 0.01) & (log.t < t0 + 0.045))       # 35 ms without samples
+    holed = GyroLog(log.t[keep], omega[keep], "clipped.csv")
+    res = calibrate([blurred], true.replace(log=holed, max_gap=0.1),
+                    fix=("axes", "focal", "readout"))
+    said = "\n".join(res.notes)
+    assert re.search(r"warning: clipped.csv: the rates look clipped within the exposure "
+                     r"\(axis [xyz] at \+-0\.5 rad/s for \d+ samples in a row", said)
+    assert re.search(r"warning: clipped.csv: gap of 3\d\.\d ms in the gyro log at "
+                     r"[0-9.]+ s, inside the exposure", said)
+    res = calibrate([blurred], true, fix=("axes", "focal", "readout"))
+    assert not any("clipped" in n or "gap of" in n for n in res.notes)

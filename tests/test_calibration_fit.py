@@ -394,6 +394,34 @@ def test_an_unsettled_twin_tie_is_told_from_the_mapping_taken():
     assert np.array_equal(tie[0], Mt) and tie[1:] == pytest.approx((0.5, 1.0))
 
 
+def test_a_twin_the_phase_clearly_prefers_but_the_objective_does_not_is_reported():
+    """The objective keeping the winner by more than a tie while the phase prefers the
+    twin by 3 standard errors or more: the two judges disagree, and the twin step says so
+    (a 2.5 px blur's wrong mapping had gone unwarned, its twin 4.5 worse and preferred by
+    9.6 errors). The winner stays; the report carries the twin, its objective gap and the
+    phase's (negative) preference for the winner. With the phase for the winner, or
+    weakly for the twin, nothing is reported."""
+    from gyrodeblur.calibration_fit import CalibrationFit
+    M = parse_axes("Xyz")
+    Mt = TWIN @ M
+
+    def twin_step(log_ratio, gain=4.5):
+        fit = SimpleNamespace(fix=set(), lo=np.full(6, -1.0), hi=np.full(6, 1.0), ubar=0.5,
+                              reg=None, search=SimpleNamespace(theta_of=_theta_of))
+        fit.fine = SimpleNamespace(points=[0] * 9, set_envelope=lambda th: None,
+                                   cost=lambda th: 0.0)
+        fit.refine = lambda N, x, iters: (x, -100.0 + gain, None, None)
+        fit.phase_patches = lambda: SimpleNamespace(sparsity=lambda th: np.exp(log_ratio)
+                                                    if np.allclose(th.axes, Mt) else 1.0)
+        return CalibrationFit.mirror_twin(fit, M, np.zeros(6), -100.0, [np.zeros(3)])
+
+    taken, twin, _, tie = twin_step(_ratios_at(-9.6))
+    assert np.array_equal(taken, M) and twin is None
+    assert np.array_equal(tie[0], Mt) and tie[1:] == pytest.approx((4.5, -9.6))
+    assert twin_step(_ratios_at(-2.5))[3] is None       # a weak preference: no conflict
+    assert twin_step(_ratios_at(9.6))[3] is None        # both judges for the winner
+
+
 def _start_fit(ubar, fix=()):
     """What :meth:`CalibrationFit.start_vec` reads of a fit: the prior's bias 0."""
     return SimpleNamespace(fix=set(fix), ubar=ubar, lo=np.full(6, -1.0), hi=np.full(6, 1.0),

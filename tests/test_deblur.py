@@ -664,6 +664,30 @@ def test_a_dropout_inside_the_exposure_is_warned_of_and_one_beside_it_is_not(mak
         deblur(image, cap, mode="invariant", method="wiener")
 
 
+def test_a_clipped_gyro_inside_the_exposure_is_warned_of(make_capture):
+    """A log whose rate sits at its largest value for samples in a row inside the
+    exposure, reached at a slope that would have gone beyond it (the gyro's range
+    exceeded), is warned of when deblurring; the same log unclipped is not."""
+    import dataclasses
+    cap = make_capture((0.0, 0.3, 0.0), readout=0.01)
+    t = cap.log.t
+    rise = 0.3 + 40.0 * np.clip(t - 0.04, 0.0, None)       # rising through the exposure
+    rng = np.random.default_rng(2)
+    image = rng.random((cap.camera.height, cap.camera.width)).astype(np.float32)
+
+    def with_y(rate):
+        omega = np.zeros_like(cap.log.omega)
+        omega[:, 1] = rate
+        return dataclasses.replace(cap, log=GyroLog(t, omega))
+
+    with pytest.warns(UserWarning, match=r"rates look clipped within the exposure \(axis y "
+                                         r"at \+-1 rad/s"):
+        deblur(image, with_y(np.minimum(rise, 1.0)), mode="invariant", method="wiener")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        deblur(image, with_y(rise), mode="invariant", method="wiener")
+
+
 def test_the_wiener_method_raises_its_phi_for_a_dark_noisy_photo(make_capture):
     """A dark photo (a quarter of the light) with shot noise, blurred by warping: the
     chapter's phi = 0.01 amplifies the noise below the blurred photo's PSNR; the default,

@@ -916,6 +916,34 @@ def test_a_plain_numeric_log_is_read_at_once_to_the_same_bits_as_line_by_line(tm
         assert len(read_gyro_log(tmp_path / "c.csv")) == 500
 
 
+def test_a_gyro_clipped_at_its_range_is_told_and_peaks_constants_and_steps_are_not():
+    """``saturation_warning``: a shake clipped at 1 rad/s (the rate run flat at the log's
+    largest value, entered at a slope that would have gone beyond it) is told with its
+    axis, level and run, inside the window only; the same shake unclipped, a constant
+    rate, a step up to one and a coarsely quantised slow peak (several equal samples at
+    the top, reached gently) are not."""
+    from gyrodeblur.gyrolog import saturation_warning
+
+    t = np.arange(0.0, 2.0, 0.005)
+    shake = 2.0 * np.sin(2 * np.pi * 3.0 * t) * np.exp(-((t - 1.0) / 0.3) ** 2)
+
+    def log(x):
+        return GyroLog(t, np.stack([np.zeros_like(x), x, np.zeros_like(x)], axis=1))
+
+    said = saturation_warning(log(np.clip(shake, -1.0, 1.0)), 0.9, 1.1)
+    assert said is not None
+    assert said.startswith("the rates look clipped within the exposure (axis y at +-1 rad/s "
+                           "for ")
+    assert "the PSFs come out too short" in said
+    assert saturation_warning(log(np.clip(shake, -1.0, 1.0)), 0.0, 0.3) is None  # not there
+    assert saturation_warning(log(shake), 0.0, 2.0) is None
+    assert saturation_warning(log(np.full_like(t, 0.7)), 0.0, 2.0) is None
+    assert saturation_warning(log(np.where(t > 1.0, 0.7, 0.0)), 0.0, 2.0) is None
+    slow = np.round(np.sin(2 * np.pi * 0.2 * t) / 0.01) * 0.01      # 5 s period, 0.01 steps
+    assert np.sum(slow == slow.max()) >= 3
+    assert saturation_warning(log(slow), 0.0, 2.0) is None
+
+
 def test_a_step_between_samples_inside_the_exposure_is_told_as_a_gap_or_a_rate():
     """``step_warning``: silent for a 200 Hz log and for a dropout outside the window; a
     dropout inside it is named with its length and time; a 40 Hz log by its rate."""

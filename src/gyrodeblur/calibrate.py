@@ -160,9 +160,9 @@ from .arguments import is_count
 from .axes import PHONE_AXIS_LETTERS, PROPER_AXIS_LETTERS, axes_to_letters, parse_axes
 from .bias_prior import BiasPrior, logs_with_captures
 from .blur_evidence import NO_BLUR_MARGIN
-from .calibration_fit import (_TEMPERATURE, BLOCKY, OFFSET_APART, OFFSET_RIVAL_NATS, TWIN,
-                              CalibrationFit, in_twin_pair, relative_ranking, shortlist,
-                              with_twin)
+from .calibration_fit import (_TEMPERATURE, _TWIN_CLEAR_SIGMAS, BLOCKY, OFFSET_APART,
+                              OFFSET_RIVAL_NATS, TWIN, CalibrationFit, in_twin_pair,
+                              relative_ranking, shortlist, with_twin)
 from .calibration_patches import CalibrationPhoto
 from .calibration_search import SearchSpace
 from .calibration_workers import StepRunner, available_workers, on_one_blas_thread
@@ -170,7 +170,7 @@ from .capture import (EXIF_START_TOLERANCE, EXIF_WHOLE_SECOND_TOLERANCE, UNKNOWN
                       UNKNOWN_READOUT_PRIOR, Capture)
 from .errors import InputError
 from .images import check_image
-from .gyrolog import rate_noise
+from .gyrolog import rate_noise, saturation_warning, step_warning
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
            "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
@@ -490,6 +490,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
              f"{why if widened else ''}: about {extra:.0f} s more than the default "
              f"+-{DEFAULT_OFFSET_RANGE * 1e3:.0f} ms (on 2 cores)")
 
+    for said in dict.fromkeys(_clipped_logs(search)):      # each log's once
+        note(f"warning: {said}")
+
     # the bias that the log's typical rate implies, when the log is long (hand motion
     # averages out over seconds; a gyro's bias does not)
     b_given = np.mean([np.asarray(cap.bias, float) for cap in captures], axis=0)
@@ -598,7 +601,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if "axes" not in fix and np.isfinite(gap) and gap < AXES_CONFIDENT_NATS:
         rival = _best_other_mapping(results, M)
         runner = None if rival is None else rival[2]
-        if tie is not None:
+        if tie is not None and tie[2] <= -_TWIN_CLEAR_SIGMAS:
+            why = (f" its mirror twin {axes_to_letters(tie[0])} scores {tie[1]:.1f} worse, "
+                   f"but the phase of the deconvolved patches prefers it by "
+                   f"{-tie[2]:.1f} standard errors: the two disagree")
+        elif tie is not None:
             phase_for = axes_to_letters(M if tie[2] >= 0 else tie[0])
             why = (f" its mirror twin {axes_to_letters(tie[0])} explains the blur about as "
                    f"well (objective {tie[1]:+.1f}), and the phase of the deconvolved "
@@ -649,6 +656,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             out_caps.append(got)
         except InputError as exc:
             raise InputError(cap.source, f"calibrated parameters are not usable: {exc.problem}") from None
+    for said in dict.fromkeys(f"{got.log.source or 'gyro log'}: {said}" for got in out_caps
+                              if (said := step_warning(got.log, *got.log_window)) is not None):
+        note(f"warning: {said}")
     cb = c0
     est = {
         "offset": (cb.time_offset, cb.time_offset + theta.offset,
@@ -711,6 +721,22 @@ def _with_bias_widened(fit, cand, steps, results, bar, bias_prior,
     if not any(np.allclose(TWIN @ r[4], q[4]) for q in more):
         more.append(r[:4] + (TWIN @ r[4], r[5], None if r[6] is None else TWIN @ r[6]))
     return sorted(results + fit.candidates(more, steps), key=lambda r: r[0]), gap
+
+
+def _clipped_logs(search: SearchSpace) -> list[str]:
+    """:func:`gyrodeblur.gyrolog.saturation_warning`'s sentence, naming the log, for each
+    photo whose log looks clipped anywhere the search may place its exposure (the time
+    shifts it admits, the longest readout it tries)."""
+    out = []
+    for ph in search.photos:
+        c = ph.cap
+        longest = UNKNOWN_READOUT_MAX if search.readout_unknown else c.readout_time * 1.6
+        start = c.exposure_start - c.time_offset
+        said = saturation_warning(c.log, start - search.tau_hi,
+                                  start + longest + c.exposure_time - search.tau_lo)
+        if said is not None:
+            out.append(f"{c.log.source or 'gyro log'}: {said}")
+    return out
 
 
 def _one_of_each_twin_pair(cand: list) -> list:

@@ -516,11 +516,15 @@ class CalibrationFit:
             What was compared, and the decision.
         tie : tuple or None
             ``(other, objective gap, z)`` when the phase decided a tie it could not
-            settle: the two objectives within :data:`_TWIN_TIE_NATS` and the phase's
+            settle (the two objectives within :data:`_TWIN_TIE_NATS` and the phase's
             preference for the mapping taken under :data:`_TWIN_CLEAR_SIGMAS` standard
-            errors. ``other`` is the mapping left, ``objective gap`` its objective minus
-            the taken one's (tempered nats), ``z`` the phase's preference for the taken
-            one (standard errors). ``None`` otherwise.
+            errors), or when the two judges disagree (the objective keeps the winner by
+            :data:`_TWIN_TIE_NATS` or more, while the phase prefers the twin by
+            :data:`_TWIN_CLEAR_SIGMAS` standard errors or more: ``z`` is then negative).
+            ``other`` is the mapping left, ``objective gap`` its objective minus the taken
+            one's (tempered nats), ``z`` the phase's preference for the taken one
+            (standard errors). ``None`` otherwise; the caller reports a gap under its
+            confidence margin as an uncertain mapping.
         """
         Mt = TWIN @ M
         xt = np.clip(_twin_parameters(x, given_biases, self.fix), self.lo, self.hi)
@@ -549,9 +553,11 @@ class CalibrationFit:
                     f"{sem:.4f} (log ratio; {int((d > 0).sum())}/{d.size} patches prefer "
                     f"{axes_to_letters(M)})")
             taken = _phase_prefers_twin(gain, d)
+            z = _phase_z(d)
             if _unsettled_tie(gain, d):
-                z = _phase_z(d)
                 tie = (M, -gain, -z) if taken else (Mt, gain, z)
+            elif not taken and z <= -_TWIN_CLEAR_SIGMAS:    # the two judges disagree
+                tie = (Mt, gain, z)
             if not taken:
                 twin = None
         if twin is not None:

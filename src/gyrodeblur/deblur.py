@@ -26,7 +26,7 @@ import numpy as np
 from .arguments import check_callback, check_flag, is_count
 from .capture import Capture, check_capture
 from .errors import InputError
-from .gyrolog import warn_of_steps
+from .gyrolog import warn_of_saturation, warn_of_steps
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
 from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_variation,
                   render_psf)
@@ -685,6 +685,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     check_callback(progress, "progress")
     get_transfer_curve(transfer)                   # refused before the PSFs are rendered
     warn_of_steps(capture.log, *capture.log_window)
+    warn_of_saturation(capture.log, *capture.log_window)
     if align is not None:
         align = check_flag(align, "align")
     method = _checked_method(method)

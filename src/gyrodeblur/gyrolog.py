@@ -71,6 +71,8 @@ __all__ = [
     "largest_step",
     "step_warning",
     "warn_of_steps",
+    "saturation_warning",
+    "warn_of_saturation",
     "INTERPOLATED_STEP",
     "rate_noise",
     "median_rate",
@@ -326,6 +328,68 @@ def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
     """A :class:`UserWarning`, naming the log, with :func:`step_warning`'s sentence where
     it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
     said = step_warning(log, t0, t1, cost=cost)
+    if said is not None:
+        warnings.warn(f"{log.source or 'gyro log'}: {said}", stacklevel=stacklevel + 1)
+
+
+#: Samples in a row at an axis's largest rate of the whole log, entered or left at a slope
+#: that would have carried the rate beyond it, that :func:`saturation_warning` reads as the
+#: gyro's range exceeded (a clipped sensor), rather than a peak that happens to repeat a
+#: value.
+SATURATED_RUN = 3
+
+
+def saturation_warning(log: GyroLog, t0: float, t1: float) -> str | None:
+    """A sentence for the user where ``log``'s rates look clipped within ``[t0, t1]``
+    (the log's clock, s); ``None`` otherwise.
+
+    A gyro driven past its range reports its largest value, sample after sample, while
+    the motion goes on: the PSFs then come out too short, and calibration fits the
+    offset and bias to the loss (an audit's log clipped at 0.5 rad/s: the offset 34 ms
+    off, stated +-2 ms). Read as clipped, per log axis: :data:`SATURATED_RUN` samples or
+    more in a row at the whole log's largest magnitude on that axis, where the two
+    samples before the run (or after it) extrapolate beyond that magnitude. A constant
+    rate, or a step up to it, is not a clip.
+    """
+    i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
+    i1 = min(int(np.searchsorted(log.t, t1, side="left")) + 1, len(log.t))
+    found = []
+    for axis in range(log.omega.shape[1]):
+        w = log.omega[:, axis]
+        top = float(np.max(np.abs(w)))
+        if not top > 0:
+            continue
+        at = np.abs(w) >= top * (1 - 1e-9)
+        longest = 0
+        for first, last in _runs(at):
+            if last < i0 or first >= i1 or last - first + 1 < SATURATED_RUN:
+                continue
+            sign = np.sign(w[first])
+            entered = first >= 2 and sign * (2 * w[first - 1] - w[first - 2]) > top
+            left = last + 2 < len(w) and sign * (2 * w[last + 1] - w[last + 2]) > top
+            if entered or left:
+                longest = max(longest, last - first + 1)
+        if longest:
+            found.append(f"axis {'xyz'[axis]} at +-{top:.4g} rad/s for {longest} samples in "
+                         "a row")
+    if not found:
+        return None
+    return (f"the rates look clipped within the exposure ({'; '.join(found)}, the log's "
+            "largest value there, reached at a slope that would have gone beyond it): the "
+            "gyro's range was exceeded, the motion beyond it is lost, and the PSFs come out "
+            "too short there (log with a wider gyro range)")
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """``(first, last)`` index of each run of true values in ``flags``."""
+    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1))
+
+
+def warn_of_saturation(log: GyroLog, t0: float, t1: float, *, stacklevel: int = 2) -> None:
+    """A :class:`UserWarning`, naming the log, with :func:`saturation_warning`'s sentence
+    where it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
+    said = saturation_warning(log, t0, t1)
     if said is not None:
         warnings.warn(f"{log.source or 'gyro log'}: {said}", stacklevel=stacklevel + 1)
 
