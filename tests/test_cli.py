@@ -383,6 +383,7 @@ def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
     assert "warning: the blind kernel explains the photo no better than no blur" in got.err
     assert "as it is (no blind kernel that fits it)" in got.out, got.out
     assert "deblurred" not in got.out and "PSF extent" not in got.out, got.out
+    assert "deconvolved for noise" not in got.out, got.out   # a JPEG, but not deconvolved
     kept = read_photo(d / "blind.png").pixels
     assert kept.shape == (192, 256, 3)
     assert np.abs(kept - read_photo(d / "sharp.jpg").pixels).max() <= 1.5 / 255
@@ -391,6 +392,7 @@ def test_blind_deblur_needs_no_gyro(capture_dir, capsys):
     got = capsys.readouterr()
     assert "no better than no blur" not in got.err and "does not sharpen" not in got.err
     assert "deblurred" in got.out and "as it is" not in got.out, got.out
+    assert "JPEG: deconvolved for noise of" in got.out, got.out
     # told not to check, it deconvolves with the kernel it found
     forced = read_photo(d / "forced.png").pixels
     assert np.abs(forced - read_photo(d / "sharp.jpg").pixels).max() > 4 / 255

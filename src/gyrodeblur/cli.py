@@ -799,7 +799,8 @@ class _PhotoDeblur:
         args, say, options = self.args, self.say, self.options
         grid, overlap, curve, progress = self.grid, self.overlap, self.curve, self.progress
         colour, given = self.colour, self.given
-        if self.noise_note:
+        as_it_is = False
+        if self.noise_note and not args.blind:
             say(self.noise_note)
         if args.blind:
             from .deblur import deblur_blind
@@ -808,6 +809,10 @@ class _PhotoDeblur:
                                            overlap=overlap, method=args.method,
                                            transfer=curve, check_blur=not args.no_blur_check,
                                            progress=progress, **options)
+            as_it_is = (not args.no_blur_check and field.extents.max() == 1  # the checks'
+                        and np.array_equal(restored, np.clip(colour, 0.0, 1.0)))  # deltas
+            if self.noise_note and not as_it_is:      # said of a photo deconvolved only
+                say(self.noise_note)
             mode_txt = "blind"
             grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
         else:
@@ -852,8 +857,7 @@ class _PhotoDeblur:
             raise
         e = field.extents
         gh, gw = given.pixels.shape[:2]
-        if (args.blind and not args.no_blur_check and e.max() == 1     # the checks' deltas,
-                and np.array_equal(restored, np.clip(colour, 0.0, 1.0))):  # not deconvolved
+        if as_it_is:
             say(f"wrote {args.photo} as it is (no blind kernel that fits it) -> "
                 f"{args.output}: {gw}x{gh}, {time.perf_counter() - self.t0:.2f} s")
         else:

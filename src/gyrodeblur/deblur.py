@@ -879,14 +879,17 @@ def _shows_no_blur(image, psf, transfer) -> bool:
                       f"the most textured windows' edges are hardly sparser than with no "
                       f"blur (their gradients' L1/L2 x{ratio:.2f} of that, over "
                       f"{SPARSER_MAX:g}), as where a repeating pattern or text is taken for "
-                      f"the blur, or the photo shows little blur. Deconvolving with it would "
-                      f"add ghost edges. {_RETURNED_AS_IT_IS}", stacklevel=3)
+                      f"the blur, the photo shows little blur, or the kernel size is far "
+                      f"larger than the blur (give one a little over the blur's length). "
+                      f"Deconvolving with it would add ghost edges. {_RETURNED_AS_IT_IS}",
+                      stacklevel=3)
         return True
     side = psf.shape[0]
     why = (f"the photo shows little blur, or its blur is longer than the {side} px kernel "
            f"support" + (", as the estimate filling the whole support suggests"
                          if psf_extent(psf) >= side - 1 else "")
-           + " (try a larger kernel size)")
+           + " (try a larger kernel size if the photo is visibly blurred: on a sharp photo "
+             "a larger support only invites a false kernel)")
     warnings.warn(f"the blind kernel explains the photo no better than no blur at all "
                   f"({gain:+.1f} nats per 9 windows, under {NO_BLUR_MARGIN:g}), so it does not "
                   f"fit the photo: {why}, or its blur is not one "
