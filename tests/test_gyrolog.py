@@ -942,6 +942,15 @@ def test_a_gyro_clipped_at_its_range_is_told_and_peaks_constants_and_steps_are_n
     slow = np.round(np.sin(2 * np.pi * 0.2 * t) / 0.01) * 0.01      # 5 s period, 0.01 steps
     assert np.sum(slow == slow.max()) >= 3
     assert saturation_warning(log(slow), 0.0, 2.0) is None
+    # a 500 Hz log of a smooth sway rounded to a +-2000 deg/s 16-bit gyro's step: its
+    # peak repeats its top value, entered two steps below it, which extrapolates a step
+    # beyond (a rule without a margin took 42 of 240 such logs for clipped)
+    t5 = np.arange(0.0, 1.0, 1 / 500)
+    quantum = np.radians(2000) / 32768
+    sway = np.round(1.2 * np.sin(2 * np.pi * 2.0 * t5 + 1.0) / quantum) * quantum
+    assert np.sum(np.abs(sway) == np.abs(sway).max()) >= 3
+    rounded = GyroLog(t5, np.stack([sway, 0 * sway, 0 * sway], axis=1))
+    assert saturation_warning(rounded, 0.0, 1.0) is None
 
 
 def test_a_step_between_samples_inside_the_exposure_is_told_as_a_gap_or_a_rate():

@@ -348,8 +348,10 @@ def saturation_warning(log: GyroLog, t0: float, t1: float) -> str | None:
     offset and bias to the loss (an audit's log clipped at 0.5 rad/s: the offset 34 ms
     off, stated +-2 ms). Read as clipped, per log axis: :data:`SATURATED_RUN` samples or
     more in a row at the whole log's largest magnitude on that axis, where the two
-    samples before the run (or after it) extrapolate beyond that magnitude. A constant
-    rate, or a step up to it, is not a clip.
+    samples before the run (or after it) extrapolate beyond that magnitude by more than
+    1 % of it and 3 of the log's smallest steps between values (up to 5 % of it): a
+    smooth peak of a log rounded to a 16-bit sensor's steps, sampled at a kHz, can repeat
+    its top value a few times. A constant rate, or a step up to it, is not a clip.
     """
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(log.t, t1, side="left")) + 1, len(log.t))
@@ -360,13 +362,18 @@ def saturation_warning(log: GyroLog, t0: float, t1: float) -> str | None:
         if not top > 0:
             continue
         at = np.abs(w) >= top * (1 - 1e-9)
+        values = np.unique(w)
+        quantum = float(np.min(np.diff(values))) if values.size > 1 else 0.0
+        # not a rounded smooth peak's plateau (the smallest step between values is the
+        # sensor's rounding in a long log, but may be a short log's coarse sampling)
+        beyond = top + max(min(3 * quantum, 0.05 * top), 0.01 * top)
         longest = 0
         for first, last in _runs(at):
             if last < i0 or first >= i1 or last - first + 1 < SATURATED_RUN:
                 continue
             sign = np.sign(w[first])
-            entered = first >= 2 and sign * (2 * w[first - 1] - w[first - 2]) > top
-            left = last + 2 < len(w) and sign * (2 * w[last + 1] - w[last + 2]) > top
+            entered = first >= 2 and sign * (2 * w[first - 1] - w[first - 2]) > beyond
+            left = last + 2 < len(w) and sign * (2 * w[last + 1] - w[last + 2]) > beyond
             if entered or left:
                 longest = max(longest, last - first + 1)
         if longest:
