@@ -932,8 +932,14 @@ def test_a_gyro_clipped_at_its_range_is_told_and_peaks_constants_and_steps_are_n
 
     said = saturation_warning(log(np.clip(shake, -1.0, 1.0)), 0.9, 1.1)
     assert said is not None
-    assert said.startswith("the rates look clipped within the exposure (axis y at +-1 rad/s "
+    assert said.startswith("the rates look clipped within the exposure (axis y at +1 rad/s "
                            "for ")
+    assert "axis y at -1 rad/s for " in said                      # both sides clipped
+    glitch = np.clip(shake, -1.0, 1.0)
+    glitch[20] = 1.3                                              # one sample above the clip
+    assert "axis y at +1 rad/s for " in saturation_warning(log(glitch), 0.9, 1.1)
+    lopsided = np.clip(shake, -1.1, 0.9)           # a bias subtracted: +0.9 and -1.1 (-1.1
+    assert "at -1.1 rad/s" in saturation_warning(log(lopsided), 0.9, 1.1)   # found alone)
     assert "the PSFs come out too short" in said
     assert saturation_warning(log(np.clip(shake, -1.0, 1.0)), 0.0, 0.3) is None  # not there
     assert saturation_warning(log(shake), 0.0, 2.0) is None

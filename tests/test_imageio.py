@@ -1071,6 +1071,12 @@ def test_a_tiff_cut_short_is_refused_as_truncated(tmp_path, recwarn, layout):
     with pytest.raises(InputError, match=rf"cut.tif: truncated: the file has "
                                          rf"{len(data) * 6 // 10} bytes, but its {where}"):
         read_photo(tmp_path / "cut.tif")
+    if layout == "pixels first":      # the directory last: a cut inside it, of any length
+        for lost in (1, 7, 30, 60, 120):
+            (tmp_path / "cut.tif").write_bytes(data[:-lost])
+            with pytest.raises(InputError, match=r"cut.tif: truncated: the file has \d+ "
+                                                 r"bytes, but its (first directory|tag \d+)"):
+                read_photo(tmp_path / "cut.tif")
     assert not recwarn.list
     (tmp_path / "empty.jpg").write_bytes(b"")
     with pytest.raises(InputError, match=r"empty.jpg: the file is empty \(0 bytes\)"):
@@ -1295,6 +1301,17 @@ def test_a_tiff_needing_imagecodecs_is_refused_saying_what_to_do(tmp_path, monke
                                          r"imagecodecs.*pip install imagecodecs.*or save the "
                                          r"TIFF uncompressed"):
         read_photo(tmp_path / "a.tif")
+
+
+def test_a_refusal_of_what_a_tiff_holds_is_not_put_down_to_imagecodecs(tmp_path):
+    """32-bit integer samples in an LZW TIFF (Pillow's mode I), which tifffile cannot
+    decode without imagecodecs: refused for its samples, as uncompressed, not with advice
+    to install a package that would not help (a review found the refusal replaced)."""
+    ints = np.arange(32 * 32, dtype=np.int32).reshape(32, 32) * 1000
+    for name, kw in (("lzw.tif", {"compression": "tiff_lzw"}), ("raw.tif", {})):
+        Image.fromarray(ints).save(tmp_path / name, **kw)
+        with pytest.raises(InputError, match=rf"{name}: unsupported samples \(32-bit"):
+            read_photo(tmp_path / name)
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])

@@ -733,7 +733,8 @@ def _clipped_logs(search: SearchSpace) -> list[str]:
         longest = UNKNOWN_READOUT_MAX if search.readout_unknown else c.readout_time * 1.6
         start = c.exposure_start - c.time_offset
         said = saturation_warning(c.log, start - search.tau_hi,
-                                  start + longest + c.exposure_time - search.tau_lo)
+                                  start + longest + c.exposure_time - search.tau_lo,
+                                  what="where the search may place the exposure")
         if said is not None:
             out.append(f"{c.log.source or 'gyro log'}: {said}")
     return out

@@ -811,8 +811,6 @@ class _PhotoDeblur:
                                            progress=progress, **options)
             as_it_is = (not args.no_blur_check and field.extents.max() == 1  # the checks'
                         and np.array_equal(restored, np.clip(colour, 0.0, 1.0)))  # deltas
-            if self.noise_note and not as_it_is:      # said of a photo deconvolved only
-                say(self.noise_note)
             mode_txt = "blind"
             grid_txt = f" {blind_grid[0]}x{blind_grid[1]}" if blind_grid != (1, 1) else ""
         else:
@@ -831,6 +829,8 @@ class _PhotoDeblur:
             if report.model == "global":
                 grid_txt += " (global model)"
         progress.close()
+        if args.blind and self.noise_note and not as_it_is:   # of a photo deconvolved only
+            say(self.noise_note)
         h, w = self.photo.pixels.shape[:2]
         drawing = (to_photo_layout(field_image(field, w, h), args.photo_rotation)
                    if args.save_psf else None)

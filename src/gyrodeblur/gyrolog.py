@@ -332,65 +332,85 @@ def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
         warnings.warn(f"{log.source or 'gyro log'}: {said}", stacklevel=stacklevel + 1)
 
 
-#: Samples in a row at an axis's largest rate of the whole log, entered or left at a slope
-#: that would have carried the rate beyond it, that :func:`saturation_warning` reads as the
-#: gyro's range exceeded (a clipped sensor), rather than a peak that happens to repeat a
-#: value.
+#: Samples in a row at one rate, the highest the log holds that long on an axis and side,
+#: entered or left at a slope that would have carried the rate beyond it, that
+#: :func:`saturation_warning` reads as the gyro's range exceeded (a clipped sensor), rather
+#: than a peak that happens to repeat a value.
 SATURATED_RUN = 3
 
+#: rad/s: a level under this is not read as a clip. No gyro's range is under 125 deg/s
+#: (2.2 rad/s, less a bias subtracted by the phone), while a small motion logged in a
+#: sensor's rounding steps repeats its top value by chance (a review's steady-hand logs
+#: rounded to a 16-bit +-2000 deg/s gyro's steps: 21-43 % of them).
+CLIP_MIN_RATE = 1.0
 
-def saturation_warning(log: GyroLog, t0: float, t1: float) -> str | None:
-    """A sentence for the user where ``log``'s rates look clipped within ``[t0, t1]``
-    (the log's clock, s); ``None`` otherwise.
+
+def saturation_warning(log: GyroLog, t0: float, t1: float, *,
+                       what: str = "within the exposure") -> str | None:
+    """A sentence for the user where ``log``'s rates look clipped in ``[t0, t1]`` (the
+    log's clock, s; ``what`` says where that is); ``None`` otherwise.
 
     A gyro driven past its range reports its largest value, sample after sample, while
     the motion goes on: the PSFs then come out too short, and calibration fits the
-    offset and bias to the loss (an audit's log clipped at 0.5 rad/s: the offset 34 ms
-    off, stated +-2 ms). Read as clipped, per log axis: :data:`SATURATED_RUN` samples or
-    more in a row at the whole log's largest magnitude on that axis, where the two
-    samples before the run (or after it) extrapolate beyond that magnitude by more than
-    1 % of it and 3 of the log's smallest steps between values (up to 5 % of it): a
-    smooth peak of a log rounded to a 16-bit sensor's steps, sampled at a kHz, can repeat
-    its top value a few times. A constant rate, or a step up to it, is not a clip.
+    offset and bias to the loss (an audit's log clipped at 0.5 rad/s, a range no gyro has:
+    the offset 34 ms off, stated +-2 ms). Read as clipped, per log axis and sign (a gyro
+    whose bias is
+    subtracted clips at two levels, ``+R - b`` and ``-R - b``): :data:`SATURATED_RUN`
+    samples or more in a row at one rate, the highest that the rate holds that long on
+    that side and exceeded by two samples at most (a glitch), where the two samples
+    before the run (or after it) extrapolate beyond it
+    by more than 1 % of it and 3 of the log's smallest steps between values (up to 5 %
+    of it): a smooth peak of a log rounded to a 16-bit sensor's steps,
+    sampled at a kHz, can repeat its top value a few times. A level under
+    :data:`CLIP_MIN_RATE` is not a clip (small motion in rounding steps); nor is a
+    constant rate, or a step up to one.
     """
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(log.t, t1, side="left")) + 1, len(log.t))
     found = []
     for axis in range(log.omega.shape[1]):
         w = log.omega[:, axis]
-        top = float(np.max(np.abs(w)))
-        if not top > 0:
-            continue
-        at = np.abs(w) >= top * (1 - 1e-9)
         values = np.unique(w)
         quantum = float(np.min(np.diff(values))) if values.size > 1 else 0.0
-        # not a rounded smooth peak's plateau (the smallest step between values is the
-        # sensor's rounding in a long log, but may be a short log's coarse sampling)
-        beyond = top + max(min(3 * quantum, 0.05 * top), 0.01 * top)
-        longest = 0
-        for first, last in _runs(at):
-            if last < i0 or first >= i1 or last - first + 1 < SATURATED_RUN:
-                continue
-            sign = np.sign(w[first])
-            entered = first >= 2 and sign * (2 * w[first - 1] - w[first - 2]) > beyond
-            left = last + 2 < len(w) and sign * (2 * w[last + 1] - w[last + 2]) > beyond
-            if entered or left:
-                longest = max(longest, last - first + 1)
-        if longest:
-            found.append(f"axis {'xyz'[axis]} at +-{top:.4g} rad/s for {longest} samples in "
-                         "a row")
+        for sign in (1.0, -1.0):
+            level, longest = _clipped_run(sign * w, i0, i1, quantum)
+            if longest:
+                found.append(f"axis {'xyz'[axis]} at {sign * level:+.4g} rad/s for {longest} "
+                             "samples in a row")
     if not found:
         return None
-    return (f"the rates look clipped within the exposure ({'; '.join(found)}, the log's "
-            "largest value there, reached at a slope that would have gone beyond it): the "
+    return (f"the rates look clipped {what} ({'; '.join(found)}: the highest rate held "
+            "that long, entered or left at a slope that would have gone beyond it): the "
             "gyro's range was exceeded, the motion beyond it is lost, and the PSFs come out "
             "too short there (log with a wider gyro range)")
 
 
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """``(first, last)`` index of each run of true values in ``flags``."""
-    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1))
+def _clipped_run(v: np.ndarray, i0: int, i1: int, quantum: float) -> tuple[float, int]:
+    """:func:`saturation_warning` on one side of one axis (``v``: the rates, signed so
+    that the side is positive; ``[i0, i1)`` the samples of the window; ``quantum`` the
+    log's smallest step between values): ``(level, the longest clipped run there in
+    samples)``, the run 0 where none is."""
+    change = np.flatnonzero(np.diff(v) != 0)
+    starts = np.concatenate([[0], change + 1])
+    ends = np.concatenate([change, [len(v) - 1]])
+    held = (ends - starts + 1 >= SATURATED_RUN) & (v[starts] > 0)
+    if not held.any():
+        return 0.0, 0
+    level = float(v[starts[held]].max())
+    # the top of that side but for two samples at most (a glitch above a clip), and no less
+    # than a gyro's range could be
+    if level < CLIP_MIN_RATE or level < np.partition(v, -SATURATED_RUN)[-SATURATED_RUN]:
+        return level, 0
+    beyond = level + max(min(3 * quantum, 0.05 * level), 0.01 * level)
+    longest = 0
+    for first, last in zip(starts[held], ends[held]):
+        if v[first] != level or last < i0 or first >= i1:
+            continue
+        entered = first >= 2 and 2 * v[first - 1] - v[first - 2] > beyond
+        left = last + 2 < len(v) and 2 * v[last + 1] - v[last + 2] > beyond
+        if entered or left:
+            longest = max(longest, int(last - first + 1))
+    return level, longest
 
 
 def warn_of_saturation(log: GyroLog, t0: float, t1: float, *, stacklevel: int = 2) -> None:

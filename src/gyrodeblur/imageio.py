@@ -607,6 +607,8 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
         tifffile_error = exc
     try:
         return _read_tiff_by_pillow(path, im, tifffile_error)
+    except InputError:                   # what Pillow's path refuses, imagecodecs or not
+        raise
     except Exception as exc:
         refusal = _codec_missing(path, tifffile_error)
         if refusal is None:
@@ -614,24 +616,56 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
         raise refusal from exc
 
 
+#: Bytes per value of each TIFF field type (TIFF 6.0 and BigTIFF).
+_TIFF_TYPE_BYTES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8,
+                    13: 4, 16: 8, 17: 8, 18: 8}
+#: TIFF tags whose value is the offset of a sub-directory: Exif and GPS.
+_TIFF_SUB_IFDS = (34665, 34853)
+
+
 def _refuse_truncated_tiff(path: str) -> None:
     """Refuse a TIFF cut short (a copy or download interrupted), saying so: one whose
-    first directory (its tags, which a writer may put after the pixels) lies past the
-    end of the file, or whose first image's strips or tiles run past it. The decoders
-    would say only "(0)" or "decoder error -2", Pillow would warn of corrupt EXIF, and
-    libtiff would print its own line. A directory tifffile cannot parse otherwise is
-    left to the decoders."""
+    header, first directory (its tags, which a writer may put after the pixels), a value one of
+    its tags points to (an ICC profile, an Exif directory) or its first image's strips or
+    tiles lie past the end of the file. The decoders would say only "(0)", "decoder error
+    -2" or "corrupted IFD structure", Pillow would warn of corrupt EXIF or a truncated
+    read, libtiff would print its own line, and a cut LZW file would be taken for one that
+    needs imagecodecs."""
     size = os.path.getsize(path)
+
+    def cut(what: str, end: int) -> InputError:
+        return InputError(path, f"truncated: the file has {size} bytes, but {what} "
+                                f"{end} (an incomplete copy or download?)")
+
     with open(path, "rb") as f:
         head = f.read(16)
-    order = "<" if head[:2] == b"II" else ">"
-    big = head[2:4] in (b"+\x00", b"\x00+")
-    if len(head) == 16:
-        first = struct.unpack(order + ("Q" if big else "I"), head[8:16] if big else head[4:8])[0]
+        order = "<" if head[:2] == b"II" else ">"
+        big = head[2:4] in (b"+\x00", b"\x00+")
+        offset, entry, count_size = ("Q", 20, 8) if big else ("I", 12, 2)
+        if len(head) < (16 if big else 8):
+            raise cut("its header runs to byte", 16 if big else 8)
+        first = struct.unpack(order + offset, head[8:16] if big else head[4:8])[0]
         if first >= size:
-            raise InputError(path, f"truncated: the file has {size} bytes, but its first "
-                                   f"directory is at byte {first} (an incomplete copy or "
-                                   "download?)")
+            raise cut("its first directory is at byte", first)
+        f.seek(first)
+        raw = f.read(count_size)
+        count = struct.unpack(order + ("Q" if big else "H"), raw)[0] \
+            if len(raw) == count_size else None
+        end = first + count_size + entry * (count or 0) + (8 if big else 4)
+        if count is None or end > size:
+            raise cut("its first directory runs to byte", end)
+        entries = f.read(entry * count)
+    inline = 8 if big else 4
+    for k in range(count):
+        e = entries[k * entry:(k + 1) * entry]
+        tag, kind = struct.unpack(order + "HH", e[:4])
+        n = struct.unpack(order + offset, e[4:12] if big else e[4:8])[0]
+        at = struct.unpack(order + offset, e[12:20] if big else e[8:12])[0]
+        nbytes = n * _TIFF_TYPE_BYTES.get(kind, 1)
+        if nbytes > inline and at + nbytes > size:
+            raise cut(f"its tag {tag}'s value runs to byte", at + nbytes)
+        if tag in _TIFF_SUB_IFDS and nbytes <= inline and at >= size:
+            raise cut(f"its tag {tag}'s directory is at byte", at)
     try:
         with _tifffile_quiet(), tifffile.TiffFile(path) as tif:
             page = tif.pages.first
@@ -640,8 +674,7 @@ def _refuse_truncated_tiff(path: str) -> None:
     except Exception:
         return
     if end > size:
-        raise InputError(path, f"truncated: the file has {size} bytes, but its image data "
-                               f"runs to byte {end} (an incomplete copy or download?)")
+        raise cut("its image data runs to byte", end)
 
 
 def _codec_missing(path: str, exc: BaseException) -> InputError | None:
@@ -653,9 +686,9 @@ def _codec_missing(path: str, exc: BaseException) -> InputError | None:
         return None
     found = re.search(r"<(COMPRESSION|PREDICTOR)\.(\w+)", text)
     what = f"{found[2]} {found[1].lower()}" if found else "encoding"
-    return InputError(path, f"its {what} needs the package imagecodecs, which is not "
-                            "installed: `pip install imagecodecs` (or gyrodeblur's `tiff` "
-                            "extra), or save the TIFF uncompressed")
+    return InputError(path, f"its {what} needs the package imagecodecs (not installed, or "
+                            "without that codec): `pip install imagecodecs` (or "
+                            "gyrodeblur's `tiff` extra), or save the TIFF uncompressed")
 
 
 def _read_tiff_by_pillow(path: str, im: Image.Image, tifffile_error: Exception) -> np.ndarray:
