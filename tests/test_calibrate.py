@@ -322,7 +322,15 @@ def test_a_shake_that_repeats_within_the_exposure_makes_the_offset_ambiguous(cas
     for offset, readout, _ in res.offset_rivals:     # absolute values, near the given ones
         assert abs(offset - bad.time_offset) < 0.05 and readout == pytest.approx(0.03)
     assert any("time offset is ambiguous" in note and "--time-offset" in note
+               and "or calibrate on several photos of the session" in note
                for note in res.notes)
+    # two photos of the session, as ambiguous: the advice asks for more than these two
+    # (a five-frame session had been told to calibrate on several photos)
+    later = true.replace(exposure_start=0.62)
+    res = calibrate([_blur(sharp, true), _blur(sharp, later, seed=1)],
+                    [bad, bad.replace(exposure_start=0.62)], fix={"axes", "readout", "bias"})
+    said = [n for n in res.notes if "time offset is ambiguous" in n]
+    assert said and "or calibrate on more photos of the session than these 2" in said[0]
 
 
 def test_deblurring_with_the_calibrated_capture_is_close_to_the_true_one(case, recovered):

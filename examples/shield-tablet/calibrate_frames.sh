@@ -3,9 +3,15 @@
 # from the published values (focal length 1558.69 px, no time offset) and the proper rotation
 # `YXz` next to the published, improper axis matrix. Writes ./shield-out/calibrated.json (the
 # corrected capture of frame 2) and prints every parameter before and after.
-# Usage (from this folder): ./calibrate_frames.sh [extra gyrodeblur calibrate options]
+# Usage (from any folder; the outputs go to this one): ./calibrate_frames.sh [extra gyrodeblur calibrate options]
 set -euo pipefail
-data=${GYRODEBLUR_SHARED_DATA:-../../../shared/data}/real/shield-tablet
+shared=${GYRODEBLUR_SHARED_DATA:+$(realpath -m "$GYRODEBLUR_SHARED_DATA")}
+cd "$(dirname "$0")"    # the paths below are this folder's
+data=${shared:-../../../shared/data}/real/shield-tablet
+if [ ! -f "$data/frames.txt" ]; then
+  echo "$0: no Shield capture at $(realpath -m "$data"): set GYRODEBLUR_SHARED_DATA to the shared data folder" >&2
+  exit 2
+fi
 frames=$(./frames_in_log.sh)
 mkdir -p shield-out
 photos=()

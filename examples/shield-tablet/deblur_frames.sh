@@ -2,9 +2,15 @@
 # Deblur the Shield-tablet frames that the gyro log covers, into ./shield-out/, with the
 # hand-worked capture_0003.json, or with another description given as CAPTURE (say
 # CAPTURE=shield-out/calibrated.json after ./calibrate_frames.sh).
-# Usage (from this folder): [CAPTURE=file.json] ./deblur_frames.sh [extra gyrodeblur deblur options]
+# Usage (from any folder; the outputs go to this one): [CAPTURE=file.json] ./deblur_frames.sh [extra gyrodeblur deblur options]
 set -euo pipefail
-data=${GYRODEBLUR_SHARED_DATA:-../../../shared/data}/real/shield-tablet
+shared=${GYRODEBLUR_SHARED_DATA:+$(realpath -m "$GYRODEBLUR_SHARED_DATA")}
+cd "$(dirname "$0")"    # the paths below are this folder's
+data=${shared:-../../../shared/data}/real/shield-tablet
+if [ ! -f "$data/frames.txt" ]; then
+  echo "$0: no Shield capture at $(realpath -m "$data"): set GYRODEBLUR_SHARED_DATA to the shared data folder" >&2
+  exit 2
+fi
 capture=${CAPTURE:-capture_0003.json}
 frames=$(./frames_in_log.sh)
 mkdir -p shield-out

@@ -563,6 +563,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             note(msg, "  ")
             gap = _gap_to_other_mappings(results, M, fx)
 
+    # what the warnings below advise: more photos of the session than were given
+    more_photos = ("several photos of the session" if len(images) == 1 else
+                   f"more photos of the session than these {len(images)}")
+    these_photos = "this photo's" if len(images) == 1 else "these photos'"
+
     # other offsets the photo(s) cannot tell from the chosen one: the winner's refinements
     # reached their basins (scored under the winner's mapping; a mirror twin taken below
     # starts from the winner's parameters)
@@ -574,7 +579,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         alt += f" and {len(rivals) - 3} more" if len(rivals) > 3 else ""
         note(f"warning: the time offset is ambiguous: other offsets score within "
              f"{OFFSET_RIVAL_NATS:g} of the best: {alt}. Give the offset (--time-offset) if it "
-             f"is known, or calibrate on several photos of the session", "  ")
+             f"is known, or calibrate on {more_photos}", "  ")
 
     # 3. the mirror twin (|H| nearly equal): the frame registration decides at the same
     #    parameters, else the twin is refined and the phase (sparsity of the deconvolved
@@ -620,9 +625,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                    + (f" scores only {gap:.1f} worse (< {AXES_CONFIDENT_NATS:g})" if gap >= 0
                       else f" scores {-gap:.1f} better, by less than the margin kept for the "
                            "given one"))
-        note("warning: the axis mapping is uncertain:" + why + "; this photo's blur does not "
-             "tell the mappings apart surely. Give the mapping (--orientation) if it is known, or "
-             "calibrate on several photos of the session", "  ")
+        note("warning: the axis mapping is uncertain:" + why + f"; {these_photos} blur does "
+             "not tell the mappings apart surely. Give the mapping (--orientation) if it is "
+             f"known, or calibrate on {more_photos}", "  ")
 
     far = 0.0 if kept else _prior_distance(fit, M, x)
     if far > 0 and far > _chi2_quantile(_FAR_QUANTILE, len(_prior_bound(fit))):
