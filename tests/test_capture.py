@@ -188,6 +188,9 @@ def test_not_json(tmp_path):
     with pytest.raises(InputError, match=r"not valid JSON \(Unterminated string starting at: "
                                          r"line 1, column 20\)"):
         load_capture(tmp_path / "c.json")
+    (tmp_path / "d.json").mkdir()            # a folder is named as one, not by its errno
+    with pytest.raises(InputError, match=r"d.json: is a folder, not a capture description$"):
+        load_capture(tmp_path / "d.json")
 
 
 def test_unknown_keys_are_warned_of_and_notes_are_not(capture_files):

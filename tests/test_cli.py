@@ -222,13 +222,20 @@ def test_a_gyro_deblur_warns_when_the_logs_blur_does_not_fit_the_photo(capture_d
     capsys.readouterr()
     runs = {"right": [], "late": ["--exposure-start", "50.6"],
             "late, unchecked": ["--exposure-start", "50.6", "--no-blur-check"],
-            "fx 5x": ["--fx", "2250", "--fy", "2250"]}
+            "fx 5x": ["--fx", "2250", "--fy", "2250"],
+            "exposure 13x": ["--exposure-time", "0.65", "--fx", "900", "--fy", "900"]}
     for name, extra in runs.items():
         assert main(["deblur", str(d / "b.png"), "--capture", cap, "-o",
                      str(d / f"{name}.png"), "--model", "patches", *extra]) == 0
         err = capsys.readouterr().err
         warned = "the blur the gyro log implies does not fit the photo" in err
         assert warned == (name in ("late", "fx 5x")), (name, err)
+        # a blur over half the photo's side, which the check reads in too few windows
+        # (a 40 ms exposure given as 40 had passed it): warned of as such
+        long = "spans over half the photo's 192 px shorter side" in err
+        assert long == (name == "exposure 13x"), (name, err)
+        if long:
+            assert "Check exposure_time and readout_time (seconds, not ms)" in err
         if warned:
             assert "run calibrate (or deblur --refine) first" in err
             assert "the focal length (one in the pixels of another resolution)" in err
@@ -358,10 +365,11 @@ def test_missing_log_and_unknown_format(capture_dir, capsys):
     d = capture_dir
     assert "not found" in _run_error(["psf", "--capture", str(d / "cap.json"), "--gyro",
                                       str(d / "nope.csv"), "--at", "5,5", "-o", str(d / "p.npy")], capsys)
-    for bad, flag in ((["--at", "five,5"], "--at"), (["--grid", "3xq"], "--grid"),
+    npy = ["-o", str(d / "p.npy")]
+    for bad, flag in ((["--at", "five,5", *npy], "--at"), (["--grid", "3xq", *npy], "--grid"),
                       (["--at", "5,5", "-o", str(d / "p.txt")], "p.txt")):
         msg = _run_error(["psf", "--capture", str(d / "cap.json"), "--gyro", str(d / "nope.csv"),
-                          "-o", str(d / "p.npy"), *bad], capsys)   # the options are checked
+                          *bad], capsys)                           # the options are checked
         assert flag in msg and "nope.csv" not in msg, msg          # before the log is read
     assert "/dev/null: not a regular file" in _run_error(
         ["psf", "--capture", str(d / "cap.json"), "--gyro", "/dev/null", "--at", "5,5", "-o",
@@ -1990,3 +1998,32 @@ def test_the_readmes_python_api_example_runs_on_a_short_description(capture_dir,
     gain = (psnr(read_photo(d / "out.jpg").pixels, sharp, border=16)
             - psnr(read_photo(d / "photo.jpg").pixels, sharp, border=16))
     assert gain > 3, gain
+
+
+def test_a_home_folder_is_expanded_in_every_file_option(capture_dir, capsys, monkeypatch):
+    """``~`` in ``--capture=~/...`` and ``-o=~/...`` (which the shell leaves alone) is the
+    home folder, as in a capture's ``gyro.path`` and ``--gyro``: before, the capture was
+    "not found" and the output's folder taken for one named ``~``."""
+    d = capture_dir
+    monkeypatch.setenv("HOME", str(d))
+    monkeypatch.chdir(d / "..")
+    assert main(["simulate", "--capture=~/cap.json", "~/sharp.jpg", "--output=~/b.png"]) == 0
+    assert main(["deblur", "~/b.png", "--capture=~/cap.json", "--output=~/out.png",
+                 "--method", "wiener", "--save-psf=~/psf.png"]) == 0
+    assert (d / "out.png").is_file() and (d / "psf.png").is_file()
+    assert not (d / ".." / "~").exists()
+    assert "deblurred" in capsys.readouterr().out
+
+
+def test_an_option_of_one_value_given_twice_is_refused(capture_dir, capsys):
+    """``--fx 300 --fx 3000`` had deblurred with 3000 without a word (argparse keeps the
+    last), while ``-o`` given twice for one photo is refused: now each names the option.
+    A flag given twice, and a value after ``--``, are left alone."""
+    d = capture_dir
+    base = ["deblur", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o",
+            str(d / "o.png"), "--method", "wiener"]
+    for twice in (["--fx", "300", "--fx", "3000"], ["--orientation", "XYZ", "--orientation=yxz"],
+                  ["--time-offset", "-0.001", "--time-offset=0"]):
+        assert twice[0] in _run_error(base + twice, capsys)
+    assert not (d / "o.png").exists()
+    assert main(base + ["--overwrite", "--overwrite", "--quiet"]) == 0

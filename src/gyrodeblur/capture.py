@@ -615,6 +615,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                 data = json.load(fh, object_pairs_hook=_no_repeated_keys(src))
         except FileNotFoundError:
             raise InputError(src, "capture description not found") from None
+        except IsADirectoryError:
+            raise InputError(src, "is a folder, not a capture description") from None
         except RecursionError:
             raise InputError(src, "not valid JSON (nested too deeply)") from None
         except json.JSONDecodeError as exc:
