@@ -4,13 +4,7 @@
 # CAPTURE=shield-out/calibrated.json after ./calibrate_frames.sh).
 # Usage (from any folder; the outputs go to this one): [CAPTURE=file.json] ./deblur_frames.sh [extra gyrodeblur deblur options]
 set -euo pipefail
-shared=${GYRODEBLUR_SHARED_DATA:+$(realpath -m "$GYRODEBLUR_SHARED_DATA")}
-cd "$(dirname "$0")"    # the paths below are this folder's
-data=${shared:-../../../shared/data}/real/shield-tablet
-if [ ! -f "$data/frames.txt" ]; then
-  echo "$0: no Shield capture at $(realpath -m "$data"): set GYRODEBLUR_SHARED_DATA to the shared data folder" >&2
-  exit 2
-fi
+. "$(dirname "$0")/shared_data.sh"      # cd here; $data: the capture's folder
 capture=${CAPTURE:-capture_0003.json}
 frames=$(./frames_in_log.sh)
 mkdir -p shield-out
