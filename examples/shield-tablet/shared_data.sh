@@ -6,6 +6,7 @@ if [ -n "${GYRODEBLUR_SHARED_DATA:-}" ]; then
     echo "$0: GYRODEBLUR_SHARED_DATA=$GYRODEBLUR_SHARED_DATA is not a folder" >&2
     exit 2
   }
+  export GYRODEBLUR_SHARED_DATA=$shared     # as this script's children must read it
 fi
 cd "$(dirname "${BASH_SOURCE[0]}")"
 data=${shared:-../../../shared/data}/real/shield-tablet

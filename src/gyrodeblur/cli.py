@@ -1148,26 +1148,32 @@ def as_option(exc: InputError) -> InputError:
                       exc.problem)
 
 
-#: The options and arguments that name files, whose ``~`` :func:`_home_expanded` expands.
-_PATH_ARGUMENTS = ("photo", "photos", "sharp", "capture", "gyro", "output", "save_psf",
-                   "save_capture")
+#: The arguments that name one file each, and the options that name files (a comma-
+#: separated list for several photos), whose ``~`` :func:`_home_expanded` expands.
+_FILE_ARGUMENTS = ("photos", "sharp")
+_FILE_OPTIONS = ("capture", "gyro", "output", "save_psf", "save_capture", "out")
 
 
 def _home_expanded(args) -> None:
-    """``~`` expanded in every file name ``args`` holds (each item of a comma-separated
-    list that starts with it), as in a capture's ``gyro.path``: the shell leaves it alone
-    after ``--capture=`` or ``-o=``, where it had been taken for a folder named ``~``."""
-    def expand(value):
+    """``~`` expanded in every file name ``args`` holds, as in a capture's ``gyro.path``:
+    the shell leaves it alone after ``--capture=`` or ``-o=``, where it had been taken for
+    a folder named ``~``. An option's value is expanded item by item of its
+    comma-separated list (the spaces before an item dropped, as the list reader drops
+    them); an argument's, whole."""
+    def expand(value, listed: bool):
         if isinstance(value, list):
-            return [expand(v) for v in value]
+            return [expand(v, listed) for v in value]
         if not isinstance(value, str) or "~" not in value:
             return value
-        return ",".join(os.path.expanduser(v) if v.lstrip().startswith("~") else v
+        if not listed:
+            return os.path.expanduser(value)
+        return ",".join(os.path.expanduser(v.lstrip()) if v.lstrip().startswith("~") else v
                         for v in value.split(","))
 
-    for name in _PATH_ARGUMENTS:
-        if getattr(args, name, None) is not None:
-            setattr(args, name, expand(getattr(args, name)))
+    for names, listed in ((_FILE_ARGUMENTS, False), (_FILE_OPTIONS, True)):
+        for name in names:
+            if getattr(args, name, None) is not None:
+                setattr(args, name, expand(getattr(args, name), listed))
 
 
 def _refuse_repeated_options(parser: argparse.ArgumentParser, args, argv: list[str]) -> None:
@@ -1184,11 +1190,10 @@ def _refuse_repeated_options(parser: argparse.ArgumentParser, args, argv: list[s
         action = actions.get(tok.split("=", 1)[0]) if tok.startswith("-") else None
         if not isinstance(action, argparse._StoreAction):
             continue
-        name = max(action.option_strings, key=len)
         if action.dest in seen:
-            raise InputError(name, "given twice: give it once (the last would silently "
-                                   "replace the first)")
-        seen[action.dest] = name
+            raise InputError(tok.split("=", 1)[0], "given twice: give it once (the last "
+                                                   "would silently replace the first)")
+        seen[action.dest] = tok
 
 
 def main(argv: list[str] | None = None) -> int:
