@@ -735,10 +735,7 @@ def _clipped_logs(search: SearchSpace) -> list[str]:
     out = []
     for ph in search.photos:
         c = ph.cap
-        longest = UNKNOWN_READOUT_MAX if search.readout_unknown else c.readout_time * 1.6
-        start = c.exposure_start - c.time_offset
-        said = saturation_warning(c.log, start - search.tau_hi,
-                                  start + longest + c.exposure_time - search.tau_lo,
+        said = saturation_warning(c.log, *search.log_span(c),
                                   what="where the search may place the exposure")
         if said is not None:
             out.append(f"{c.log.source or 'gyro log'}: {said}")

@@ -53,8 +53,7 @@ class SearchSpace:
         lo, hi = -np.inf, np.inf
         for ph in self.photos:
             c = ph.cap
-            longest = UNKNOWN_READOUT_MAX if self.readout_unknown else c.readout_time * 1.6
-            span = longest + 0.005 + c.exposure_time
+            span = self.longest_window(c) + 0.005
             t0 = c.log.t[0] + c.time_offset
             t1 = c.log.t[-1] + c.time_offset
             hi = min(hi, c.exposure_start - t0)               # window start after log start
@@ -68,6 +67,19 @@ class SearchSpace:
                              "the gyro log does not cover the exposure window at any time "
                              "offset in the search range")
         return lo, hi
+
+    def longest_window(self, c) -> float:
+        """s: the longest a capture ``c``'s exposure window (first row's start to last
+        row's end) may be in the search: its readout 60 % longer, or the longest of an
+        unknown readout's range, plus the exposure time."""
+        longest = UNKNOWN_READOUT_MAX if self.readout_unknown else c.readout_time * 1.6
+        return longest + c.exposure_time
+
+    def log_span(self, c) -> tuple[float, float]:
+        """Where on its log's clock (s) the search may place capture ``c``'s exposure
+        window: every admitted time shift, the longest window (:meth:`longest_window`)."""
+        start = c.exposure_start - c.time_offset
+        return start - self.tau_hi, start + self.longest_window(c) - self.tau_lo
 
     # -- vector <-> theta -------------------------------------------------------------
     def free(self) -> list[str]:
