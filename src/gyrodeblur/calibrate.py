@@ -170,7 +170,7 @@ from .capture import (EXIF_START_TOLERANCE, EXIF_WHOLE_SECOND_TOLERANCE, UNKNOWN
                       UNKNOWN_READOUT_PRIOR, Capture)
 from .errors import InputError
 from .images import check_image
-from .gyrolog import rate_noise, saturation_warning, step_warning
+from .gyrolog import naming_log, rate_noise, saturation_warning, step_warning
 
 __all__ = ["calibrate", "CalibrationResult", "PARAMETERS", "AXES_CONFIDENT_NATS",
            "OFFSET_APART", "OFFSET_RIVAL_NATS", "standing_candidate", "DEFAULT_OFFSET_RANGE",
@@ -661,7 +661,7 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             out_caps.append(got)
         except InputError as exc:
             raise InputError(cap.source, f"calibrated parameters are not usable: {exc.problem}") from None
-    for said in dict.fromkeys(f"{got.log.source or 'gyro log'}: {said}" for got in out_caps
+    for said in dict.fromkeys(naming_log(got.log, said) for got in out_caps
                               if (said := step_warning(got.log, *got.log_window)) is not None):
         note(f"warning: {said}")
     cb = c0
@@ -738,7 +738,7 @@ def _clipped_logs(search: SearchSpace) -> list[str]:
         said = saturation_warning(c.log, *search.log_span(c),
                                   what="where the search may place the exposure")
         if said is not None:
-            out.append(f"{c.log.source or 'gyro log'}: {said}")
+            out.append(naming_log(c.log, said))
     return out
 
 

@@ -73,6 +73,7 @@ __all__ = [
     "warn_of_steps",
     "saturation_warning",
     "warn_of_saturation",
+    "naming_log",
     "INTERPOLATED_STEP",
     "rate_noise",
     "median_rate",
@@ -329,7 +330,13 @@ def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
     it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
     said = step_warning(log, t0, t1, cost=cost)
     if said is not None:
-        warnings.warn(f"{log.source or 'gyro log'}: {said}", stacklevel=stacklevel + 1)
+        warnings.warn(naming_log(log, said), stacklevel=stacklevel + 1)
+
+
+def naming_log(log: GyroLog, sentence: str) -> str:
+    """``sentence`` (:func:`step_warning`'s, :func:`saturation_warning`'s) after the
+    log's file name, as a warning or a note says it."""
+    return f"{log.source or 'gyro log'}: {sentence}"
 
 
 #: Samples in a row at one rate, the highest the log holds that long on an axis and side,
@@ -354,16 +361,14 @@ def saturation_warning(log: GyroLog, t0: float, t1: float, *,
     the motion goes on: the PSFs then come out too short, and calibration fits the
     offset and bias to the loss (an audit's log clipped at 0.5 rad/s, a range no gyro has:
     the offset 34 ms off, stated +-2 ms). Read as clipped, per log axis and sign (a gyro
-    whose bias is
-    subtracted clips at two levels, ``+R - b`` and ``-R - b``): :data:`SATURATED_RUN`
-    samples or more in a row at one rate, the highest that the rate holds that long on
-    that side and exceeded by two samples at most (a glitch), where the two samples
-    before the run (or after it) extrapolate beyond it
-    by more than 1 % of it and 3 of the log's smallest steps between values (up to 5 %
-    of it): a smooth peak of a log rounded to a 16-bit sensor's steps,
-    sampled at a kHz, can repeat its top value a few times. A level under
-    :data:`CLIP_MIN_RATE` is not a clip (small motion in rounding steps); nor is a
-    constant rate, or a step up to one.
+    whose bias is subtracted clips at two levels, ``+R - b`` and ``-R - b``):
+    :data:`SATURATED_RUN` samples or more in a row at one rate, the highest that the rate
+    holds that long on that side and exceeded by two samples at most (a glitch), where the
+    two samples before the run (or after it) extrapolate beyond it by more than 1 % of it
+    and 3 of the log's smallest steps between values (up to 5 % of it): a smooth peak of a
+    log rounded to a 16-bit sensor's steps, sampled at a kHz, can repeat its top value a
+    few times. A level under :data:`CLIP_MIN_RATE` is not a clip (small motion in rounding
+    steps); nor is a constant rate, or a step up to one.
     """
     i0 = max(int(np.searchsorted(log.t, t0, side="right")) - 1, 0)
     i1 = min(int(np.searchsorted(log.t, t1, side="left")) + 1, len(log.t))
@@ -418,7 +423,7 @@ def warn_of_saturation(log: GyroLog, t0: float, t1: float, *, stacklevel: int = 
     where it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
     said = saturation_warning(log, t0, t1)
     if said is not None:
-        warnings.warn(f"{log.source or 'gyro log'}: {said}", stacklevel=stacklevel + 1)
+        warnings.warn(naming_log(log, said), stacklevel=stacklevel + 1)
 
 
 def _secs(t: float) -> str:
