@@ -1183,17 +1183,18 @@ def _refuse_repeated_options(parser: argparse.ArgumentParser, args, argv: list[s
     left alone; so is everything after ``--``."""
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     actions = sub.choices[args.command]._option_string_actions
-    seen: dict[str, str] = {}
+    seen: set[str] = set()
     for tok in argv:
         if tok == "--":
             break
-        action = actions.get(tok.split("=", 1)[0]) if tok.startswith("-") else None
+        option = tok.split("=", 1)[0]
+        action = actions.get(option) if tok.startswith("-") else None
         if not isinstance(action, argparse._StoreAction):
             continue
         if action.dest in seen:
-            raise InputError(tok.split("=", 1)[0], "given twice: give it once (the last "
-                                                   "would silently replace the first)")
-        seen[action.dest] = tok
+            raise InputError(option, "given twice: give it once (the last would silently "
+                                     "replace the first)")
+        seen.add(action.dest)
 
 
 def main(argv: list[str] | None = None) -> int:

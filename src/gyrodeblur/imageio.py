@@ -260,12 +260,13 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
     """(format, samples, EXIF block, ICC profile, JPEG quantisation tables, PNG file
     gamma, the other metadata carried: :class:`Photo`'s ``dpi``, ``xmp`` and
     ``png_text``) of a file; decoder errors propagate."""
-    if _is_tiff(p):
+    tiff = _is_tiff(p)
+    if tiff:
         _refuse_truncated_tiff(p)            # before Pillow reads tags past the end
     try:
         im = _open_within_size_limit(p)
     except UnidentifiedImageError:
-        if not _is_tiff(p):
+        if not tiff:
             raise
         try:                                 # e.g. float RGB, which Pillow cannot open
             ints, icc, carried = _read_tiff_tifffile(p)
