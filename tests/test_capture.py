@@ -1,5 +1,6 @@
 import json
 import os
+import re
 import warnings
 
 import numpy as np
@@ -337,15 +338,54 @@ def test_a_duration_in_ms_is_named_when_the_log_does_not_cover_it(capture_files)
         load_capture(d / "cap.json")
 
 
-def test_a_key_in_the_wrong_section_and_utf16_are_explained(capture_files):
+def test_a_key_in_the_wrong_section_is_explained(capture_files):
     d, doc = capture_files
     doc["bias"] = [0.0, 0.0, 0.0]                  # belongs in "gyro"
     (d / "cap.json").write_text(json.dumps(doc))
     with pytest.warns(UserWarning, match="unknown key.*bias belongs in gyro"):
         load_capture(d / "cap.json")
-    (d / "cap.json").write_text(json.dumps(doc), encoding="utf-16")
-    with pytest.raises(InputError, match="cap.json: cannot read: not UTF-8 text"):
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-8-sig", "utf-16-le"])
+def test_a_description_in_utf16_or_with_a_byte_order_mark_is_read(capture_files, encoding):
+    d, doc = capture_files                     # as Windows editors save "Unicode" text
+    doc["gyro"]["path"] = "gyro ü.gcsv"
+    os.replace(d / "gyro.gcsv", d / "gyro ü.gcsv")
+    (d / "cap.json").write_text(json.dumps(doc, ensure_ascii=False), encoding=encoding)
+    assert load_capture(d / "cap.json").log.source == str(d / "gyro ü.gcsv")
+
+
+def test_a_description_in_another_encoding_is_refused(capture_files):
+    d, doc = capture_files
+    doc["gyro"]["path"] = "gyro é.gcsv"
+    (d / "cap.json").write_text(json.dumps(doc, ensure_ascii=False), encoding="cp1252")
+    with pytest.raises(InputError, match="cap.json: cannot read: not UTF-8 or UTF-16 text"):
         load_capture(d / "cap.json")
+
+
+def test_an_empty_gyro_path_is_named_as_empty(capture_files):
+    d, doc = capture_files
+    doc["gyro"]["path"] = " "
+    (d / "cap.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"cap.json: gyro.path: an empty file name"):
+        load_capture(d / "cap.json")
+    with pytest.raises(InputError, match=r"^--gyro: an empty file name"):
+        load_capture(d / "cap.json", overrides={"gyro_path": ""})
+
+
+@pytest.mark.skipif(not hasattr(os, "symlink") or os.name == "nt", reason="symbolic links")
+def test_a_linked_description_finds_its_log_beside_the_link_or_its_target(capture_files):
+    d, doc = capture_files
+    (d / "elsewhere").mkdir()
+    os.symlink(d / "cap.json", d / "elsewhere" / "cap.json")
+    assert load_capture(d / "elsewhere" / "cap.json").log.source == str(d / "gyro.gcsv")
+    beside_link = d / "elsewhere" / "gyro.gcsv"     # a log beside the link comes first
+    beside_link.write_bytes((d / "gyro.gcsv").read_bytes())
+    assert load_capture(d / "elsewhere" / "cap.json").log.source == str(beside_link)
+    os.remove(d / "gyro.gcsv")
+    os.remove(beside_link)
+    with pytest.raises(InputError, match=re.escape(str(beside_link))):
+        load_capture(d / "elsewhere" / "cap.json")    # named where the link reads it
 
 
 @pytest.mark.parametrize("override, named", [

@@ -525,6 +525,20 @@ def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bo
                       stacklevel=3)
 
 
+def _log_path(given, base: str, capture_path) -> str:
+    """The gyro log named ``given``: a relative path is read from ``base`` (the capture's
+    folder, or the working folder for an option); where the capture description is a
+    symbolic link and the log is not found beside the link, beside the file it links to."""
+    given = os.path.expanduser(os.fspath(given))
+    gpath = os.path.normpath(os.path.join(base, given))
+    if capture_path is not None and not os.path.isabs(given) and not os.path.exists(gpath):
+        linked = os.path.dirname(os.path.realpath(capture_path))
+        beside_target = os.path.normpath(os.path.join(linked, given))
+        if os.path.exists(beside_target):
+            return beside_target
+    return gpath
+
+
 def _no_repeated_keys(source: str):
     """A ``json.load`` hook refusing a key given twice in one object (the last would win
     silently: ``"readout_time": 0.03, ..., "readout_time": 0`` a global shutter)."""
@@ -611,8 +625,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         if not src:
             raise InputError("--capture", "an empty file name: give the capture description")
         try:
-            with open(src, encoding="utf-8-sig") as fh:
-                data = json.load(fh, object_pairs_hook=_no_repeated_keys(src))
+            with open(src, "rb") as fh:       # bytes: json tells UTF-8, -16 and -32
+                data = json.loads(fh.read(), object_pairs_hook=_no_repeated_keys(src))
         except FileNotFoundError:
             raise InputError(src, "capture description not found") from None
         except IsADirectoryError:
@@ -623,8 +637,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
             raise InputError(src, f"not valid JSON ({exc.msg}: line {exc.lineno}, column "
                                   f"{exc.colno})") from None
         except UnicodeDecodeError:
-            raise InputError(src, "cannot read: not UTF-8 text (save it as UTF-8; UTF-16, as "
-                                  "some Windows editors write, is not read)") from None
+            raise InputError(src, "cannot read: not UTF-8 or UTF-16 text (save it as "
+                                  "UTF-8)") from None
         except ValueError as exc:           # e.g. an integer of more digits than Python reads
             raise InputError(src, f"not valid JSON ({str(exc).split(';')[0]})") from None
         except OSError as exc:
@@ -718,7 +732,10 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
         raise InputError(src, "missing gyro.path (or --gyro)")
     if not isinstance(gyro_d["path"], (str, os.PathLike)):
         raise InputError(src, f"gyro.path must be a file path (a string), got {gyro_d['path']!r}")
-    gpath = os.path.normpath(os.path.join(base, os.path.expanduser(os.fspath(gyro_d["path"]))))
+    if not os.fspath(gyro_d["path"]).strip():
+        where = "--gyro" if "gyro_path" in ov else f"{src}: gyro.path"
+        raise InputError(where, "an empty file name: give the gyro log")
+    gpath = _log_path(gyro_d["path"], base, None if "gyro_path" in ov else path)
     fmt = gyro_d.get("format")
     if fmt is not None:                   # named where it was given, not at the log
         fmt = check_format(fmt, origin(("gyro_format",)) if "gyro_format" in ov
