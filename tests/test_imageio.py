@@ -709,6 +709,19 @@ def test_icc_profile_of_the_wrong_colour_space_is_left_out(tmp_path):
     assert out.icc_profile is None
 
 
+@pytest.mark.parametrize("cut", [0, 200, len(SRGB) - 1])
+def test_a_damaged_icc_profile_is_left_out_with_a_warning(tmp_path, cut):
+    damaged = SRGB[:cut] if cut else SRGB[:36] + b"xxxx" + SRGB[40:]   # no 'acsp'
+    with pytest.warns(UserWarning, match=r"out.png: the photo's ICC profile is damaged "
+                                         r"\((cut short|not an ICC profile)"):
+        out = write_photo(tmp_path / "out.png", smooth((4, 5, 3)), like=like(icc=damaged))
+    assert read_photo(out).icc_profile is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")           # a whole one is carried without a word
+        out = write_photo(tmp_path / "whole.png", smooth((4, 5, 3)), like=like(icc=SRGB))
+    assert read_photo(out).icc_profile == SRGB
+
+
 def test_no_metadata_gives_none(tmp_path):
     photo = read_photo(write_photo(tmp_path / "a.png", smooth((4, 5, 3))))
     assert photo.exif is None and photo.icc_profile is None

@@ -27,8 +27,8 @@ from .errors import InputError
 from .tonecurve import (LINEAR, SRGB, ParametricCurve, PerChannelCurve, TableCurve,
                         TransferCurve, get_transfer_curve, matches_curve)
 
-__all__ = ["profile_transfer_curve", "profile_description", "parametric_curve",
-           "photo_transfer_curve", "said_transfer_curve", "AUTO"]
+__all__ = ["profile_transfer_curve", "profile_description", "profile_damage",
+           "parametric_curve", "photo_transfer_curve", "said_transfer_curve", "AUTO"]
 
 #: The ``transfer`` name that means "the photo's ICC profile's curve, sRGB without one".
 AUTO = "auto"
@@ -87,6 +87,24 @@ def _tags(profile: bytes) -> dict[bytes, bytes]:
             raise ValueError(f"tag {sig.decode('latin-1')!r} lies outside the profile")
         tags[sig] = profile[off:off + size]
     return tags
+
+
+def profile_damage(profile: bytes) -> str | None:
+    """What is wrong with an ICC profile's structure, or ``None`` where it is whole.
+
+    A profile is damaged when it is shorter than the size its header declares (a file cut
+    short), has no ``acsp`` signature, or its tag table or a tag lies past its end. Such a
+    profile is not carried into a written photo: viewers would refuse it or misread it.
+    """
+    if len(profile) >= 4:
+        (declared,) = struct.unpack_from(">I", profile, 0)
+        if declared > len(profile):
+            return f"cut short: its header declares {declared} bytes, it holds {len(profile)}"
+    try:
+        _tags(profile)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 def _curve(data: bytes, sig: str) -> TransferCurve:

@@ -77,6 +77,7 @@ from gyrodeblur.errors import InputError
 from gyrodeblur.exif import (_EXIF_ERRORS, _IFD0_ASCII, _JPEG_MAX_EXIF, _ORIENTATION,
                              _exif_for_jpeg, _load_exif, _normalise_exif, _pillow_exif,
                              _sub_ifds, _tiff_exif, _without_thumbnail, exif_capture_hints)
+from gyrodeblur.icc import profile_damage
 from gyrodeblur.images import PHOTO_MAX, PHOTO_MIN
 from gyrodeblur.pngwrite import _PNG_XMP_KEY, DEFLATE_LEVEL, _write_png
 
@@ -936,6 +937,11 @@ def write_photo(
     ints = _to_integers(pixels, depth)
     exif = _without_thumbnail(_normalise_exif(like.exif)) if like is not None else None
     icc = like.icc_profile if like is not None else None
+    damage = profile_damage(icc) if icc else None
+    if damage:
+        warnings.warn(f"{p}: the photo's ICC profile is damaged ({damage}): left out",
+                      stacklevel=2)
+        icc = None
     if icc and not _icc_fits(icc, channels):
         icc = None
     if fmt == "JPEG" and exif and len(exif) > _JPEG_MAX_EXIF:
