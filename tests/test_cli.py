@@ -2029,5 +2029,12 @@ def test_an_option_of_one_value_given_twice_is_refused(capture_dir, capsys):
     for twice in (["--fx", "300", "--fx", "3000"], ["--orientation", "XYZ", "--orientation=yxz"],
                   ["--time-offset", "-0.001", "--time-offset=0"]):
         assert f"{twice[0]}: given twice: give it once" in _run_error(base + twice, capsys)
+    # as argparse also reads them: abbreviated, or short with the value attached
+    for twice, named in ((["--exposure-t", "0.01", "--exposure-time", "0.02"], "--exposure-time"),
+                         (["--exposure-time", "0.01", "--exposure-t=0.02"], "--exposure-t")):
+        assert f"{named}: given twice: give it once" in _run_error(base + twice, capsys)
+    psf = ["psf", "--capture", str(d / "cap.json"), "--at", "10,20", "-o", str(d / "p.npy")]
+    assert "-o: given twice: give it once" in _run_error(psf + ["-o" + str(d / "q.npy")], capsys)
+    assert not (d / "p.npy").exists() and not (d / "q.npy").exists()
     assert not (d / "o.png").exists()
     assert main(base + ["--overwrite", "--overwrite", "--quiet"]) == 0

@@ -1176,11 +1176,24 @@ def _home_expanded(args) -> None:
                 setattr(args, name, expand(getattr(args, name), listed))
 
 
+def _option_action(actions: dict, option: str):
+    """The action argparse takes ``option`` for: its own, the one long option it abbreviates
+    (argparse refuses an ambiguous one), or a short option with its value attached."""
+    if option in actions:
+        return actions[option]
+    if option.startswith("--"):
+        matches = {actions[o] for o in actions if o.startswith(option)}
+        return matches.pop() if len(matches) == 1 else None
+    return actions.get(option[:2])
+
+
 def _refuse_repeated_options(parser: argparse.ArgumentParser, args, argv: list[str]) -> None:
     """Refuse an option of one value given twice (``--fx 300 --fx 3000``): argparse keeps
     the last without a word, where ``-o`` or ``--capture`` given twice for one photo is
-    refused. Options that take a value each time (``action="append"``) and flags are
-    left alone; so is everything after ``--``."""
+    refused. An option is known however argparse reads it: abbreviated (``--exposure-t``
+    for ``--exposure-time``) or a short one with its value attached (``-oout.png``).
+    Options that take a value each time (``action="append"``) and flags are left alone;
+    so is everything after ``--``."""
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     actions = sub.choices[args.command]._option_string_actions
     seen: set[str] = set()
@@ -1188,9 +1201,11 @@ def _refuse_repeated_options(parser: argparse.ArgumentParser, args, argv: list[s
         if tok == "--":
             break
         option = tok.split("=", 1)[0]
-        action = actions.get(option) if tok.startswith("-") else None
+        action = _option_action(actions, option) if tok.startswith("-") else None
         if not isinstance(action, argparse._StoreAction):
             continue
+        if not option.startswith("--"):
+            option = option[:2]                 # -oout.png
         if action.dest in seen:
             raise InputError(option, "given twice: give it once (the last would silently "
                                      "replace the first)")
