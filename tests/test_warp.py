@@ -186,3 +186,28 @@ def test_the_alignment_grid_is_interpolated_bilinearly():
     np.testing.assert_allclose(got, ref((yy, xx)), atol=1e-5)
     one = _interpolate_grid(grid[:1, :1], _linear_taps(ty, 1), _linear_taps(tx, 1))
     np.testing.assert_array_equal(one, np.full((23, 31), grid[0, 0]))
+
+
+def test_alignment_warp_refuses_what_is_not_a_photo_and_its_field():
+    """An 8-bit photo came back scaled 0-255, a NaN pixel or displacement spread NaN or
+    stopped inside OpenCV, and another frame's field warped the photo as if it fitted."""
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.warp import warp_by_displacement
+
+    rng = np.random.default_rng(3)
+    img = rng.random((60, 80, 3)).astype(np.float32)
+    field = (np.linspace(0, 59, 4), np.linspace(0, 79, 5), rng.normal(0, 2, (4, 5, 2)))
+    assert warp_by_displacement(img, field).shape == img.shape
+    with pytest.raises(InputError, match="image must hold floating-point values"):
+        warp_by_displacement((img * 255).astype(np.uint8), field)
+    nan = img.copy()
+    nan[3, 3, 0] = np.nan
+    with pytest.raises(InputError, match="image has 1 NaN"):
+        warp_by_displacement(nan, field)
+    ys, xs, d = field
+    with pytest.raises(ValueError, match="a field for another size of photo"):
+        warp_by_displacement(img[:30, :40], field)
+    for bad in ((ys, xs, d[..., :1]), (ys, xs, d * np.nan),
+                (np.array([0, 10, 40, 59.0]), xs, d)):        # not evenly spaced
+        with pytest.raises(ValueError, match="displacement must be a grid"):
+            warp_by_displacement(img, bad)

@@ -33,7 +33,7 @@ from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_varia
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
                      check_patches, deconvolve_patchwise, patch_grid)
 from .tonecurve import TransferCurve, get_transfer_curve
-from .warp import CLIPPED, LIGHT_AREA, warp_by_displacement
+from .warp import CLIPPED, LIGHT_AREA, checked_displacement, warp_by_displacement
 from .wiener import check_phi, photo_phi, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
@@ -379,28 +379,6 @@ def _one_call_at_a_time(method: str):
     return _SERIAL_METHODS.get(method, contextlib.nullcontext())
 
 
-def _checked_displacement(displacement, shape: tuple[int, int]) -> tuple:
-    """``displacement`` as ``(ys, xs, d)`` float arrays
-    (:func:`gyrodeblur.psf.displacement_field`'s), refused naming the argument where it is
-    not such a grid over a photo of ``shape`` (rows, columns)."""
-    try:
-        ys, xs, d = (np.asarray(v, np.float64) for v in displacement)
-    except (TypeError, ValueError):
-        raise TypeError("displacement must be (ys, xs, d), as "
-                        "gyrodeblur.psf.displacement_field returns it") from None
-    if (ys.ndim != 1 or xs.ndim != 1 or len(ys) < 2 or len(xs) < 2
-            or d.shape != (len(ys), len(xs), 2) or not np.isfinite(d).all()
-            or ys[0] != 0 or xs[0] != 0 or np.any(np.diff(ys) <= 0)
-            or np.any(np.diff(xs) <= 0)):
-        raise ValueError(f"displacement must be a grid from row and column 0, ys and xs "
-                         f"increasing, d finite of shape (len(ys), len(xs), 2), got ys "
-                         f"{ys.shape}, xs {xs.shape}, d {d.shape}")
-    if abs(ys[-1] - (shape[0] - 1)) > 1 or abs(xs[-1] - (shape[1] - 1)) > 1:
-        raise ValueError(f"displacement's grid spans {xs[-1] + 1:g}x{ys[-1] + 1:g} px, the "
-                         f"photo {shape[1]}x{shape[0]}: a field for another size of photo?")
-    return ys, xs, d
-
-
 def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = None,
                      transfer: str | TransferCurve = "srgb", clip: bool = True, progress=None,
                      displacement=None, model: str | None = None, **options) -> np.ndarray:
@@ -469,7 +447,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
                                    f"{checked.shape[1]}x{checked.shape[0]} photo (a PSF for "
                                    "another size of photo?)")
     if displacement is not None:
-        displacement = _checked_displacement(displacement, checked.shape[:2])
+        displacement = checked_displacement(displacement, checked.shape[:2])
     img = _light_of(encoded, curve, image)   # patches are cut from it
     workers = 1 if method in _SERIAL_METHODS else None      # its patches one at a time
     with _one_call_at_a_time(method):       # the method's state: one call at a time

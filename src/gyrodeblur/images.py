@@ -30,7 +30,7 @@ PHOTO_MIN = -0.25
 
 def check_image(image, what: str = "image", *, min_size: int = 2,
                 dtype=np.float32, max_value: float = np.inf,
-                min_value: float = -np.inf) -> np.ndarray:
+                min_value: float = -np.inf, max_channels: int = MAX_CHANNELS) -> np.ndarray:
     """``image`` as a float32 (or ``dtype``) array, or :class:`InputError` saying what is
     wrong.
 
@@ -50,6 +50,9 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
         brighter light).
     min_value : float
         Smallest value accepted (:data:`PHOTO_MIN` for photos).
+    max_channels : int
+        Most channels accepted (a photo's :data:`MAX_CHANNELS`; more for an array of
+        planes that are warped alike).
 
     Returns
     -------
@@ -59,7 +62,7 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
     ------
     InputError
         An integer, boolean or complex dtype (the values would be misread), a shape that is
-        not ``(H, W)`` or channels-last ``(H, W, C)`` with ``C <= 4``, a side under
+        not ``(H, W)`` or channels-last ``(H, W, C)`` with ``C <= max_channels``, a side under
         ``min_size``, NaN/infinite values, or values outside ``[min_value, max_value]``.
     """
     if isinstance(image, np.ndarray):
@@ -74,9 +77,9 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
                 if arr.dtype.kind in "ui" else "")
         raise InputError(None, f"{what} must hold floating-point values in [0, 1], got dtype "
                                f"{arr.dtype}{hint}")
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= MAX_CHANNELS):
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= max_channels):
         raise InputError(None, f"{what} must have shape (H, W) or (H, W, C) with at most "
-                               f"{MAX_CHANNELS} channels last, got {arr.shape}")
+                               f"{max_channels} channels last, got {arr.shape}")
     if min(arr.shape[:2]) < min_size:
         raise InputError(None, f"{what} is {arr.shape[1]}x{arr.shape[0]} pixels; need at "
                                f"least {min_size}x{min_size}")

@@ -14,9 +14,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .images import check_image
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 
-__all__ = ["warp_by_displacement", "CLIPPED", "LIGHT_AREA", "WARP_INTERPOLATION"]
+__all__ = ["warp_by_displacement", "checked_displacement", "CLIPPED", "LIGHT_AREA", "WARP_INTERPOLATION"]
 
 #: Interpolation of the alignment warp: Lanczos (8 x 8 taps). Against a quintic-spline
 #: reference on a smoothly warped photo it is 58 dB accurate; OpenCV's bicubic 47 dB and
@@ -87,10 +88,10 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     position lies outside the photo (more than half a pixel beyond its edge pixels): their
     values are mirrored, not data (the light they need was recorded outside the frame).
     """
-    ys, xs, d = displacement
-    img = np.asarray(image, np.float32)
+    img = check_image(image, "image", min_size=1, max_channels=np.iinfo(np.int32).max)
     planes = img[..., None] if img.ndim == 2 else img
     H, W, C = planes.shape
+    ys, xs, d = checked_displacement(displacement, (H, W))
     # Bilinear interpolation of the grid, rows then columns, as two-tap sums in a fixed
     # order: the same result to the last bit whatever the machine's thread count (a BLAS
     # matrix product here made the output depend on it)
@@ -140,6 +141,35 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
                 out[r0:r1, c0:c1, k:k + src.shape[2]] = res
     out = out[..., 0] if img.ndim == 2 else out
     return (out, outside) if return_outside else out
+
+
+def checked_displacement(displacement, shape: tuple[int, int]) -> tuple:
+    """``displacement`` as ``(ys, xs, d)`` float arrays
+    (:func:`gyrodeblur.psf.displacement_field`'s), refused naming the argument where it is
+    not such a grid over a photo of ``shape`` (rows, columns): evenly spaced rows and
+    columns from 0 to the photo's last (within a pixel), displacements finite."""
+    try:
+        ys, xs, d = (np.asarray(v, np.float64) for v in displacement)
+    except (TypeError, ValueError):
+        raise TypeError("displacement must be (ys, xs, d), as "
+                        "gyrodeblur.psf.displacement_field returns it") from None
+    if (ys.ndim != 1 or xs.ndim != 1 or len(ys) < 2 or len(xs) < 2
+            or d.shape != (len(ys), len(xs), 2) or not np.isfinite(d).all()
+            or ys[0] != 0 or xs[0] != 0 or not _evenly_rising(ys) or not _evenly_rising(xs)):
+        raise ValueError(f"displacement must be a grid from row and column 0, ys and xs "
+                         f"evenly spaced and increasing, d finite of shape (len(ys), "
+                         f"len(xs), 2), got ys {ys.shape}, xs {xs.shape}, d {d.shape}")
+    if abs(ys[-1] - (shape[0] - 1)) > 1 or abs(xs[-1] - (shape[1] - 1)) > 1:
+        raise ValueError(f"displacement's grid spans {xs[-1] + 1:g}x{ys[-1] + 1:g} px, the "
+                         f"photo {shape[1]}x{shape[0]}: a field for another size of photo?")
+    return ys, xs, d
+
+
+def _evenly_rising(grid: np.ndarray) -> bool:
+    """Whether grid points rise by one step (the warp interpolates by index)."""
+    step = np.diff(grid)
+    return bool(np.isfinite(grid).all() and np.all(step > 0)
+                and np.allclose(step, step.mean(), rtol=1e-6, atol=0))
 
 
 def _beside_small_blobs(masks: list, light_area: int) -> np.ndarray | None:
