@@ -358,3 +358,26 @@ def test_shot_noise_grows_with_the_light_and_leaves_the_read_noise_as_it_was(mak
             simulate_blur(sharp, cap, full_well=bad)
     with pytest.raises(TypeError, match="full_well must be a number"):
         simulate_blur(sharp, cap, full_well="400")
+
+
+def test_noise_and_levels_refuse_what_is_not_a_float_image():
+    """``add_noise`` took 8-bit values as they were (noise on 0-255) and ``snr_db=nan``
+    into an all-NaN image; ``quantize_8bit`` turned 8-bit values nearly white."""
+    from gyrodeblur.errors import InputError
+    from gyrodeblur.simulate import add_noise, quantize_8bit
+
+    img = np.full((16, 16), 0.5, np.float32)
+    img[::2] = 0.2
+    for f in (lambda a: add_noise(a, 40.0, seed=0), quantize_8bit):
+        with pytest.raises(InputError, match="image must hold floating-point values"):
+            f((img * 255).astype(np.uint8))
+        with pytest.raises(InputError, match="image has 1 NaN"):
+            f(np.where(np.arange(256).reshape(16, 16) == 7, np.nan, img))
+    for snr in (float("nan"), 1000.0):
+        with pytest.raises(ValueError, match="snr_db must"):
+            add_noise(img, snr)
+    noisy = add_noise(img, 20.0, seed=1)            # std(img) / 10 = 0.015
+    assert noisy.dtype == np.float32 and abs(float(np.std(noisy - img)) - 0.015) < 0.002
+    q = quantize_8bit(img.astype(np.float64) + 0.001)
+    assert q.dtype == np.float32 and np.allclose(q * 255, np.round(q * 255), atol=1e-4)
+    assert np.abs(q - (img + 0.001)).max() <= 0.5 / 255 + 1e-7

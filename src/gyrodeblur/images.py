@@ -14,8 +14,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["check_image", "check_psf", "split_alpha", "join_alpha", "to_sensor_layout",
-           "to_photo_layout", "MAX_CHANNELS", "PHOTO_MAX", "PHOTO_MIN"]
+__all__ = ["check_image", "check_values", "check_psf", "split_alpha", "join_alpha",
+           "to_sensor_layout", "to_photo_layout", "MAX_CHANNELS", "PHOTO_MAX", "PHOTO_MIN"]
 
 #: Most channels an image may have (grey, grey + alpha, RGB, RGBA).
 MAX_CHANNELS = 4
@@ -65,6 +65,38 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
         not ``(H, W)`` or channels-last ``(H, W, C)`` with ``C <= max_channels``, a side under
         ``min_size``, NaN/infinite values, or values outside ``[min_value, max_value]``.
     """
+    arr = _float_array(image, what)
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= max_channels):
+        raise InputError(None, f"{what} must have shape (H, W) or (H, W, C) with at most "
+                               f"{max_channels} channels last, got {arr.shape}")
+    if min(arr.shape[:2]) < min_size:
+        raise InputError(None, f"{what} is {arr.shape[1]}x{arr.shape[0]} pixels; need at "
+                               f"least {min_size}x{min_size}")
+    arr = arr.astype(dtype, copy=False)
+    _refuse_non_finite(arr, what)
+    if np.isfinite(max_value):
+        top = float(arr.max())
+        if top > max_value:
+            raise InputError(None, f"{what} has values up to {top:.4g}; expected [0, 1] "
+                                   "(divide 8-bit values by 255, 16-bit ones by 65535)")
+    if np.isfinite(min_value):
+        bottom = float(arr.min())
+        if bottom < min_value:
+            raise InputError(None, f"{what} has values down to {bottom:.4g}; expected [0, 1] "
+                                   "(light is never below black: is it offset or negated?)")
+    return arr
+
+
+def check_values(values, what: str = "image") -> np.ndarray:
+    """``values`` of any shape as a float array of their own precision (float64 stays
+    float64), or :class:`InputError`: integers, booleans or complex numbers (pixel values
+    are floats in [0, 1]), or NaN/infinite values."""
+    arr = _float_array(values, what)
+    _refuse_non_finite(arr, what)
+    return arr
+
+
+def _float_array(image, what: str) -> np.ndarray:
     if isinstance(image, np.ndarray):
         arr = image
     else:
@@ -77,28 +109,14 @@ def check_image(image, what: str = "image", *, min_size: int = 2,
                 if arr.dtype.kind in "ui" else "")
         raise InputError(None, f"{what} must hold floating-point values in [0, 1], got dtype "
                                f"{arr.dtype}{hint}")
-    if arr.ndim not in (2, 3) or (arr.ndim == 3 and not 1 <= arr.shape[2] <= max_channels):
-        raise InputError(None, f"{what} must have shape (H, W) or (H, W, C) with at most "
-                               f"{max_channels} channels last, got {arr.shape}")
-    if min(arr.shape[:2]) < min_size:
-        raise InputError(None, f"{what} is {arr.shape[1]}x{arr.shape[0]} pixels; need at "
-                               f"least {min_size}x{min_size}")
-    arr = arr.astype(dtype, copy=False)
+    return arr
+
+
+def _refuse_non_finite(arr: np.ndarray, what: str) -> None:
     finite = np.isfinite(arr)
     if not finite.all():
         n = int(arr.size - np.count_nonzero(finite))
         raise InputError(None, f"{what} has {n} NaN or infinite value(s)")
-    if np.isfinite(max_value):
-        top = float(arr.max())
-        if top > max_value:
-            raise InputError(None, f"{what} has values up to {top:.4g}; expected [0, 1] "
-                                   "(divide 8-bit values by 255, 16-bit ones by 65535)")
-    if np.isfinite(min_value):
-        bottom = float(arr.min())
-        if bottom < min_value:
-            raise InputError(None, f"{what} has values down to {bottom:.4g}; expected [0, 1] "
-                                   "(light is never below black: is it offset or negated?)")
-    return arr
 
 
 def check_psf(psf, what: str = "PSF", *, dtype=np.float32) -> np.ndarray:

@@ -16,7 +16,7 @@ from .bands import for_row_bands
 from .capture import Capture, check_capture
 from .gyrolog import warn_of_steps
 from .arguments import check_flag, check_real, check_seed, is_count, is_whole
-from .images import PHOTO_MAX, PHOTO_MIN, check_image, join_alpha, split_alpha
+from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_values, join_alpha, split_alpha
 from .psf import check_blur_span
 from .tonecurve import LINEAR, TransferCurve, get_transfer_curve
 
@@ -254,10 +254,8 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         raise ValueError(f"order must be 1 (bilinear) or 3 (cubic spline), got {order!r}")
     if n_samples is not None and not is_count(n_samples):
         raise ValueError(f"n_samples must be a positive whole number or None, got {n_samples!r}")
-    if snr_db is not None:
-        snr_db = check_real(snr_db, "snr_db")
-        if not -100.0 <= snr_db <= 300.0:     # checked before the work, not after it
-            raise ValueError(f"snr_db must be -100 to 300 dB, got {snr_db!r}")
+    if snr_db is not None:                    # checked before the work, not after it
+        snr_db = _checked_snr(snr_db)
     if full_well is not None:
         full_well = check_real(full_well, "full_well")
         if not 1.0 <= full_well <= 1e9:       # a count of electrons
@@ -350,13 +348,38 @@ def _shot_noise(light: np.ndarray, full_well: float, rng) -> np.ndarray:
     return (rng.poisson(lit * full_well) / full_well - lit).astype(np.float32)
 
 
-def add_noise(image: np.ndarray, snr_db: float, seed: int | None = None) -> np.ndarray:
-    """Add white Gaussian noise of std ``std(image) / 10**(snr_db / 20)`` (float32)."""
-    rng = np.random.default_rng(seed)
-    sigma = float(np.std(image)) / 10 ** (snr_db / 20)
-    return (image + rng.normal(0.0, sigma, image.shape)).astype(np.float32)
+def _checked_snr(snr_db) -> float:
+    """``snr_db`` as a float in -100 to 300 dB, else ``TypeError``/``ValueError``."""
+    snr_db = check_real(snr_db, "snr_db")
+    if not -100.0 <= snr_db <= 300.0:
+        raise ValueError(f"snr_db must be -100 to 300 dB, got {snr_db!r}")
+    return snr_db
+
+
+def add_noise(image: np.ndarray, snr_db: float, seed=None) -> np.ndarray:
+    """Add white Gaussian noise of std ``std(image) / 10**(snr_db / 20)``.
+
+    Parameters
+    ----------
+    image : ndarray, float
+        Values as they are, of any shape (no range is assumed).
+    snr_db : float
+        Signal-to-noise ratio, dB (-100 to 300).
+    seed : int, numpy Generator or SeedSequence, optional
+        The noise's random state.
+
+    Returns
+    -------
+    ndarray, float32, the shape of ``image``.
+    """
+    img = check_values(image)
+    sigma = float(np.std(img)) / 10 ** (_checked_snr(snr_db) / 20)
+    rng = np.random.default_rng(check_seed(seed))
+    return (img + rng.normal(0.0, sigma, img.shape)).astype(np.float32)
 
 
 def quantize_8bit(image: np.ndarray) -> np.ndarray:
-    """Clip to [0, 1] and round to the nearest of the 256 8-bit levels (float32)."""
-    return (np.round(np.clip(image, 0, 1) * 255) / 255).astype(np.float32)
+    """Clip to [0, 1] and round to the nearest of the 256 8-bit levels (float32; a float
+    image is required: 8-bit integers are already quantised)."""
+    img = check_values(image)
+    return (np.round(np.clip(img, 0, 1) * 255) / 255).astype(np.float32)
