@@ -984,3 +984,26 @@ def test_a_step_between_samples_inside_the_exposure_is_told_as_a_gap_or_a_rate()
     coarse = step_warning(GyroLog(t40, np.zeros((t40.size, 3))), 0.4, 0.46)
     assert coarse.startswith("the gyro log has a sample only every 25.0 ms (40 Hz)")
     assert largest_step(full, 2.0, 3.0) == (0.0, 2.0)     # no two samples around it
+
+
+def test_a_log_built_in_code_is_refused_as_it_is_wrong():
+    """Boolean rates had been read as 0 and 1 rad/s; two samples at one time were said to
+    have "other rates" when theirs were equal; float32 Unix times, which collapse onto one
+    another, were told only as repeated times."""
+    t = 100.0 + np.arange(400) * 0.005
+    with pytest.raises(InputError, match="gyro omega must be real numbers, got dtype bool"):
+        GyroLog(t, np.zeros((400, 3), bool))
+    twice = t.copy()
+    twice[10] = twice[9]
+    with pytest.raises(InputError, match=r"sample 11 has the time of sample 10 \(100.045000 s\) "
+                                         r"with the same rates"):
+        GyroLog(twice, np.zeros((400, 3)))
+    w = np.zeros((400, 3))
+    w[10] = 0.1
+    with pytest.raises(InputError, match="with other rates"):
+        GyroLog(twice, w)
+    with pytest.raises(InputError, match=r"gyro times are float32: at 1.7e\+09 s they are kept "
+                                         r"only to 128 s; give them as float64"):
+        GyroLog((1.7e9 + np.arange(400) * 0.005).astype(np.float32), np.zeros((400, 3)))
+    small = GyroLog(np.arange(400, dtype=np.float32) * 0.005, np.zeros((400, 3)))
+    assert small.t.dtype == np.float64          # float32 seconds of a short log are fine

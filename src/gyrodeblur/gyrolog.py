@@ -136,9 +136,10 @@ class GyroLog:
         object.__setattr__(self, "meta", dict(self.meta))    # the caller's may change
         for name in ("t", "omega"):
             kind = np.asarray(getattr(self, name)).dtype.kind
-            if kind not in "biuf":
+            if kind not in "iuf":
                 raise InputError(self.source, f"gyro {name} must be real numbers, got "
                                               f"dtype {np.asarray(getattr(self, name)).dtype}")
+        _refuse_coarse_times(np.asarray(self.t), self.source)
         t = np.array(self.t, dtype=np.float64)         # copies: the caller's arrays may
         w = np.array(self.omega, dtype=np.float64)     # change after validation
         object.__setattr__(self, "t", t)
@@ -172,9 +173,28 @@ class GyroLog:
         return GyroLog(self.t[keep], self.omega[keep], self.source, dict(self.meta))
 
 
-def _check_increasing(t: np.ndarray, source: str | None, unit: str | None = "s") -> None:
+#: Coarsest time step (s) that float times of fewer bits than float64 may hold: a tenth of
+#: a 1 kHz gyro's sample interval.
+_COARSEST_TIME_STEP = 1e-4
+
+
+def _refuse_coarse_times(t: np.ndarray, source: str | None) -> None:
+    """Refuse float32 (or float16) times too large for their precision: Unix times in
+    float32 are kept to 128 s, and samples collapse onto one time."""
+    if t.dtype.kind != "f" or t.dtype.itemsize >= 8 or t.size == 0:
+        return
+    top = float(np.nanmax(np.abs(t))) if np.isfinite(t).any() else 0.0
+    step = float(np.spacing(t.dtype.type(top)))
+    if step > _COARSEST_TIME_STEP:
+        raise InputError(source, f"gyro times are {t.dtype}: at {top:.6g} s they are kept "
+                                 f"only to {step:.3g} s; give them as float64")
+
+
+def _check_increasing(t: np.ndarray, source: str | None, unit: str | None = "s",
+                      w: np.ndarray | None = None) -> None:
     """Refuse timestamps ``t`` that do not increase, naming the first sample that does not
-    (in ``unit``; ``None``: as the file writes them, its unit still unknown)."""
+    (in ``unit``; ``None``: as the file writes them, its unit still unknown; ``w``: the
+    rates, to say whether two samples at one time differ)."""
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
@@ -186,8 +206,10 @@ def _check_increasing(t: np.ndarray, source: str | None, unit: str | None = "s")
             return f"{int(v)}" if v.is_integer() and abs(v) < 1e19 else repr(v)
 
         if a == b:
+            rates = ("" if w is None else " with the same rates"
+                     if np.array_equal(w[i], w[i + 1]) else " with other rates")
             raise InputError(source, f"timestamps are not increasing: sample {i + 2} has the "
-                                     f"time of sample {i + 1} ({said(a)}) with other rates "
+                                     f"time of sample {i + 1} ({said(a)}){rates} "
                                      "(two samples at one time: remove one)")
         raise InputError(source, f"timestamps are not increasing: sample {i + 2} "
                                  f"({said(a)}) is earlier than sample {i + 1} ({said(b)}) "
@@ -208,7 +230,7 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
                                  f"{MAX_TIME:.3g} s (136 years), where seconds are too coarse "
                                  "for an exposure: microseconds or nanoseconds read as "
                                  "seconds? (set the time unit)")
-    _check_increasing(t, source)
+    _check_increasing(t, source, w=w)
     med = float(np.median(np.linalg.norm(w, axis=1)))
     peak = np.max(np.abs(w), axis=1)
     if med <= IMPLAUSIBLE_MEDIAN_RATE and np.any(peak > MAX_GYRO_RATE):
@@ -898,7 +920,7 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
     if tu is None:
         if len(rows) < 2:                             # (repeated rows are one sample)
             raise InputError(path, f"only {len(rows)} gyro sample(s); at least 2 are needed")
-        _check_increasing(rows[:, 0], path, None)     # before a unit is guessed from them
+        _check_increasing(rows[:, 0], path, None, rows[:, 1:])  # before a unit is guessed
         tu, interval = time_unit_from_interval(rows[:, 0])
         if tu is None:
             raise InputError(path, f"time unit of column {header[ti]!r} unknown (its median "
