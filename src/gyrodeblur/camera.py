@@ -32,7 +32,9 @@ class Camera:
         (:func:`gyrodeblur.capture.load_capture`) also refuses one under 0.15 x the longer
         side, a value in mm.
     cx, cy : float
-        Principal point in pixels.
+        Principal point in pixels. Any finite value: a crop's own intrinsics may put it
+        outside the image, even far outside. A capture description also refuses one more
+        than a frame from the image's centre, a fraction of the size typed as pixels.
     width, height : int
         Image size the intrinsics are valid for.
     """

@@ -402,6 +402,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         declares).
     clip : bool
         Clip the result to [0, 1] (default; values outside are ringing or overshoot).
+    progress : callable(done, total), optional
+        Called as patches are done, as in :func:`deblur`.
     displacement : (ys, xs, d), optional
         Mean-displacement field the (centred) PSFs leave out; the photo is warped by it
         first (:func:`warp_by_displacement`). Where the warp samples outside the photo
@@ -613,14 +615,14 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
         ``method="wiener"`` (fewer rows or columns on a photo too small for it),
         ``"auto"`` (:func:`auto_grid`: patches small enough that the PSF changes by at
         most ~half a pixel across one) for the other methods.
-    align : bool, optional
-        Warp the photo by the PSFs' mean-displacement field and deconvolve with centred
-        PSFs (see :func:`plan_psf_field`). Default: off for ``"wiener"`` (the chapter's
-        design), on for the other methods.
     overlap : float
         Overlap between neighbouring patches, fraction of the patch size (default 0.25).
     method : str
         Deconvolution method, a key of :data:`METHODS`.
+    align : bool, optional
+        Warp the photo by the PSFs' mean-displacement field and deconvolve with centred
+        PSFs (see :func:`plan_psf_field`). Default: off for ``"wiener"`` (the chapter's
+        design), on for the other methods.
     transfer : {"srgb", "linear"} or TransferCurve
         Transfer curve of the photo's values (default sRGB, as a photo file holds them;
         :func:`gyrodeblur.simulate.simulate_blur` makes such a photo by default);
@@ -630,6 +632,8 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
     clip : bool
         Clip the output to [0, 1].
     progress : callable(done, total), optional
+        Called as the work goes on: ``done`` of ``total`` steps, the patches and, with
+        the global model, its refinement's steps after them.
     return_report : bool
         Also return a :class:`DeblurReport`.
     **options
