@@ -404,7 +404,8 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
     clip : bool
         Clip the result to [0, 1] (default; values outside are ringing or overshoot).
     progress : callable(done, total), optional
-        Called as patches are done, as in :func:`deblur`.
+        Called as the work goes on, as in :func:`deblur`: the patches, then the global
+        model's refinement steps.
     displacement : (ys, xs, d), optional
         Mean-displacement field the (centred) PSFs leave out; the photo is warped by it
         first (:func:`warp_by_displacement`). Where the warp samples outside the photo
@@ -537,9 +538,13 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress, exte
     outer, cg_steps = refinement_budget(extent)
     total = len(patches) + outer * channels
     report = None if progress is None else (lambda done, _: progress(done, total))
+    # the patches' results blended unclipped, then clipped below 0 (negative light is
+    # ringing) and above 1 but where a compact blob is clipped (``_clip_start_above_one``);
+    # with ``clip=False`` the start is the blend as it is, as before
     start = deconvolve_patchwise(img, patches, psfs, dataclasses.replace(settings, clip=False),
                                  progress=report, unknown=unknown, workers=workers)
-    np.maximum(start, 0.0, out=start)             # negative light is ringing
+    if settings.clip:
+        np.maximum(start, 0.0, out=start)
     gc = np.moveaxis(img, 2, 0) if img.ndim == 3 else img[None]
     middle = psfs[len(psfs) // 2]
     sat = _clipping(gc, settings.saturation_level, settings.saturation_dilation,
@@ -554,7 +559,8 @@ def _deconvolve_globally(img, patches, psfs, deconvolve, unknown, progress, exte
             cover = blur.adjoint(sat.ignore.astype(np.float32))
             p = blur.pad
             lights = sat.ignore | (cover[p:p + img.shape[0], p:p + img.shape[1]] > 0.5)
-        _clip_start_above_one(start, sat, lights, float(extent) ** 2)
+        if settings.clip:
+            _clip_start_above_one(start, sat, lights, float(extent) ** 2)
         if unknown is not None:
             ignore = unknown if ignore is None else ignore | unknown
         at_least = None
