@@ -33,8 +33,9 @@ class Camera:
         side, a value in mm.
     cx, cy : float
         Principal point in pixels. Any finite value: a crop's own intrinsics may put it
-        outside the image, even far outside. A capture description also refuses one more
-        than a frame from the image's centre, a fraction of the size typed as pixels.
+        outside the image, even far outside. A capture description
+        (:func:`gyrodeblur.capture.load_capture`) also refuses one more than a frame from
+        the image's centre, and warns of one more than a quarter of it off centre.
     width, height : int
         Image size the intrinsics are valid for.
     """

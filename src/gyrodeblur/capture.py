@@ -527,8 +527,9 @@ def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bo
 
 def _log_path(given, base: str, capture_path) -> str:
     """The gyro log named ``given``: a relative path is read from ``base`` (the capture's
-    folder, or the working folder for an option); where the capture description is a
-    symbolic link and the log is not found beside the link, beside the file it links to."""
+    folder, or the working folder for an option); where the log is not found there and the
+    capture description's path passes through symbolic links, beside the file it resolves
+    to."""
     given = os.path.expanduser(os.fspath(given))
     gpath = os.path.normpath(os.path.join(base, given))
     if capture_path is not None and not os.path.isabs(given) and not os.path.exists(gpath):

@@ -173,19 +173,21 @@ class GyroLog:
         return GyroLog(self.t[keep], self.omega[keep], self.source, dict(self.meta))
 
 
-#: Coarsest time step (s) that float times of fewer bits than float64 may hold: a tenth of
-#: a 1 kHz gyro's sample interval.
-_COARSEST_TIME_STEP = 1e-4
+#: Coarsest rounding of float times of fewer bits than float64, as a fraction of the
+#: log's median sample interval.
+_COARSEST_TIME_STEP = 0.1
 
 
 def _refuse_coarse_times(t: np.ndarray, source: str | None) -> None:
-    """Refuse float32 (or float16) times too large for their precision: Unix times in
-    float32 are kept to 128 s, and samples collapse onto one time."""
-    if t.dtype.kind != "f" or t.dtype.itemsize >= 8 or t.size == 0:
-        return
-    top = float(np.nanmax(np.abs(t))) if np.isfinite(t).any() else 0.0
+    """Refuse float32 (or float16) times rounded to more than a tenth of the log's sample
+    interval: Unix times in float32 are kept to 128 s, and samples collapse onto one time
+    (times since boot, to 0.12 ms after 20 minutes, are kept)."""
+    if t.dtype.kind != "f" or t.dtype.itemsize >= 8 or t.size < 2 or not np.isfinite(t).all():
+        return                    # NaN and too few samples are told by _validate
+    top = float(np.abs(t).max())
     step = float(np.spacing(t.dtype.type(top)))
-    if step > _COARSEST_TIME_STEP:
+    interval = float(np.median(np.diff(t.astype(np.float64))))
+    if step > _COARSEST_TIME_STEP * interval or interval <= 0:
         raise InputError(source, f"gyro times are {t.dtype}: at {top:.6g} s they are kept "
                                  f"only to {step:.3g} s; give them as float64")
 
