@@ -774,13 +774,17 @@ class _PhotoDeblur:
         photo, options = self.photo, self.options
         self.noise_note = ""
         if self.method == "sparse" and "noise_sigma" not in options and photo.quantization:
-            from .noise import estimate_noise_sigma, photo_noise_sigma
+            from .noise import (COARSE_MIN_SIDE, coarse_noise_sigma, estimate_noise_sigma,
+                                photo_noise_sigma)
             shown = estimate_noise_sigma(self.colour)
-            options["noise_sigma"] = photo_noise_sigma(photo, measured=shown)
+            coarse = (coarse_noise_sigma(self.colour)
+                      if min(self.colour.shape[:2]) >= COARSE_MIN_SIDE else None)
+            options["noise_sigma"] = photo_noise_sigma(photo, measured=shown, coarse=coarse)
+            half = "" if coarse is None else f", {255 * coarse:.2f} at half resolution"
             self.noise_note = (f"JPEG: deconvolved for noise of "
                                f"{255 * options['noise_sigma']:.2f} levels (its pixels show "
-                               f"{255 * shown:.2f}; the compression's error counts as noise "
-                               "too; --noise-sigma sets it)")
+                               f"{255 * shown:.2f}{half}; the compression's error counts as "
+                               "noise too; --noise-sigma sets it)")
         if self.method == "wiener" and "phi" not in options:
             from .wiener import DEFAULT_PHI, photo_phi
             phi = photo_phi(self.colour)

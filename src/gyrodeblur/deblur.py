@@ -591,7 +591,7 @@ def _clip_start_above_one(start: np.ndarray, sat, lights: np.ndarray | None,
     sun that the over-exposure tests take for clipped but consistent data), and a held
     light must keep the light its streak shows beyond it: from a start clipped to 1, the
     refinement put that light in rings along the trace around the object (held-out
-    scenes of session 62: 0.2-1.4 dB of the whole photo, 3 dB beside a 4x glow). A large
+    scenes of session 62: 0.15-1.4 dB of the whole photo, 3 dB beside a 4x glow). A large
     clipped area (white paper, an over-exposed sky) keeps the start at 1: its interior is
     not blurred, and kept above 1 the start cost its text photos up to 0.08 dB."""
     over = start > 1.0

@@ -13,7 +13,7 @@ import scipy.ndimage as ndi
 from .images import split_alpha
 
 __all__ = ["estimate_noise_sigma", "coarse_noise_sigma", "jpeg_noise_sigma",
-           "photo_noise_sigma", "JPEG_NOISE_SCALE"]
+           "photo_noise_sigma", "JPEG_NOISE_SCALE", "COARSE_MIN_SIDE"]
 
 #: Scale (``[0, 1]`` units: 1.7 8-bit levels) of the level a JPEG is deconvolved for:
 #: ``sigma^2 = estimate^2 + JPEG_NOISE_SCALE * q``, ``q = sqrt(mean(Q^2) / 12) / 255`` the
@@ -25,6 +25,10 @@ __all__ = ["estimate_noise_sigma", "coarse_noise_sigma", "jpeg_noise_sigma",
 #: six was 0.0065 (0.0043-0.0093 leaving one photo out); ``benchmarks/jpeg_noise.py``
 #: checks it on the six other shared photos.
 JPEG_NOISE_SCALE = 0.0065
+
+#: Shortest side (px) :func:`coarse_noise_sigma` reads: 8 x 8 at half resolution in each
+#: phase.
+COARSE_MIN_SIDE = 17
 
 #: Median of |N(0, 1)| is 0.6745; 1 / 0.6745 turns a median absolute value into a sigma.
 _MAD_TO_SIGMA = 1.482602218505602
@@ -168,44 +172,70 @@ def jpeg_noise_sigma(estimate: float, luma_table) -> float:
     return float(np.sqrt(float(estimate) ** 2 + JPEG_NOISE_SCALE * q))
 
 
-def coarse_noise_sigma(image: np.ndarray) -> float:
+def coarse_noise_sigma(image: np.ndarray, *, max_pixels: int = 2_000_000) -> float:
     """The white-noise level that :func:`estimate_noise_sigma` reads at half resolution:
     twice its estimate on the image averaged over 2 x 2 blocks (which halves white
-    noise), in the image's own units.
+    noise), in the image's own units; the largest over the four phases of the blocks.
 
     JPEG zeroes the fine frequencies' noise, which the full-resolution estimate reads (at
     quality 80, a quarter of it or less), and keeps the noise below about 0.25 cycles/px,
-    whose quantisation steps are small: the noise the deconvolution amplifies. Texture
-    leaks into it more than into the full-resolution estimate (a close-up of grass reads
-    4x its noise), so it is one bound among others, not the level itself.
+    whose quantisation steps are small: the noise the deconvolution amplifies. Blocks in
+    phase with 4:2:0 chroma keep its noise, others average it with a neighbour's (on a
+    test photo 20 % less); the largest of the four phases is read in any layout of the
+    photo (rotated, cropped by a pixel). Texture leaks into it more than into the
+    full-resolution estimate (a close-up of grass reads four times what that reads), so
+    it is a bound beside the other, not the level itself.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        At least :data:`COARSE_MIN_SIDE` pixels a side (each phase's half-resolution
+        image 8 x 8).
+    max_pixels : int, optional
+        Larger images are measured on bands of rows and columns, as
+        :func:`estimate_noise_sigma` measures them (12 MP: 0.6 s, the full-resolution
+        estimate 0.3 s, on a loaded 2-core VM).
     """
-    img = np.asarray(image, dtype=np.float32)
-    h, w = img.shape[0] // 2 * 2, img.shape[1] // 2 * 2
-    x = img[:h, :w]
-    half = 0.25 * (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2])
-    return 2.0 * estimate_noise_sigma(half)
+    img = _subsample(np.asarray(image, dtype=np.float32), max_pixels)
+    if min(img.shape[:2]) < COARSE_MIN_SIDE:
+        raise ValueError(f"expected an (H, W) or (H, W, C) image of at least "
+                         f"{COARSE_MIN_SIDE}x{COARSE_MIN_SIDE}, got {img.shape}")
+    readings = []
+    for dy in (0, 1):
+        for dx in (0, 1):
+            x = img[dy:, dx:]
+            x = x[:x.shape[0] // 2 * 2, :x.shape[1] // 2 * 2]
+            half = 0.25 * (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2])
+            readings.append(2.0 * estimate_noise_sigma(half, max_pixels=half.shape[0]
+                                                       * half.shape[1]))
+    return max(readings)
 
 
-def photo_noise_sigma(photo, measured: float | None = None) -> float:
+def photo_noise_sigma(photo, measured: float | None = None,
+                      coarse: float | None = None) -> float:
     """The noise level to deconvolve a photo from :func:`gyrodeblur.imageio.read_photo`
     with: :func:`estimate_noise_sigma` of its colour channels (alpha left out); for a JPEG
     with quantisation tables, the larger of that and :func:`coarse_noise_sigma` (the
-    noise the compression kept), raised by :func:`jpeg_noise_sigma`.
+    noise the compression kept; a photo under :data:`COARSE_MIN_SIDE` px a side has only
+    the first), raised
+    by :func:`jpeg_noise_sigma`.
 
-    ``measured`` (optional): the full-resolution estimate, when the caller has it
+    ``measured``, ``coarse`` (optional): those readings, when the caller has them
     already. Pass the result as the sparse method's ``noise_sigma``
     (``deblur(..., noise_sigma=...)``).
 
-    The coarse bound (session 62): a helper's held-out noisy phone photos (white noise of
-    7-12 levels before JPEG quality 75-85, 4:2:0; the photo's pixels read 1.9-7.2) had
-    been deconvolved for 4-8 levels, two of them into results below the blurred photo;
-    with the bound they read 7-11 levels and gained 0.4-2.4 dB. On
-    ``benchmarks/jpeg_noise.py`` (40 dB, little noise) it moved the mean by -0.04 dB at
-    quality 95 (the worst photo -0.24) and by 0.00 at 90 and 80.
+    The coarse bound (session 62): a helper's held-out low-light JPEGs brought up by gain
+    (quality 75-85, 4:2:0) read 1.0-7.2 levels at full resolution and had been
+    deconvolved for 3.4-7.9, two of them into results below the blurred photo; with the
+    bound they are deconvolved for 6.0-12.2 and gain 0.35-2.4 dB. A close-up of grass
+    lost 0.9 dB (its texture read as noise). BENCHMARKS.md section 2 has the figures and
+    ``benchmarks/jpeg_noise.py``'s (photos with little noise: about nothing).
     """
     colour = split_alpha(photo.pixels)[0]
     sigma = estimate_noise_sigma(colour) if measured is None else measured
     tables = getattr(photo, "quantization", None)
     if photo.format == "JPEG" and tables and 0 in tables:
-        sigma = jpeg_noise_sigma(max(sigma, coarse_noise_sigma(colour)), tables[0])
+        if coarse is None and min(colour.shape[:2]) >= COARSE_MIN_SIDE:
+            coarse = coarse_noise_sigma(colour)
+        sigma = jpeg_noise_sigma(max(sigma, coarse or 0.0), tables[0])
     return sigma
