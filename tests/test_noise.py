@@ -162,6 +162,18 @@ def test_a_tiny_jpeg_s_noise_level_is_read_at_full_resolution_only(tmp_path):
         coarse_noise_sigma(jpg.pixels)
 
 
+def test_a_non_finite_or_boolean_image_is_refused():
+    """A NaN pixel made the estimate NaN, and a boolean mask was read as 0 and 1, without
+    a word (integer images stay welcome: the answer is in their own units)."""
+    img = np.full((16, 16), 0.5, np.float32)
+    img[3, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        estimate_noise_sigma(img)
+    with pytest.raises(ValueError, match="real pixel values, got dtype bool"):
+        estimate_noise_sigma(np.zeros((16, 16), bool))
+    assert estimate_noise_sigma(np.full((16, 16), 128, np.uint8)) == 0.0
+
+
 def test_a_barely_noisy_8bit_image_is_not_noiseless():
     """Where most filter responses are exactly 0 (an 8-bit image with a few pixels a level
     off) the median is 0, but the noise is not: the estimate comes from the mean."""

@@ -46,7 +46,9 @@ def estimate_noise_sigma(image: np.ndarray, *, edge_quantile: float = 0.15,
     ----------
     image : ndarray, shape (H, W) or (H, W, C)
         The (blurred, noisy) image; for float32 photos in ``[0, 1]`` the answer is on the
-        same ``[0, 1]`` scale (multiply by 255 for 8-bit levels). At least 8x8 pixels.
+        same ``[0, 1]`` scale (multiply by 255 for 8-bit levels). At least 8x8 pixels, of
+        real values (integers in their own units; not booleans), finite where measured
+        (``ValueError`` otherwise).
     edge_quantile : float, optional
         Fraction of pixels, those with the weakest smoothed gradient, that the estimate
         uses; edges and texture in the rest are ignored. 0.15 kept the bias on strongly
@@ -100,12 +102,16 @@ def estimate_noise_sigma(image: np.ndarray, *, edge_quantile: float = 0.15,
     >>> round(estimate_noise_sigma(noisy), 2)
     0.02
     """
+    if np.asarray(image).dtype.kind not in "uif":
+        raise ValueError(f"expected real pixel values, got dtype {np.asarray(image).dtype}")
     img = np.asarray(image, dtype=np.float32)
     if img.ndim not in (2, 3) or min(img.shape[:2]) < 8:
         raise ValueError(f"expected an (H, W) or (H, W, C) image of at least 8x8, got {img.shape}")
     if not 0 < edge_quantile <= 1:
         raise ValueError(f"edge_quantile must be in (0, 1], got {edge_quantile}")
     img = _subsample(img, max_pixels)
+    if not np.isfinite(img).all():           # (of the pixels measured)
+        raise ValueError("the image has NaN or infinite values: its noise cannot be measured")
     chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
     sigmas = [_channel_sigma(np.ascontiguousarray(ch), edge_quantile) for ch in chans]
     return float(np.mean(sigmas))
