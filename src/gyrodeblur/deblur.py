@@ -105,6 +105,9 @@ def register_method(name: str, factory: Callable[..., Deconvolver], *, default: 
     Parameters
     ----------
     name : str
+        A name already in :data:`METHODS` is registered anew, its factory replaced for
+        the whole process (the built-in ``"sparse"`` and ``"wiener"`` too, and so for the
+        command line run in it): give a new name to keep both.
     factory : callable
         ``factory(image, **options) -> deconvolve``, called once per photo. ``image`` is
         the whole photo in linear light, float32 ``(H, W)`` or ``(H, W, C)`` (alpha left
