@@ -74,9 +74,10 @@ from PIL import Image, TiffImagePlugin, UnidentifiedImageError
 from gyrodeblur.arguments import is_whole
 from gyrodeblur.atomicfile import atomic_write, check_folder_of, check_writable
 from gyrodeblur.errors import InputError
-from gyrodeblur.exif import (_EXIF_ERRORS, _IFD0_ASCII, _JPEG_MAX_EXIF, _ORIENTATION,
-                             _exif_for_jpeg, _load_exif, _normalise_exif, _pillow_exif,
-                             _sub_ifds, _tiff_exif, _without_thumbnail, exif_capture_hints)
+from gyrodeblur.exif import (_EXIF_ERRORS, _EXIF_IFD, _GPS_IFD, _IFD0_ASCII, _JPEG_MAX_EXIF,
+                             _ORIENTATION, _exif_for_jpeg, _load_exif, _normalise_exif,
+                             _pillow_exif, _sub_ifds, _tiff_exif, _without_thumbnail,
+                             exif_capture_hints)
 from gyrodeblur.icc import profile_damage
 from gyrodeblur.images import PHOTO_MAX, PHOTO_MIN
 from gyrodeblur.pngwrite import _PNG_XMP_KEY, DEFLATE_LEVEL, _write_png
@@ -621,8 +622,6 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
 #: Bytes per value of each TIFF field type (TIFF 6.0 and BigTIFF).
 _TIFF_TYPE_BYTES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8,
                     13: 4, 16: 8, 17: 8, 18: 8}
-#: TIFF tags whose value is the offset of a sub-directory: Exif and GPS.
-_TIFF_SUB_IFDS = (34665, 34853)
 
 
 def _refuse_truncated_tiff(path: str) -> None:
@@ -666,7 +665,7 @@ def _refuse_truncated_tiff(path: str) -> None:
         nbytes = n * _TIFF_TYPE_BYTES.get(kind, 1)
         if nbytes > inline and at + nbytes > size:
             raise cut(f"its tag {tag}'s value runs to byte", at + nbytes)
-        if tag in _TIFF_SUB_IFDS and nbytes <= inline and at >= size:
+        if tag in (_EXIF_IFD, _GPS_IFD) and nbytes <= inline and at >= size:   # sub-IFD
             raise cut(f"its tag {tag}'s directory is at byte", at)
     try:
         with _tifffile_quiet(), tifffile.TiffFile(path) as tif:
