@@ -774,11 +774,9 @@ class _PhotoDeblur:
         photo, options = self.photo, self.options
         self.noise_note = ""
         if self.method == "sparse" and "noise_sigma" not in options and photo.quantization:
-            from .noise import (COARSE_MIN_SIDE, coarse_noise_sigma, estimate_noise_sigma,
-                                photo_noise_sigma)
+            from .noise import coarse_noise_reading, estimate_noise_sigma, photo_noise_sigma
             shown = estimate_noise_sigma(self.colour)
-            coarse = (coarse_noise_sigma(self.colour)
-                      if min(self.colour.shape[:2]) >= COARSE_MIN_SIDE else None)
+            coarse = coarse_noise_reading(self.colour)
             options["noise_sigma"] = photo_noise_sigma(photo, measured=shown, coarse=coarse)
             half = "" if coarse is None else f", {255 * coarse:.2f} at half resolution"
             self.noise_note = (f"JPEG: deconvolved for noise of "

@@ -12,8 +12,8 @@ import scipy.ndimage as ndi
 
 from .images import split_alpha
 
-__all__ = ["estimate_noise_sigma", "coarse_noise_sigma", "jpeg_noise_sigma",
-           "photo_noise_sigma", "JPEG_NOISE_SCALE", "COARSE_MIN_SIDE"]
+__all__ = ["estimate_noise_sigma", "coarse_noise_sigma", "coarse_noise_reading",
+           "jpeg_noise_sigma", "photo_noise_sigma", "JPEG_NOISE_SCALE", "COARSE_MIN_SIDE"]
 
 #: Scale (``[0, 1]`` units: 1.7 8-bit levels) of the level a JPEG is deconvolved for:
 #: ``sigma^2 = estimate^2 + JPEG_NOISE_SCALE * q``, ``q = sqrt(mean(Q^2) / 12) / 255`` the
@@ -217,6 +217,14 @@ def coarse_noise_sigma(image: np.ndarray, *, max_pixels: int = 2_000_000) -> flo
     return max(readings)
 
 
+def coarse_noise_reading(image: np.ndarray) -> float | None:
+    """:func:`coarse_noise_sigma` where the image is large enough for it
+    (:data:`COARSE_MIN_SIDE`), else ``None``."""
+    if min(np.shape(image)[:2]) < COARSE_MIN_SIDE:
+        return None
+    return coarse_noise_sigma(image)
+
+
 def photo_noise_sigma(photo, measured: float | None = None,
                       coarse: float | None = None) -> float:
     """The noise level to deconvolve a photo from :func:`gyrodeblur.imageio.read_photo`
@@ -241,7 +249,7 @@ def photo_noise_sigma(photo, measured: float | None = None,
     sigma = estimate_noise_sigma(colour) if measured is None else measured
     tables = getattr(photo, "quantization", None)
     if photo.format == "JPEG" and tables and 0 in tables:
-        if coarse is None and min(colour.shape[:2]) >= COARSE_MIN_SIDE:
-            coarse = coarse_noise_sigma(colour)
+        if coarse is None:
+            coarse = coarse_noise_reading(colour)
         sigma = jpeg_noise_sigma(max(sigma, coarse or 0.0), tables[0])
     return sigma
