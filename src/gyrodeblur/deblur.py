@@ -34,7 +34,7 @@ from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_varia
 from .tiling import (DEFAULT_GRID, DEFAULT_OVERLAP, MIN_WINDOW, check_grid, check_overlap,
                      check_patches, deconvolve_patchwise, patch_grid)
 from .tonecurve import TransferCurve, get_transfer_curve
-from .warp import CLIPPED, LIGHT_AREA, checked_displacement, warp_by_displacement
+from .warp import CLIPPED, LIGHT_AREA, checked_displacement, warp_checked
 from .wiener import check_phi, photo_phi, wiener_deconvolve
 
 __all__ = ["deblur", "deblur_with_psfs", "deblur_blind", "DeblurReport", "METHODS",
@@ -411,10 +411,10 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         model's refinement steps.
     displacement : (ys, xs, d), optional
         Mean-displacement field the (centred) PSFs leave out; the photo is warped by it
-        first (:func:`warp_by_displacement`). Where the warp samples outside the photo
-        (a strip as wide as the displacement at an edge) the values are mirrored, not
-        data; a method whose deconvolver takes an ``unknown`` mask (``"sparse"``) gives
-        them no data term.
+        first (:func:`gyrodeblur.warp.warp_by_displacement`). Where the warp samples
+        outside the photo (a strip as wide as the displacement at an edge) the values are
+        mirrored, not data; a method whose deconvolver takes an ``unknown`` mask
+        (``"sparse"``) gives them no data term.
     model : {"global", "patches"}, optional
         ``"patches"``: each patch deconvolved with its PSF and the results blended (the
         chapter's design). ``"global"``: that result refined under one forward model for
@@ -462,7 +462,7 @@ def deblur_with_psfs(image: np.ndarray, patches, psfs, *, method: str | None = N
         unknown = None
         if displacement is not None:
             box = max(p.shape[0] * p.shape[1] for p in psfs)
-            warp = partial(warp_by_displacement, img, displacement, clipped=CLIPPED,
+            warp = partial(warp_checked, img, displacement, clipped=CLIPPED,
                            light_area=int(LIGHT_AREA * box))
             if _takes_unknown(deconvolve):  # mirrored samples are not data: no data term
                 img, outside = warp(return_outside=True)

@@ -300,7 +300,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
     rng = np.random.default_rng(seed)          # (a Generator given is used as it is)
     clean = out
     if snr_db is not None:
-        out = (add_noise(out, snr_db, rng) if linear
+        out = (_with_noise(out, snr_db, rng) if linear
                else _add_light_noise(out, curve, snr_db, rng))
     if full_well is not None:
         out = out + _shot_noise(clean, full_well, rng)
@@ -308,7 +308,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
         np.maximum(out, 0.0, out=out)
     out = curve.encode(out)
     if quantize:
-        out = quantize_8bit(out)
+        out = _to_8bit_levels(out)
     return join_alpha(out.astype(np.float32, copy=False), alpha)
 
 
@@ -373,13 +373,21 @@ def add_noise(image: np.ndarray, snr_db: float, seed=None) -> np.ndarray:
     ndarray, float32, the shape of ``image``.
     """
     img = check_values(image)
-    sigma = float(np.std(img)) / 10 ** (_checked_snr(snr_db) / 20)
-    rng = np.random.default_rng(check_seed(seed))
+    return _with_noise(img, _checked_snr(snr_db), np.random.default_rng(check_seed(seed)))
+
+
+def _with_noise(img: np.ndarray, snr_db: float, rng: np.random.Generator) -> np.ndarray:
+    """:func:`add_noise` of checked values and ``snr_db``, drawn from ``rng``."""
+    sigma = float(np.std(img)) / 10 ** (snr_db / 20)
     return (img + rng.normal(0.0, sigma, img.shape)).astype(np.float32)
 
 
 def quantize_8bit(image: np.ndarray) -> np.ndarray:
     """Clip to [0, 1] and round to the nearest of the 256 8-bit levels (float32; a float
     image is required: 8-bit integers are already quantised)."""
-    img = check_values(image)
+    return _to_8bit_levels(check_values(image))
+
+
+def _to_8bit_levels(img: np.ndarray) -> np.ndarray:
+    """:func:`quantize_8bit` of checked values."""
     return (np.round(np.clip(img, 0, 1) * 255) / 255).astype(np.float32)

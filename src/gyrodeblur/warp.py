@@ -17,7 +17,8 @@ import numpy as np
 from .images import check_image
 from .sparse import _CLIP_VALUE, _ZONE_AREA
 
-__all__ = ["warp_by_displacement", "checked_displacement", "CLIPPED", "LIGHT_AREA", "WARP_INTERPOLATION"]
+__all__ = ["warp_by_displacement", "warp_checked", "checked_displacement", "CLIPPED",
+           "LIGHT_AREA", "WARP_INTERPOLATION"]
 
 #: Interpolation of the alignment warp: Lanczos (8 x 8 taps). Against a quintic-spline
 #: reference on a smoothly warped photo it is 58 dB accurate; OpenCV's bicubic 47 dB and
@@ -89,9 +90,19 @@ def warp_by_displacement(image: np.ndarray, displacement, *, clipped: float | No
     values are mirrored, not data (the light they need was recorded outside the frame).
     """
     img = check_image(image, "image", min_size=1, max_channels=np.iinfo(np.int32).max)
+    return warp_checked(img, checked_displacement(displacement, img.shape[:2]),
+                        clipped=clipped, light_area=light_area, return_outside=return_outside)
+
+
+def warp_checked(img: np.ndarray, displacement: tuple, *, clipped: float | None = None,
+                 light_area: int | None = None, return_outside: bool = False):
+    """:func:`warp_by_displacement` of a photo and field already checked (a float32 photo
+    of finite values; ``displacement`` as :func:`checked_displacement` returns it for
+    this photo's size), for a caller that checked them before its own work."""
+    ys, xs, d = displacement
+    img = np.asarray(img, np.float32)               # (no copy of a float32 photo)
     planes = img[..., None] if img.ndim == 2 else img
     H, W, C = planes.shape
-    ys, xs, d = checked_displacement(displacement, (H, W))
     # Bilinear interpolation of the grid, rows then columns, as two-tap sums in a fixed
     # order: the same result to the last bit whatever the machine's thread count (a BLAS
     # matrix product here made the output depend on it)
