@@ -756,6 +756,7 @@ def test_a_tab_separated_log_may_use_the_decimal_comma(tmp_path, trace):
                  + _formatted_rows(trace, lambda v: f"{v:.9E}".replace(".", ","), "\t"))
     log = read_gyro_log(p)
     assert np.allclose(log.t, trace.t, atol=1e-6) and np.allclose(log.omega, trace.omega)
+    assert log.in_device_axes and log.meta["app"] == "phyphox"     # a phone's own axes
 
 
 def test_samples_with_a_missing_value_are_skipped_with_a_warning(tmp_path, trace):

@@ -769,7 +769,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     if "orientation" not in gyro_d and log.in_device_axes:
         orientation = "android-back-camera"      # not the camera's axes, as XYZ would say
         what = ("an Android sensor log" if device == "android device" else
-                "a phone app's log (its column names are Sensor Logger's or Core Motion's)")
+                f"a phone app's log (its column names are {log.meta.get('app', 'a phone app')}'s)")
         warnings.warn(f"{src}: {what} is in the device's axes (x right, y "
                       f"up, z out of the screen); with no gyro.orientation (--orientation) "
                       f"given, it is read as android-back-camera (yxz: a back camera of "

@@ -53,7 +53,7 @@ import numpy as np
 
 from .errors import InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
-                          default_rate_columns, default_time_column, from_a_phone_app,
+                          default_rate_columns, default_time_column, phone_app,
                           is_number, looks_like_time, parse_number, refuse_signed_names,
                           sensor_time_column, sniff_delimiter, time_unit_from_interval,
                           unit_from_name)
@@ -913,8 +913,10 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
                           f"column {column!r} states", stacklevel=4)
     rows = read_rows([ti] + ri)                                          # time, x, y, z
     meta = {}
-    if from_a_phone_app(header, ri):
+    app = phone_app(header, ri)
+    if app is not None:
         meta["axes"] = "phone device"
+        meta["app"] = app
     if tu is None and not looks_like_time(header[ti]):
         raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
                                "does not say it holds times; give the unit (--time-unit "

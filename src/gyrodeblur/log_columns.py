@@ -23,7 +23,7 @@ __all__ = ["TIME_UNITS", "RATE_UNITS", "RATE_UNIT_ENDINGS", "RATE_ALIASES",
            "bracketed_unit", "sniff_delimiter", "time_unit_from_interval", "rate_axis",
            "looks_like_time", "default_time_column", "sensor_time_column",
            "default_rate_columns",
-           "from_a_phone_app", "refuse_signed_names"]
+           "phone_app", "refuse_signed_names"]
 
 #: Seconds per unit of time.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -258,15 +258,24 @@ def default_rate_columns(path: str, header: list[str], ti: int) -> list[int]:
     return ri
 
 
-def from_a_phone_app(header: list[str], rate_columns: list[int]) -> bool:
-    """Whether a CSV's columns are a phone app's, whose rates are in the device's axes:
-    Sensor Logger's ``seconds_elapsed`` column, or rates named as Core Motion's
-    ``rotationRateX`` (iOS apps; SensorLog's ``gyroRotationX(rad/s)`` and
-    ``motionRotationRateX(rad/s)``)."""
+def phone_app(header: list[str], rate_columns: list[int]) -> str | None:
+    """The phone app whose CSV columns these are, when they are one's (its rates are then
+    in the device's axes), else ``None``: ``"Sensor Logger"`` (its ``seconds_elapsed``
+    column), ``"phyphox"`` (``"Time (s)"`` first, the rates ``"Gyroscope x (rad/s)"``),
+    ``"SensorLog"`` (iOS; ``gyroRotationX(rad/s)`` or ``motionRotationRateX(rad/s)``) or
+    ``"Core Motion"`` (rates named as its ``rotationRateX``, as iOS apps write them)."""
     names = [h.strip().lower() for h in header]
-    return "seconds_elapsed" in names or any(
-        names[i].startswith(("rotationrate", "gyrorotation", "motionrotationrate"))
-        for i in rate_columns)
+    rates = [names[i] for i in rate_columns]
+    if "seconds_elapsed" in names:
+        return "Sensor Logger"
+    if names[:1] == ["time (s)"] and all(
+            re.fullmatch(r"gyroscope [xyz] \(rad/s\)", r) for r in rates):
+        return "phyphox"
+    if any(r.startswith(("gyrorotation", "motionrotationrate")) for r in rates):
+        return "SensorLog"
+    if any(r.startswith("rotationrate") for r in rates):
+        return "Core Motion"
+    return None
 
 
 def refuse_signed_names(path: str, header: list[str], columns: list[int]) -> None:
