@@ -272,6 +272,8 @@ def test_shared_android_log(shared_data):
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
     # epoch microseconds said to be seconds: rounding would eat the exposure
     ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000005000,0,0,0\n",
+     r"time column 't_s' read in s, as its name states: .* 5000 s, .* in us it is a 200 Hz"),
+    ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000000001,0,0,0\n",
      r"gyro sample 1's time 1.7e\+15 s is beyond 4.29e\+09 s .* microseconds or "
      r"nanoseconds read as seconds"),
     ("t_s,x,y,z\n0,0,0\n", "expected 4 values"),
@@ -1008,3 +1010,33 @@ def test_a_log_built_in_code_is_refused_as_it_is_wrong():
         GyroLog((1.7e9 + np.arange(400) * 0.005).astype(np.float32), np.zeros((400, 3)))
     since_boot = (1200.0 + np.arange(400) * 0.005).astype(np.float32)   # to 0.12 ms
     assert GyroLog(since_boot, np.zeros((400, 3))).t.dtype == np.float64
+
+
+def test_a_time_unit_that_makes_no_gyros_rate_is_refused_naming_the_one_that_fits(
+        tmp_path, trace):
+    """A column named ``t_ns`` that holds milliseconds read as nanoseconds is a 200 MHz
+    gyro: refused, with the unit that makes the log a 200 Hz one (it had been read, and
+    then said not to cover the exposure, blaming the capture's start). A unit given that
+    way is refused the same; a drone's 8 kHz log in ns and a 2 Hz one in s are read."""
+    p = tmp_path / "ms.csv"
+    p.write_text("t_ns,wx,wy,wz\n" + "".join(
+        f"{t * 1e3:.4f},{w[0]:.6f},{w[1]:.6f},{w[2]:.6f}\n" for t, w in zip(trace.t, trace.omega)))
+    with pytest.raises(InputError, match=r"time column 't_ns' read in ns, as its name states: "
+                                         r"its median sample interval, 5 ns, is that of a "
+                                         r"2e\+08 Hz gyro, which no gyro is; in ms it is a "
+                                         r"200 Hz gyro's; give the right unit"):
+        read_gyro_log(p)
+    with pytest.warns(UserWarning, match="the time unit given, ms, overrides the ns"):
+        assert np.allclose(read_gyro_log(p, time_unit="ms").t, trace.t, atol=1e-6)
+    s = tmp_path / "s.csv"
+    s.write_text("t,wx,wy,wz\n" + _formatted_rows(trace, lambda v: f"{v:.6f}"))
+    with pytest.raises(InputError, match=r"read in ms, as given: .* 2e\+05 Hz gyro.* in s "
+                                         r"it is a 200 Hz"):
+        read_gyro_log(s, time_unit="ms")
+    fast = tmp_path / "fast.csv"
+    fast.write_text("t_ns,wx,wy,wz\n" + "".join(f"{k * 125_000},0.1,0.2,0.3\n"
+                                                 for k in range(50)))
+    assert read_gyro_log(fast).sample_interval == pytest.approx(1.25e-4)
+    slow = tmp_path / "slow.csv"
+    slow.write_text("t_s,wx,wy,wz\n" + "".join(f"{k * 0.5},0.1,0.2,0.3\n" for k in range(9)))
+    assert read_gyro_log(slow).sample_interval == pytest.approx(0.5)

@@ -53,8 +53,8 @@ import numpy as np
 
 from .errors import InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
-                          default_rate_columns, default_time_column, phone_app,
-                          is_number, looks_like_time, parse_number, refuse_signed_names,
+                          default_rate_columns, default_time_column, implausible_time_unit,
+                          is_number, phone_app, looks_like_time, parse_number, refuse_signed_names,
                           sensor_time_column, sniff_delimiter, time_unit_from_interval,
                           unit_from_name)
 
@@ -231,7 +231,7 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         raise InputError(source, f"gyro sample {i + 1}'s time {float(t[i]):.6g} s is beyond "
                                  f"{MAX_TIME:.3g} s (136 years), where seconds are too coarse "
                                  "for an exposure: microseconds or nanoseconds read as "
-                                 "seconds? (set the time unit)")
+                                 "seconds? (a CSV or JSON log's unit: --time-unit, or gyro.time_unit)")
     _check_increasing(t, source, w=w)
     med = float(np.median(np.linalg.norm(w, axis=1)))
     peak = np.max(np.abs(w), axis=1)
@@ -240,10 +240,12 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         raise InputError(source, f"gyro sample {i + 1} (t = {float(t[i]):.6f} s) has a rate of "
                                  f"{float(peak[i]):.4g} rad/s, beyond any gyro's range "
                                  f"({MAX_GYRO_RATE:g} rad/s): a corrupt sample, or rates in "
-                                 "deg/s read as rad/s? (set the rate unit)")
+                                 "deg/s read as rad/s? (a CSV or JSON log's unit: --rate-unit "
+                                 "deg/s, or gyro.rate_unit)")
     if med > IMPLAUSIBLE_MEDIAN_RATE:
         raise InputError(source, f"median angular rate {med:.1f} rad/s is implausible for a "
-                                 "hand-held camera; are the rates in deg/s? (set the rate unit)")
+                                 "hand-held camera; are the rates in deg/s? (a CSV or JSON "
+                                 "log's unit: --rate-unit deg/s, or gyro.rate_unit)")
 
 
 #: s: times that differ by less are equal (a 20 Hz log's 0.05 s steps read from text)
@@ -933,6 +935,12 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
                                    f"{GUESSED_RATE_RANGE[1] / 1e3:g} kHz in any unit); "
                                    "give it (--time-unit s|ms|us|ns)")
         meta["time_unit_from"] = f"the median sample interval, {interval:.6g} {tu}"
+    else:
+        wrong = implausible_time_unit(rows[:, 0], tu)
+        if wrong is not None:
+            told = "given" if time_unit is not None else "its name states"
+            raise InputError(path, f"time column {header[ti]!r} read in {tu}, as {told}: "
+                                   f"{wrong}; give the right unit (--time-unit s|ms|us|ns)")
     if ru is None:
         ru = "rad/s"
         meta["rate_unit_from"] = "assumed: the column names state no unit"

@@ -19,8 +19,9 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["TIME_UNITS", "RATE_UNITS", "RATE_UNIT_ENDINGS", "RATE_ALIASES",
-           "GUESSED_RATE_RANGE", "parse_number", "is_number", "unit_from_name",
-           "bracketed_unit", "sniff_delimiter", "time_unit_from_interval", "rate_axis",
+           "GUESSED_RATE_RANGE", "PLAUSIBLE_RATE_RANGE", "parse_number", "is_number",
+           "unit_from_name", "bracketed_unit", "sniff_delimiter", "time_unit_from_interval",
+           "implausible_time_unit", "rate_axis",
            "looks_like_time", "default_time_column", "sensor_time_column",
            "default_rate_columns",
            "phone_app", "refuse_signed_names"]
@@ -108,6 +109,31 @@ def time_unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
         if per_second / GUESSED_RATE_RANGE[1] <= m <= per_second / GUESSED_RATE_RANGE[0]:
             return unit, m
     return None, m
+
+
+#: Sample rates (Hz) beyond which a stated time unit is taken for a wrong one: a factor
+#: 1000 off a phone's 100-500 Hz lands outside, the 8-32 kHz of a drone's gyro inside.
+PLAUSIBLE_RATE_RANGE = (1.0, 100_000.0)
+
+
+def implausible_time_unit(t: np.ndarray, unit: str) -> str | None:
+    """What is wrong with reading the increasing times ``t`` in ``unit``, when their
+    median sample interval then makes a gyro faster or slower than
+    :data:`PLAUSIBLE_RATE_RANGE` (a column named ``t_ns`` that holds milliseconds), with
+    the unit that would fit; ``None`` when it does not (or under two distinct times)."""
+    d = np.diff(np.asarray(t, np.float64))
+    d = d[d > 0]
+    if d.size == 0:
+        return None
+    interval = float(np.median(d))
+    rate = 1.0 / (interval * TIME_UNITS[unit])
+    if PLAUSIBLE_RATE_RANGE[0] <= rate <= PLAUSIBLE_RATE_RANGE[1]:
+        return None
+    fits, _ = time_unit_from_interval(t)
+    then = (f"; in {fits} it is a {1.0 / (interval * TIME_UNITS[fits]):.4g} Hz gyro's"
+            if fits is not None else "")
+    return (f"its median sample interval, {interval:.6g} {unit}, is that of a {rate:.4g} Hz "
+            f"gyro, which no gyro is{then}")
 
 
 #: What may come before a rate column's axis letter (lower case, letters only): ``x``,
