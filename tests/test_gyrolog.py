@@ -1040,3 +1040,33 @@ def test_a_time_unit_that_makes_no_gyros_rate_is_refused_naming_the_one_that_fit
     slow = tmp_path / "slow.csv"
     slow.write_text("t_s,wx,wy,wz\n" + "".join(f"{k * 0.5},0.1,0.2,0.3\n" for k in range(9)))
     assert read_gyro_log(slow).sample_interval == pytest.approx(0.5)
+
+
+def test_a_log_without_a_header_line_is_read_from_the_column_numbers_given(tmp_path, trace):
+    """A logger that writes no header (``x,y,z,timestamp_ns``, as OpenCamera Sensors is
+    said to): with the time and rate columns given by number (from 0) it is read, the
+    unit of the times given or found from their intervals, the first line a sample, its
+    line numbers the file's; without them it is refused with the options named (they had
+    not helped: the header was required all the same)."""
+    p = tmp_path / "noheader.csv"
+    p.write_text("".join(f"{w[0]:.9f},{w[1]:.9f},{w[2]:.9f},{int(round(t * 1e9))}\n"
+                         for t, w in zip(trace.t, trace.omega)))
+    log = read_gyro_log(p, time_column=3, rate_columns=(0, 1, 2), time_unit="ns")
+    assert np.allclose(log.t, trace.t, atol=1e-9) and np.allclose(log.omega, trace.omega)
+    log = read_gyro_log(p, time_column="3", rate_columns=["0", "1", "2"])    # as JSON may
+    assert np.allclose(log.t, trace.t, atol=1e-9) and log.meta["time_unit"] == "ns"
+    log = read_gyro_log(p, time_column=3, rate_columns=(2, 1, 0), time_unit="ns")
+    assert np.allclose(log.omega, trace.omega[:, ::-1])
+    with pytest.raises(InputError, match=r"no header line .* give the time and rate columns "
+                                         r"by number, from 0: the capture's gyro.time_column"):
+        read_gyro_log(p)
+    with pytest.raises(InputError, match="no header line"):
+        read_gyro_log(p, time_column=3)
+    with pytest.raises(InputError, match=r"four different columns of the 4 in each line "
+                                         r"\(counted from 0\), got 3 and 0, 1, 4"):
+        read_gyro_log(p, time_column=3, rate_columns=(0, 1, 4))
+    lines = p.read_text().splitlines()
+    lines[2] = lines[2].replace(",", ";", 1)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="line 3"):
+        read_gyro_log(p, time_column=3, rate_columns=(0, 1, 2))

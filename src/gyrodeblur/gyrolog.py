@@ -841,13 +841,45 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         named = [h.strip() for h in _fields(comment, delimiter, path, "the column names")]
         if len(named) >= len(header) and not any(is_number(h) for h in named):
             header, lines, skip = named, [comment] + lines, skip - 1
-    if all(is_number(h) for h in header):
-        raise InputError(path, "no header line (expected column names such as t_ns,wx,wy,wz)")
+    if all(is_number(h) for h in header):          # no names: the data from line 1
+        header = _numbered_columns(path, len(header), time_column, rate_columns)
+        time_column, rate_columns = "t", ("x", "y", "z")
+        lines, skip = [""] + lines, skip - 1
     first_row = _fields(next((ln for ln in lines[1:] if ln.strip()), ""), delimiter, path,
                         f"line {skip + 2}")
     return _log_from_table(path, header, first_row, partial(
         _parse_numeric_rows, path, lines[1:], first_line=skip + 2, sep=delimiter,
         names=header), time_column, rate_columns, time_unit, rate_unit)
+
+
+def _numbered_columns(path: str, n: int, time_column, rate_columns) -> list[str]:
+    """Column names for a CSV log without a header line, whose time and rate columns the
+    caller gave by number (from 0): ``t`` for the time column, ``x``, ``y``, ``z`` for the
+    rate columns in the order given, ``column K`` for the others. Refused without those
+    numbers: the columns' meaning and units cannot be guessed."""
+    def number(c) -> int | None:
+        if isinstance(c, (int, np.integer)) and not isinstance(c, bool):
+            return int(c)
+        if isinstance(c, str) and c.strip().isascii() and c.strip().isdigit():
+            return int(c.strip())
+        return None
+
+    numbers = [number(time_column)] + [number(c) for c in (
+        rate_columns if rate_columns is not None and not isinstance(rate_columns, str)
+        and len(rate_columns) == 3 else (None,))]
+    if time_column is None or rate_columns is None or None in numbers:
+        raise InputError(path, "no header line (expected column names such as "
+                               "t_ns,wx,wy,wz; for a log without one, give the time and rate "
+                               "columns by number, from 0: the capture's gyro.time_column and "
+                               "gyro.rate_columns)")
+    if len(set(numbers)) < 4 or not all(0 <= i < n for i in numbers):
+        raise InputError(path, f"the time and rate columns must be four different columns of "
+                               f"the {n} in each line (counted from 0), got {numbers[0]} and "
+                               f"{', '.join(map(str, numbers[1:]))}")
+    names = [f"column {k}" for k in range(n)]
+    for name, i in zip("txyz", numbers):
+        names[i] = name
+    return names
 
 
 def _log_from_table(path: str, header: list[str], first_row: list[str], read_rows,
