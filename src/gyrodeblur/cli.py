@@ -365,8 +365,8 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve, zoom: float | None = None,
                       f"explains its most textured windows better ({gain:+.1f} nats per 9 "
                       f"windows). The time offset, the exposure start, the axis mapping, the "
                       f"focal length (one in the pixels of another resolution) or the log is "
-                      f"likely not the photo's, and the result is then worse than the "
-                      f"input: run calibrate (or deblur --refine) first. A sharp photo, or one "
+                      f"likely not the photo's, and the result is then likely worse than "
+                      f"the input: run calibrate (or deblur --refine) first. A sharp photo, or one "
                       f"softer than its pixels (upscaled, digitally zoomed, heavily denoised), "
                       f"also gives this (--no-blur-check skips the check)"
                       + ("" if not zoom else
