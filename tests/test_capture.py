@@ -100,9 +100,15 @@ def test_exif_hints_fill_gaps(capture_files):
                                          r"4.25 mm x its longer side in pixels"):
         load_capture(d / "cap.json", image_size=(800, 600),
                      exif_hints={"exposure_time": 0.02, "focal_length_mm": 4.25})
-    with pytest.raises(InputError, match=r"cap.json: no focal length: give camera.fx"):
+    with pytest.raises(InputError, match=r"cap.json: no focal length: give camera.fx "
+                                         r"\(pixels\) or --fx$"):
         load_capture(d / "cap.json",        # the hint in pixels, but no photo size to fit it
                      exif_hints={"exposure_time": 0.02, "focal_length_mm": 4.25, "fx": 9.0})
+    # with a photo, one whose EXIF would give it is named; without (the psf command's
+    # capture, no photo to read), it is not
+    with pytest.raises(InputError, match=r"give camera.fx \(pixels\) or --fx, or a photo "
+                                         r"whose EXIF has FocalLengthIn35mmFilm"):
+        load_capture(d / "cap.json", image_size=(800, 600), exif_hints={})
 
 
 def test_a_description_far_from_the_photos_exif_is_warned_of(capture_files):
