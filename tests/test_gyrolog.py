@@ -269,12 +269,14 @@ def test_shared_android_log(shared_data):
     ("time,x,y,z\n1733380020406623488,0,0,0\n1733380020401865728,0,0,0\n",
      r"sample 2 \(1733380020401865728\) is earlier than sample 1 \(1733380020406623488\)"),
     ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,0\n1.0,0,0,0\n", r"only 1 gyro sample\(s\)"),
-    ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n", "deg/s"),
+    ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n",
+     r"are the rates in deg/s\? \(a CSV or JSON log's unit: --rate-unit deg/s, or "
+     r"gyro.rate_unit\)"),
     # epoch microseconds said to be seconds: rounding would eat the exposure
     ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000005000,0,0,0\n",
      r"time column 't_s' read in s, as its name states: .* 5000 s, .* in us it is a 200 Hz"),
-    ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000000001,0,0,0\n",
-     r"gyro sample 1's time 1.7e\+15 s is beyond 4.29e\+09 s .* microseconds or "
+    ("t_s,x,y,z\n100000000000000,0,0,0\n100000000000000.03125,0,0,0\n",
+     r"gyro sample 1's time 1e\+14 s is beyond 4.29e\+09 s .* microseconds or "
      r"nanoseconds read as seconds"),
     ("t_s,x,y,z\n0,0,0\n", "expected 4 values"),
     ("t_s,x,y,z\n0,0,0,abc\n", "not a number"),
@@ -1017,14 +1019,15 @@ def test_a_time_unit_that_makes_no_gyros_rate_is_refused_naming_the_one_that_fit
     """A column named ``t_ns`` that holds milliseconds read as nanoseconds is a 200 MHz
     gyro: refused, with the unit that makes the log a 200 Hz one (it had been read, and
     then said not to cover the exposure, blaming the capture's start). A unit given that
-    way is refused the same; a drone's 8 kHz log in ns and a 2 Hz one in s are read."""
+    way is refused the same; a drone's 8 kHz log in ns and a 5 Hz one in s are read."""
     p = tmp_path / "ms.csv"
     p.write_text("t_ns,wx,wy,wz\n" + "".join(
         f"{t * 1e3:.4f},{w[0]:.6f},{w[1]:.6f},{w[2]:.6f}\n" for t, w in zip(trace.t, trace.omega)))
     with pytest.raises(InputError, match=r"time column 't_ns' read in ns, as its name states: "
                                          r"its median sample interval, 5 ns, is that of a "
                                          r"2e\+08 Hz gyro, which no gyro is; in ms it is a "
-                                         r"200 Hz gyro's; give the right unit"):
+                                         r"200 Hz gyro's; give the right unit \(--time-unit "
+                                         r"s\|ms\|us\|ns, or gyro.time_unit\)"):
         read_gyro_log(p)
     with pytest.warns(UserWarning, match="the time unit given, ms, overrides the ns"):
         assert np.allclose(read_gyro_log(p, time_unit="ms").t, trace.t, atol=1e-6)
@@ -1038,8 +1041,8 @@ def test_a_time_unit_that_makes_no_gyros_rate_is_refused_naming_the_one_that_fit
                                                  for k in range(50)))
     assert read_gyro_log(fast).sample_interval == pytest.approx(1.25e-4)
     slow = tmp_path / "slow.csv"
-    slow.write_text("t_s,wx,wy,wz\n" + "".join(f"{k * 0.5},0.1,0.2,0.3\n" for k in range(9)))
-    assert read_gyro_log(slow).sample_interval == pytest.approx(0.5)
+    slow.write_text("t_s,wx,wy,wz\n" + "".join(f"{k * 0.2:.1f},0.1,0.2,0.3\n" for k in range(9)))
+    assert read_gyro_log(slow).sample_interval == pytest.approx(0.2)
 
 
 def test_a_log_without_a_header_line_is_read_from_the_column_numbers_given(tmp_path, trace):
@@ -1057,16 +1060,54 @@ def test_a_log_without_a_header_line_is_read_from_the_column_numbers_given(tmp_p
     assert np.allclose(log.t, trace.t, atol=1e-9) and log.meta["time_unit"] == "ns"
     log = read_gyro_log(p, time_column=3, rate_columns=(2, 1, 0), time_unit="ns")
     assert np.allclose(log.omega, trace.omega[:, ::-1])
-    with pytest.raises(InputError, match=r"no header line .* give the time and rate columns "
+    with pytest.raises(InputError, match=r"no header line .* give its time and rate columns "
                                          r"by number, from 0: the capture's gyro.time_column"):
         read_gyro_log(p)
     with pytest.raises(InputError, match="no header line"):
         read_gyro_log(p, time_column=3)
-    with pytest.raises(InputError, match=r"four different columns of the 4 in each line "
-                                         r"\(counted from 0\), got 3 and 0, 1, 4"):
+    with pytest.raises(InputError, match=r"column 4 does not exist \(the log has 4, counted "
+                                         r"from 0\)"):
         read_gyro_log(p, time_column=3, rate_columns=(0, 1, 4))
+    with pytest.raises(InputError, match="rate_columns must be three different columns"):
+        read_gyro_log(p, time_column=3, rate_columns=(0, 1, 1))
     lines = p.read_text().splitlines()
     lines[2] = lines[2].replace(",", ";", 1)
     p.write_text("\n".join(lines) + "\n")
     with pytest.raises(InputError, match="line 3"):
         read_gyro_log(p, time_column=3, rate_columns=(0, 1, 2))
+
+
+@pytest.mark.parametrize("layout", ["spaces", "pandas", "decimal comma"])
+def test_headerless_logs_in_other_layouts_are_read_from_the_column_numbers(tmp_path, trace,
+                                                                           layout):
+    """Without column names: space-separated with an integer time first (it had been
+    taken for an Android dump, the column numbers ignored), pandas' ``0,1,2,3`` names
+    (not a sample at t = 0), and semicolons with decimal commas (as many commas as
+    semicolons in a sample: the semicolon is the delimiter)."""
+    ns = [int(round(t * 1e9)) for t in trace.t]
+    if layout == "spaces":
+        text = "".join(f"{n} {w[0]:.9f} {w[1]:.9f} {w[2]:.9f}\n" for n, w in zip(ns, trace.omega))
+    elif layout == "pandas":
+        text = "0,1,2,3\n" + "".join(f"{n},{w[0]:.9f},{w[1]:.9f},{w[2]:.9f}\n"
+                                     for n, w in zip(ns, trace.omega))
+    else:
+        text = "".join(";".join([str(n)] + [f"{v:.9f}".replace(".", ",") for v in w]) + "\n"
+                       for n, w in zip(ns, trace.omega))
+    p = tmp_path / "log.txt"
+    p.write_text(text)
+    log = read_gyro_log(p, time_column=0, rate_columns=(1, 2, 3))
+    assert len(log) == len(trace) and log.meta["time_unit"] == "ns"
+    assert np.allclose(log.t, trace.t, atol=1e-9) and np.allclose(log.omega, trace.omega)
+
+
+@pytest.mark.parametrize("name, scale, rate, fits", [
+    ("t_ms", 1.0, 50, "in s it is a 50 Hz"),          # Android's slowest game rate, in s
+    ("t_s", 1e3, 1000, "in ms it is a 1000 Hz"),      # a fast IMU's, in ms
+    ("t_ms", 1e6, 2000, "in us it is a 2000 Hz"),
+])
+def test_phone_and_imu_rates_a_unit_off_are_refused(tmp_path, name, scale, rate, fits):
+    t = 100.0 + np.arange(40) / rate
+    p = tmp_path / "log.csv"
+    p.write_text(f"{name},wx,wy,wz\n" + "".join(f"{v * scale:.6f},0.1,0.2,0.3\n" for v in t))
+    with pytest.raises(InputError, match=fits):
+        read_gyro_log(p)

@@ -54,9 +54,9 @@ import numpy as np
 from .errors import InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
                           default_rate_columns, default_time_column, implausible_time_unit,
-                          is_number, phone_app, looks_like_time, parse_number, refuse_signed_names,
-                          sensor_time_column, sniff_delimiter, time_unit_from_interval,
-                          unit_from_name)
+                          is_number, looks_like_time, parse_number, phone_app,
+                          refuse_signed_names, sensor_time_column, sniff_delimiter,
+                          time_unit_from_interval, unit_from_name)
 
 __all__ = [
     "GyroLog",
@@ -534,7 +534,13 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if not os.path.isfile(path):
         raise InputError(path, "not a regular file (a device or a pipe), not a gyro log"
                          if os.path.exists(path) else "gyro log not found")
-    format = _guess_format(path) if format is None else check_format(format)
+    if format is None:
+        format = _guess_format(path)
+        if format == "android" and (options.get("time_column") is not None
+                                    or options.get("rate_columns") is not None):
+            format = "csv"      # columns given by number: a table without names, not a dump
+    else:
+        format = check_format(format)
     unknown = sorted(set(options) - set(_CSV_OPTIONS))
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(unknown)} "
@@ -841,53 +847,43 @@ def read_csv_log(path: str | os.PathLike, *, time_column: str | int | None = Non
         named = [h.strip() for h in _fields(comment, delimiter, path, "the column names")]
         if len(named) >= len(header) and not any(is_number(h) for h in named):
             header, lines, skip = named, [comment] + lines, skip - 1
-    if all(is_number(h) for h in header):          # no names: the data from line 1
-        header = _numbered_columns(path, len(header), time_column, rate_columns)
-        time_column, rate_columns = "t", ("x", "y", "z")
-        lines, skip = [""] + lines, skip - 1
+    numbered = _numbers_only(header, delimiter)
+    if numbered:                       # no column names: the data from this line on
+        if time_column is None or rate_columns is None:
+            raise InputError(path, "no header line (expected column names such as "
+                                   "t_ns,wx,wy,wz; for a log without one, give its time and "
+                                   "rate columns by number, from 0: the capture's "
+                                   "gyro.time_column and gyro.rate_columns)")
+        if header != [str(k) for k in range(len(header))]:   # pandas' names 0, 1, 2, ...
+            lines, skip = [""] + lines, skip - 1
+        header = [f"column {k}" for k in range(len(header))]
     first_row = _fields(next((ln for ln in lines[1:] if ln.strip()), ""), delimiter, path,
                         f"line {skip + 2}")
     return _log_from_table(path, header, first_row, partial(
         _parse_numeric_rows, path, lines[1:], first_line=skip + 2, sep=delimiter,
-        names=header), time_column, rate_columns, time_unit, rate_unit)
+        names=header), time_column, rate_columns, time_unit, rate_unit, numbered=numbered)
 
 
-def _numbered_columns(path: str, n: int, time_column, rate_columns) -> list[str]:
-    """Column names for a CSV log without a header line, whose time and rate columns the
-    caller gave by number (from 0): ``t`` for the time column, ``x``, ``y``, ``z`` for the
-    rate columns in the order given, ``column K`` for the others. Refused without those
-    numbers: the columns' meaning and units cannot be guessed."""
-    def number(c) -> int | None:
-        if isinstance(c, (int, np.integer)) and not isinstance(c, bool):
-            return int(c)
-        if isinstance(c, str) and c.strip().isascii() and c.strip().isdigit():
-            return int(c.strip())
-        return None
-
-    numbers = [number(time_column)] + [number(c) for c in (
-        rate_columns if rate_columns is not None and not isinstance(rate_columns, str)
-        and len(rate_columns) == 3 else (None,))]
-    if time_column is None or rate_columns is None or None in numbers:
-        raise InputError(path, "no header line (expected column names such as "
-                               "t_ns,wx,wy,wz; for a log without one, give the time and rate "
-                               "columns by number, from 0: the capture's gyro.time_column and "
-                               "gyro.rate_columns)")
-    if len(set(numbers)) < 4 or not all(0 <= i < n for i in numbers):
-        raise InputError(path, f"the time and rate columns must be four different columns of "
-                               f"the {n} in each line (counted from 0), got {numbers[0]} and "
-                               f"{', '.join(map(str, numbers[1:]))}")
-    names = [f"column {k}" for k in range(n)]
-    for name, i in zip("txyz", numbers):
-        names[i] = name
-    return names
+def _numbers_only(fields: list[str], delimiter: str | None) -> bool:
+    """Whether a CSV line's ``fields`` are all numbers (a sample, not column names), with a
+    decimal comma where the delimiter allows one (semicolon, tab)."""
+    comma = delimiter in (";", "\t")
+    try:
+        for f in fields:
+            parse_number(f, decimal_comma=comma)
+    except ValueError:
+        return False
+    return True
 
 
 def _log_from_table(path: str, header: list[str], first_row: list[str], read_rows,
-                    time_column, rate_columns, time_unit, rate_unit) -> GyroLog:
+                    time_column, rate_columns, time_unit, rate_unit, *,
+                    numbered: bool = False) -> GyroLog:
     """A CSV or JSON log's samples, from its column names ``header``, the text of its
     first sample's values ``first_row``, and ``read_rows(columns)``, the float64 values of
     those columns (indices) in every complete sample (:func:`_complete_rows`); the other
-    arguments are :func:`read_csv_log`'s."""
+    arguments are :func:`read_csv_log`'s. ``numbered``: the file names no columns (its
+    ``header`` is ``column 0``, ``column 1``, ...; the caller gave the columns by number)."""
     def col(c, what: str) -> int:
         if isinstance(c, (int, np.integer)) and not isinstance(c, (bool, np.bool_)):
             i = int(c)
@@ -901,7 +897,7 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
             raise InputError(path, f"{what} must name a column (its name, or its index from "
                                    f"0), got {c!r}")
         if not 0 <= i < len(header):
-            raise InputError(path, f"column {i} does not exist (header has {len(header)}, "
+            raise InputError(path, f"column {i} does not exist (the log has {len(header)}, "
                                    "counted from 0)")
         return i
 
@@ -951,7 +947,7 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
     if app is not None:
         meta["axes"] = "phone device"
         meta["app"] = app
-    if tu is None and not looks_like_time(header[ti]):
+    if tu is None and not numbered and not looks_like_time(header[ti]):
         raise InputError(path, f"time unit of column {header[ti]!r} unknown, and its name "
                                "does not say it holds times; give the unit (--time-unit "
                                "s|ms|us|ns) or name the column (gyro.time_column)")
@@ -972,7 +968,8 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
         if wrong is not None:
             told = "given" if time_unit is not None else "its name states"
             raise InputError(path, f"time column {header[ti]!r} read in {tu}, as {told}: "
-                                   f"{wrong}; give the right unit (--time-unit s|ms|us|ns)")
+                                   f"{wrong}; give the right unit (--time-unit s|ms|us|ns, "
+                                   "or gyro.time_unit)")
     if ru is None:
         ru = "rad/s"
         meta["rate_unit_from"] = "assumed: the column names state no unit"
