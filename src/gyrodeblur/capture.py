@@ -697,7 +697,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                               f"sensor's longer side in mm")
     if "fx" not in cam_d:
         raise InputError(src, "no focal length: give camera.fx (pixels) or --fx" + (
-            "" if image_size is None else  # (no photo here: the psf command's capture)
+            "" if image_size is None else  # no photo to read (the psf command's capture)
             ", or a photo whose EXIF has FocalLengthIn35mmFilm, or FocalLength with "
             "FocalPlaneXResolution"))
     cam_d.setdefault("fy", cam_d["fx"])
