@@ -769,8 +769,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     device = log.meta.get("axes")
     if "orientation" not in gyro_d and log.in_device_axes:
         orientation = "android-back-camera"      # not the camera's axes, as XYZ would say
+        app = log.meta.get("app")
         what = ("an Android sensor log" if device == "android device" else
-                f"a phone app's log (its column names are {log.meta.get('app', 'a phone app')}'s)")
+                "a phone app's log" + (f" (its column names are {app}'s)" if app else ""))
         warnings.warn(f"{src}: {what} is in the device's axes (x right, y "
                       f"up, z out of the screen); with no gyro.orientation (--orientation) "
                       f"given, it is read as android-back-camera (yxz: a back camera of "

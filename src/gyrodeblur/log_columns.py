@@ -114,10 +114,10 @@ def time_unit_from_interval(t: np.ndarray) -> tuple[str | None, float]:
 
 
 #: Sample rates (Hz) beyond which a stated time unit is taken for a wrong one: a log of
-#: 50 Hz to 5 kHz (a phone's slowest gyro rate to a fast IMU's) read in a unit 1000 off
-#: lands outside, a drone's 32 kHz gyro inside; a gyro slower than 5 Hz says nothing of a
-#: hand-held exposure's motion.
-PLAUSIBLE_RATE_RANGE = (5.0, 40_000.0)
+#: 50 Hz to 1.5 kHz (a phone's game rate to a fast IMU's) read in a unit 1000 off lands
+#: outside, a drone's 32 kHz gyro inside, and so does a log as slow as 2 Hz, which is of
+#: no use for an exposure but not a wrong unit.
+PLAUSIBLE_RATE_RANGE = (2.0, 40_000.0)
 
 
 def implausible_time_unit(t: np.ndarray, unit: str) -> str | None:
