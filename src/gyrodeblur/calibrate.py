@@ -858,6 +858,13 @@ def searched_mappings(mappings, captures, fix=()) -> tuple[list, str | None]:
     them or that the given mapping is left out (``None`` where there is nothing to say).
     """
     default = mappings is None
+    declared = default and all(cap.axes_from_log and np.allclose(cap.axes, np.eye(3))
+                               for cap in captures)
+    if declared and "axes" not in fix:
+        said = sorted({str(cap.log.meta.get("orientation")) for cap in captures})
+        return ["XYZ"], (f"the gyro log states its own axes (its header's orientation "
+                         f"{', '.join(said)}) and the description gives none: that mapping "
+                         "is taken (--mappings all, mappings='all': search all 24)")
     if default:
         mappings = "phone" if all(cap.log.in_device_axes for cap in captures) else "all"
     if isinstance(mappings, str):
