@@ -364,11 +364,15 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         Axis mappings to consider: ``"all"``, the 24 proper signed permutations;
         ``"phone"``, the 8 of them possible for a phone's own camera from the phone's
         device axes (:data:`gyrodeblur.axes.PHONE_AXIS_LETTERS`: the camera looks along
-        the device's z axis); or a list of mappings (letters). Default: ``"phone"`` where
-        every capture's log is a phone app's or an Android sensor dump, in the device's
-        axes (:attr:`GyroLog.in_device_axes <gyrodeblur.gyrolog.GyroLog.in_device_axes>`),
-        else ``"all"``. Give ``"all"`` for a phone's log and a photo from another camera
-        fixed to it. A given mapping outside the set is not kept.
+        the device's z axis); or a list of mappings (letters). Default: the given mapping
+        alone where every capture's mapping is its log's own statement
+        (:attr:`Capture.axes_from_log <gyrodeblur.capture.Capture.axes_from_log>`: a
+        Gyroflow header's ``orientation``, the description giving none); ``"phone"``
+        where every capture's log is a phone app's or an Android sensor dump, in the
+        device's axes (:attr:`GyroLog.in_device_axes
+        <gyrodeblur.gyrolog.GyroLog.in_device_axes>`); else ``"all"``. Give ``"all"`` for
+        a phone's log and a photo from another camera fixed to it. A given mapping outside
+        the set is not kept.
     downscale : float
         Calibrate on the photos shrunk by this factor (0 < ``downscale`` <= 1, area
         averaging). For photos softer than their pixel grid (upscaled, or heavily
