@@ -843,42 +843,6 @@ def test_the_candidate_mappings():
     assert only is measured
 
 
-def test_a_mapping_the_gyro_log_states_itself_is_taken_as_known(tmp_path):
-    """A Gyroflow log states its axes in its header (``orientation``); with the
-    description silent, that mapping is taken, not searched among 24 (a held-out photo of
-    library shelves, its capture right but 12 ms late, had been taken to another mapping
-    and deblurred to 7.5 dB against 19.4). A description that gives a mapping, a CSV log,
-    a capture whose axes were set in code, or ``mappings`` asked for, search as before."""
-    from gyrodeblur.axes import PROPER_AXIS_LETTERS
-    from gyrodeblur.calibrate import searched_mappings
-    from gyrodeblur.capture import load_capture
-    from gyrodeblur.gyrolog import write_gcsv
-
-    true = _true_capture(0.5)
-    write_gcsv(tmp_path / "g.gcsv", true.log, tscale=1e-6, gscale=1e-6)
-    text = (tmp_path / "g.gcsv").read_text()
-    assert "orientation," in text                       # the header states the mapping
-    doc = {"exposure_start": true.exposure_start, "exposure_time": true.exposure_time,
-           "readout_time": true.readout_time,
-           "camera": {"fx": true.camera.fx, "width": true.camera.width,
-                      "height": true.camera.height},
-           "gyro": {"path": "g.gcsv"}}
-    (tmp_path / "c.json").write_text(json.dumps(doc))
-    declared = load_capture(tmp_path / "c.json")
-    assert declared.axes_from_log
-    letters, why = searched_mappings(None, [declared])
-    assert letters == ["XYZ"] and "the gyro log states its own axes" in why, why
-    assert searched_mappings("all", [declared]) == (list(PROPER_AXIS_LETTERS), None)
-    assert searched_mappings(None, [declared.replace(axes=parse_axes("Yzx"))])[0] == \
-        list(PROPER_AXIS_LETTERS)
-    assert searched_mappings(None, [declared, true])[0] == list(PROPER_AXIS_LETTERS)
-    doc["gyro"]["orientation"] = "XYZ"                  # the description's own statement
-    (tmp_path / "c.json").write_text(json.dumps(doc))
-    stated = load_capture(tmp_path / "c.json")
-    assert not stated.axes_from_log
-    assert searched_mappings(None, [stated])[0] == list(PROPER_AXIS_LETTERS)
-
-
 def test_a_phone_log_is_searched_over_the_mappings_a_phone_s_camera_can_have(monkeypatch):
     """A phone's own camera looks along the device's z axis, so from a phone app's log (in
     the device's axes) only the 8 mappings that keep camera z on log z are searched, and a

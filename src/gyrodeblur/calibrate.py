@@ -364,15 +364,11 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         Axis mappings to consider: ``"all"``, the 24 proper signed permutations;
         ``"phone"``, the 8 of them possible for a phone's own camera from the phone's
         device axes (:data:`gyrodeblur.axes.PHONE_AXIS_LETTERS`: the camera looks along
-        the device's z axis); or a list of mappings (letters). Default: the given mapping
-        alone where every capture's mapping is its log's own statement
-        (:attr:`Capture.axes_from_log <gyrodeblur.capture.Capture.axes_from_log>`: a
-        Gyroflow header's ``orientation``, the description giving none); ``"phone"``
-        where every capture's log is a phone app's or an Android sensor dump, in the
-        device's axes (:attr:`GyroLog.in_device_axes
-        <gyrodeblur.gyrolog.GyroLog.in_device_axes>`); else ``"all"``. Give ``"all"`` for
-        a phone's log and a photo from another camera fixed to it. A given mapping outside
-        the set is not kept.
+        the device's z axis); or a list of mappings (letters). Default: ``"phone"`` where
+        every capture's log is a phone app's or an Android sensor dump, in the device's
+        axes (:attr:`GyroLog.in_device_axes <gyrodeblur.gyrolog.GyroLog.in_device_axes>`),
+        else ``"all"``. Give ``"all"`` for a phone's log and a photo from another camera
+        fixed to it. A given mapping outside the set is not kept.
     downscale : float
         Calibrate on the photos shrunk by this factor (0 < ``downscale`` <= 1, area
         averaging). For photos softer than their pixel grid (upscaled, or heavily
@@ -862,13 +858,6 @@ def searched_mappings(mappings, captures, fix=()) -> tuple[list, str | None]:
     them or that the given mapping is left out (``None`` where there is nothing to say).
     """
     default = mappings is None
-    declared = default and all(cap.axes_from_log and np.allclose(cap.axes, np.eye(3))
-                               for cap in captures)
-    if declared and "axes" not in fix:
-        said = sorted({str(cap.log.meta.get("orientation")) for cap in captures})
-        return ["XYZ"], (f"the gyro log states its own axes (its header's orientation "
-                         f"{', '.join(said)}) and the description gives none: that mapping "
-                         "is taken (--mappings all, mappings='all': search all 24)")
     if default:
         mappings = "phone" if all(cap.log.in_device_axes for cap in captures) else "all"
     if isinstance(mappings, str):

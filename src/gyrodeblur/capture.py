@@ -122,12 +122,6 @@ class Capture:
         Whether that EXIF time had no SubSecTimeOriginal (``exposure_start`` is then the
         middle of its second): calibrate searches :data:`EXIF_WHOLE_SECOND_TOLERANCE`
         either way.
-    axes_from_log : bool
-        Whether the axis mapping is the gyro log's own statement (a Gyroflow log's
-        ``orientation`` header line, :func:`load_capture` given no ``gyro.orientation``):
-        ``axes`` is then the identity on the rates the header already turned, and
-        :func:`gyrodeblur.calibrate.calibrate` takes that mapping as known unless asked
-        to search others.
 
     Notes
     -----
@@ -149,7 +143,6 @@ class Capture:
     exposure_start_from_exif: bool = False
     readout_time_unknown: bool = False
     exif_time_to_the_second: bool = False
-    axes_from_log: bool = False
 
     def __post_init__(self):
         src = self.source
@@ -860,7 +853,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
     try:
         return Capture(exposure_start, exposure_time, readout, camera, log, axes, offset, bias,
                        spec, src, 0.05 if max_gap is None else max_gap, from_exif, unknown,
-                       to_the_second, "orientation" not in gyro_d and "orientation" in log.meta)
+                       to_the_second)
     except InputError as exc:       # a field an option set: name the option too
         if exc.source != src:
             raise                   # the log's own errors (coverage) name the log

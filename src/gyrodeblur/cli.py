@@ -915,10 +915,9 @@ OFFSET_RANGE_HELP = ("seconds searched on each side of the given time offset (de
                      "clocks are known only roughly, e.g. 1: as far as the log covers it, "
                      "about 30 s more per second on each side on 2 cores")
 MAPPINGS_HELP = ("axis mappings searched: phone, the 8 of a phone's own camera (it looks "
-                 "along the device's z axis), or all 24; default: none where a Gyroflow "
-                 "log's header states the mapping and the description does not, phone for a "
-                 "phone app's log or an Android sensor dump (in the device's axes), else "
-                 "all. Give all for a phone's log and a photo from another camera fixed to it")
+                 "along the device's z axis), or all 24; default phone for a phone app's "
+                 "log or an Android sensor dump (in the device's axes), else all. Give all "
+                 "for a phone's log and a photo from another camera fixed to it")
 WORKERS_HELP = ("processes that refine the calibration's independent starts side by side "
                 "(Linux; default: the CPUs available, up to 4; 1: none); the result is the "
                 "same for any number. The environment variable GYRODEBLUR_THREADS=N caps "
