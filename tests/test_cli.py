@@ -1607,6 +1607,47 @@ def test_psf_takes_one_of_at_and_grid_a_pixel_of_the_frame_and_npy_or_png(captur
     assert main(base + ["--at", "255,191"]) == 0
 
 
+def test_psf_takes_a_photos_size_and_exif_but_not_its_exif_time(capture_dir, capsys):
+    """``psf --photo``: a capture without a camera or an exposure time takes them from the
+    photo's EXIF (FocalLengthIn35mmFilm, ExposureTime) and its size, as deblur does; the
+    PSF is the one the completed capture renders. The photo's EXIF time is not taken for
+    the exposure start, an output may not be the photo, and a photo turned upright is
+    refused naming what to give (psf has no --photo-rotation)."""
+    from gyrodeblur.capture import load_capture
+    from gyrodeblur.psf import render_psf
+
+    d = capture_dir
+    doc = json.loads((d / "cap.json").read_text())
+    del doc["camera"], doc["exposure_time"]
+    (d / "bare.json").write_text(json.dumps(doc))
+    exif = Image.Exif()
+    sub = exif.get_ifd(0x8769)
+    sub[0xA405], sub[0x829A], sub[0x9003] = 28, 0.02, "2024:12:05 07:27:10"
+    pixels = (np.random.default_rng(1).random((96, 128, 3)) * 255).astype(np.uint8)
+    Image.fromarray(pixels).save(d / "p.jpg", exif=exif.tobytes(), quality=90)
+    Image.fromarray(pixels.transpose(1, 0, 2)).save(d / "upright.jpg", exif=exif.tobytes())
+    base = ["psf", "--capture", str(d / "bare.json"), "--at", "30,40"]
+    assert "no focal length" in _run_error(base + ["-o", str(d / "q.npy")], capsys)
+    assert main(base + ["--photo", str(d / "p.jpg"), "-o", str(d / "q.npy")]) == 0
+    fx = 28 * np.hypot(128, 96) / np.hypot(36, 24)
+    cap = load_capture(d / "bare.json", overrides={"fx": fx, "fy": fx, "cx": 63.5, "cy": 47.5,
+                                                   "exposure_time": 0.02},
+                       image_size=(128, 96))
+    np.testing.assert_allclose(np.load(d / "q.npy"), render_psf(cap, 30, 40), atol=1e-6)
+    del doc["exposure_start"]
+    (d / "nostart.json").write_text(json.dumps(doc))
+    err = _run_error(["psf", "--capture", str(d / "nostart.json"), "--at", "30,40", "--photo",
+                      str(d / "p.jpg"), "-o", str(d / "r.npy")], capsys)
+    assert "exposure_start" in err and not (d / "r.npy").exists()
+    before = (d / "p.jpg").read_bytes()
+    err = _run_error(base + ["--photo", str(d / "p.jpg"), "-o", str(d / "p.jpg"), "--overwrite"],
+                     capsys)
+    assert "p.jpg" in err and (d / "p.jpg").read_bytes() == before
+    err = _run_error(["psf", "--capture", str(d / "cap.json"), "--at", "30,40", "--photo",
+                      str(d / "upright.jpg"), "-o", str(d / "u.png")], capsys)  # 256 x 192
+    assert "give the photo as the camera stored it" in err and "--photo-rotation" not in err
+
+
 def test_the_progress_bar_is_drawn_on_a_terminal_only_and_never_with_quiet(monkeypatch,
                                                                           capsys):
     """A log file gets no carriage-return lines, and ``--quiet`` silences the bar on a

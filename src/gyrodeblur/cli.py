@@ -185,16 +185,22 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
     cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
                        report=say, logs=getattr(args, "logs", None), exif_start=exif_start)
     if photo is not None:
+        # psf has no --photo-rotation: it takes the photo's pixels as stored
+        turn = ("give --photo-rotation (90 on most phones)" if hasattr(args, "photo_rotation")
+                else "give the photo as the camera stored it")
         if size[1] > size[0] and not getattr(args, "photo_rotation", 0) \
                 and cap.log.in_device_axes:
             say(f"note: {photo.path}: taller than wide, while a phone's sensor is wider than "
-                "tall: if an app or an export turned the photo upright, give "
-                "--photo-rotation (90 on most phones), or the rows are not the sensor's "
-                "readout rows")
+                f"tall: if an app or an export turned the photo upright, {turn}, or the "
+                "rows are not the sensor's readout rows")
         given_cam = cap.camera
         try:
             cap = cap.scaled_to(size[0], size[1], source=photo.path)
         except InputError as exc:
+            if not hasattr(args, "photo_rotation") and "turned by 90 degrees" in exc.problem:
+                raise exc.reworded(exc.problem.split(" (turned")[0] + " (turned by 90 "
+                                   "degrees? the rows must be the sensor's readout rows: "
+                                   "give the photo as the camera stored it)") from None
             turned = getattr(args, "photo_rotation", 0)
             if turned and "turned by 90 degrees" in exc.problem:     # by the option itself
                 raise exc.reworded(exc.problem.split(" (turned")[0] + f", after "
@@ -387,10 +393,17 @@ def cmd_psf(args, say) -> None:
     out = args.output
     if not out.lower().endswith((".npy", ".npz", ".png")):
         raise InputError(out, "output must end in .npy, .npz or .png")
-    _check_output(out, None, args.overwrite, image=out.lower().endswith(".png"))
+    _check_output(out, None, args.overwrite, image=out.lower().endswith(".png"),
+                  inputs=[args.photo] if args.photo else ())
     at = None if args.at is None else _pair(args.at, "--at", float, sep=",")
     grid = None if args.grid is None else _pair(args.grid, "--grid")
-    cap = _load_capture(args, say=say)          # reads the log: after the cheap checks
+    photo = None
+    if args.photo is not None:                  # its size and EXIF, as deblur takes them
+        from .imageio import read_photo
+        photo = read_photo(args.photo)
+    # reads the log: after the cheap checks; the photo's EXIF time is no exposure start
+    # here (known to tens of ms, where deblur searches it with --refine)
+    cap = _load_capture(args, photo, say=say, exif_start=False)
     _check_not_over_capture(cap, args.overwrite, args.output)
     if at is not None:
         x, y = at
@@ -957,6 +970,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overlap", type=float, default=None,
                    help=f"patch overlap fraction, with --grid (default {DEFAULT_OVERLAP:g})")
     s.add_argument("-o", "--output", required=True, metavar="OUT.npy|OUT.npz|OUT.png")
+    s.add_argument("--photo", metavar="PHOTO",
+                   help="the blurred photo, as the camera stored it (its rows the sensor's "
+                        "readout rows): the capture is fitted to its size, and its EXIF "
+                        "fills what the capture leaves out (focal length, exposure time; "
+                        "not the exposure start, which must be given)")
     s.add_argument("--overwrite", action="store_true",
                    help="write over an existing output file (never over an input)")
     _add_capture_options(s)
