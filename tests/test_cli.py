@@ -1648,6 +1648,22 @@ def test_psf_takes_a_photos_size_and_exif_but_not_its_exif_time(capture_dir, cap
     assert "give the photo as the camera stored it" in err and "--photo-rotation" not in err
 
 
+def test_a_gcsv_read_bottom_to_top_is_warned_of_unless_the_photo_is_turned(capture_dir,
+                                                                          capsys):
+    """A gcsv header's frame_readout_direction 1 with a readout time given: warned of (the
+    model reads rows top to bottom), except where --photo-rotation turns the photo."""
+    d = capture_dir
+    g = d / "gyro.gcsv"
+    g.write_text(g.read_text().replace("tscale,", "frame_readout_direction,1\ntscale,", 1))
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "-o",
+                 str(d / "p.npy")]) == 0
+    assert "frame_readout_direction is 1 (bottom to top)" in capsys.readouterr().err
+    for turn, warned in (("180", False), ("0", True)):
+        assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / f"s{turn}.png"), "--photo-rotation", turn]) == 0
+        assert ("frame_readout_direction" in capsys.readouterr().err) == warned, turn
+
+
 def test_the_progress_bar_is_drawn_on_a_terminal_only_and_never_with_quiet(monkeypatch,
                                                                           capsys):
     """A log file gets no carriage-return lines, and ``--quiet`` silences the bar on a

@@ -821,6 +821,13 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                                     f"{log.meta['frame_readout_time']}; or give readout_time")
         if report:
             report(f"readout_time = {readout:.6g} s (from the gcsv header's frame_readout_time)")
+    if readout and direction != 0:     # given: this model reads rows top to bottom
+        warnings.warn(f"{gpath}: the gcsv header's frame_readout_direction is {direction} ("
+                      f"{'bottom to top' if direction == 1 else 'along the rows'}), while "
+                      "readout_time is applied from the photo's first row down: unless the "
+                      "photo was turned so that its rows are read top to bottom "
+                      f"(--photo-rotation {'180' if direction == 1 else '90 or 270'}), its "
+                      "rolling shutter is modelled the wrong way", stacklevel=2)
     unknown = readout is None
     if unknown and report:
         report("readout_time not given: 0 (a global shutter) unless calibrated (a phone's "

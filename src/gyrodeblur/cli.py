@@ -182,8 +182,15 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
         from .imageio import exif_capture_hints
         size = (photo.pixels.shape[1], photo.pixels.shape[0])
         hints = exif_capture_hints(photo)
-    cap = load_capture(args.capture, overrides=overrides, image_size=size, exif_hints=hints,
-                       report=say, logs=getattr(args, "logs", None), exif_start=exif_start)
+    turns = getattr(args, "photo_rotation", 0) or 0   # calibrate's: lists, one per option
+    turned = any(any(t) if isinstance(t, list) else t for t in
+                 (turns if isinstance(turns, list) else [turns]))
+    with warnings.catch_warnings():
+        if turned:                                   # so that its rows run down, presumably
+            warnings.filterwarnings("ignore", ".*: the gcsv header's frame_readout_direction")
+        cap = load_capture(args.capture, overrides=overrides, image_size=size,
+                           exif_hints=hints, report=say, logs=getattr(args, "logs", None),
+                           exif_start=exif_start)
     if photo is not None:
         # psf has no --photo-rotation: it takes the photo's pixels as stored
         turn = ("give --photo-rotation (90 on most phones)" if hasattr(args, "photo_rotation")
