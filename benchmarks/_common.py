@@ -28,11 +28,11 @@ def machine_info() -> dict:
     import scipy
     import skimage
 
-    from gyrodeblur.fftutils import FFT_WORKERS
+    from gyrodeblur.fftutils import usable_cpus
 
     info = {
         "cpu_count": os.cpu_count(),
-        "fft_workers": FFT_WORKERS,
+        "fft_workers": usable_cpus(),
         "loadavg_1min_at_start": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
         "platform": platform.platform(),
         "processor": platform.processor() or platform.machine(),

@@ -39,7 +39,7 @@ import numpy as np
 import scipy
 import scipy.fft as sfft
 
-from gyrodeblur.fftutils import FFT_WORKERS
+from gyrodeblur.fftutils import usable_cpus
 from gyrodeblur.tiling import MAX_AUTO_WORKERS, deconvolve_patchwise, patch_grid
 from gyrodeblur.wiener import DEFAULT_PHI, wiener_deconvolve
 
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     out = deconvolve_patchwise(image, patches, psfs, deconv)
     _, traced_peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    auto_workers = min(FFT_WORKERS, MAX_AUTO_WORKERS)
+    auto_workers = min(usable_cpus(), MAX_AUTO_WORKERS)
     serial = deconvolve_patchwise(image, patches, psfs, deconv, workers=1)
     # what was timed is a deconvolution: the same with one worker or several, the mean
     # level kept (the PSFs sum to 1), and the photo changed
@@ -139,8 +139,8 @@ def main(argv: list[str] | None = None) -> int:
     del out, serial
 
     def fft_floor():
-        spec = sfft.rfft2(image, axes=(0, 1), workers=FFT_WORKERS)
-        sfft.irfft2(spec, s=image.shape[:2], axes=(0, 1), workers=FFT_WORKERS,
+        spec = sfft.rfft2(image, axes=(0, 1), workers=usable_cpus())
+        sfft.irfft2(spec, s=image.shape[:2], axes=(0, 1), workers=usable_cpus(),
                     overwrite_x=True)
 
     # Interleave the measurements so that load from other processes hits them alike.
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         "psf_extent_px": extent,
         "n_psfs": len(psfs),
         "phi": DEFAULT_PHI,
-        "fft_workers": FFT_WORKERS,
+        "fft_workers": usable_cpus(),
         "patch_workers_auto": auto_workers,
         "cpu_count": os.cpu_count(),
         "loadavg_1min": os.getloadavg()[0],
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.write_text(json.dumps(report, indent=2))
 
     print(f"image {width}x{height} RGB float32, 6x8 patches, 25% overlap, "
-          f"{len(psfs)} PSFs of ~{extent} px, FFT workers {FFT_WORKERS}, "
+          f"{len(psfs)} PSFs of ~{extent} px, FFT workers {usable_cpus()}, "
           f"load {report['loadavg_1min']:.2f} on {os.cpu_count()} cores")
     print(f"{'measurement':<40}{'best s':>9}{'median s':>10}{'x floor':>9}")
     rows = [("FFT floor (rfft2+irfft2, 3 ch)", res["fft_floor"]),

@@ -101,7 +101,7 @@ def worker(mp: float, method: str, mode: str, repeat: int) -> dict:
 
     from deconv_speed import make_photo
     from gyrodeblur.deblur import deblur
-    from gyrodeblur.fftutils import FFT_WORKERS, fast_shape
+    from gyrodeblur.fftutils import fast_shape, usable_cpus
     from gyrodeblur.packedfft import packed_irfft2, packed_rfft2
     from gyrodeblur.tonecurve import linear_to_srgb, srgb_to_linear
 
@@ -131,8 +131,8 @@ def worker(mp: float, method: str, mode: str, repeat: int) -> dict:
     floor_scipy, floor_cv = [], []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        spec = sfft.rfft2(padded, axes=(0, 1), workers=FFT_WORKERS)
-        sfft.irfft2(spec, s=shape, axes=(0, 1), workers=FFT_WORKERS, overwrite_x=True)
+        spec = sfft.rfft2(padded, axes=(0, 1), workers=usable_cpus())
+        sfft.irfft2(spec, s=shape, axes=(0, 1), workers=usable_cpus(), overwrite_x=True)
         floor_scipy.append(time.perf_counter() - t0)
         del spec
     planes = np.ascontiguousarray(np.moveaxis(padded, 2, 0))

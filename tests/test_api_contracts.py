@@ -181,9 +181,9 @@ def test_a_method_that_is_not_thread_safe_runs_its_patches_one_at_a_time(
         with pytest.raises(TypeError, match=f"{flag} must be True or False, got 'no'"):
             register_method("said no", factory, **{flag: "no"})
     assert "said no" not in METHODS
-    from gyrodeblur.fftutils import FFT_WORKERS
+    from gyrodeblur.fftutils import usable_cpus
 
-    if FFT_WORKERS > 1:                  # one core: no thread to overlap with
+    if usable_cpus() > 1:                # one core: no thread to overlap with
         own_method("parallel", factory)
         deblur(blurred, cap, method="parallel", grid=(3, 3))
         assert overlaps, "the default runs patches side by side (the test's own check)"

@@ -63,9 +63,9 @@ def test_bands_are_equal_split_by_workers_and_min_rows():
     assert got == [(0, 66), (66, 133), (133, 200)] and me not in threads
     assert run(100, workers=4, min_rows=64) == ([(0, 100)], {me})   # one band: no thread
     assert run(7, workers=0, min_rows=1) == ([(0, 7)], {me})
-    old = bands_mod.FFT_WORKERS
+    old = bands_mod.usable_cpus
     try:
-        bands_mod.FFT_WORKERS = 3
+        bands_mod.usable_cpus = lambda: 3
         assert run(9, min_rows=1)[0] == [(0, 3), (3, 6), (6, 9)]
     finally:
-        bands_mod.FFT_WORKERS = old
+        bands_mod.usable_cpus = old

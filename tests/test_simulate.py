@@ -56,9 +56,9 @@ def test_row_bands_in_threads_give_the_single_thread_result(make_capture, scene,
 
     cap = make_capture([-0.3, 0.5, 2.0], readout=0.02)
     for order in (1, 3):
-        monkeypatch.setattr(bands, "FFT_WORKERS", 3)      # 3 bands of 80 rows
+        monkeypatch.setattr(bands, "usable_cpus", lambda: 3)      # 3 bands of 80 rows
         threaded = simulate_blur(scene, cap, order=order, transfer="linear")
-        monkeypatch.setattr(bands, "FFT_WORKERS", 1)
+        monkeypatch.setattr(bands, "usable_cpus", lambda: 1)
         single = simulate_blur(scene, cap, order=order, transfer="linear")
         assert np.array_equal(threaded, single)
         assert np.abs(threaded - scene).max() > 0.1       # and it did blur

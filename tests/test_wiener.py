@@ -308,8 +308,42 @@ def test_a_photos_phi_is_the_chapters_unless_its_noise_asks_for_more():
     assert photo_phi(noisy) == pytest.approx(expected, rel=0.15)
 
 
+def test_the_fft_threads_follow_a_cap_or_affinity_set_after_import(monkeypatch):
+    """The FFTs' threads, the row bands and the patches' threads are counted at each call,
+    not once at import: a process pool's initializer that sets ``GYRODEBLUR_THREADS`` (or
+    the affinity) after the worker imported gyrodeblur is obeyed."""
+    import os
+
+    import scipy.fft as sfft
+
+    from gyrodeblur.bands import for_row_bands
+    from gyrodeblur.fftutils import THREADS_ENV
+
+    asked = []
+    real = sfft.rfft2
+
+    def spy(*args, workers=None, **kwargs):
+        asked.append(workers)
+        return real(*args, workers=workers, **kwargs)
+
+    monkeypatch.setattr(sfft, "rfft2", spy)
+    image = np.random.default_rng(0).random((64, 64)).astype(np.float32)
+    psf = np.zeros((3, 3), np.float32)
+    psf[1, 1] = 1.0
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2}, raising=False)
+    for cap, want in (("", 3), ("1", 1), ("2", 2)):
+        monkeypatch.setenv(THREADS_ENV, cap)
+        asked.clear()
+        convolve_fft(image, psf)
+        wiener_deconvolve(image, psf, phi=0.01)
+        assert want in asked and set(asked) <= {1, want}, (cap, asked)  # an OTF's: 1
+        bands = []
+        for_row_bands(lambda r0, r1: bands.append((r0, r1)), 9, min_rows=1)
+        assert len(bands) == want, (cap, bands)
+
+
 def test_the_fft_threads_are_the_cpus_this_process_may_use(monkeypatch):
-    """``FFT_WORKERS`` counts the CPUs of the process's affinity mask (``taskset``, a
+    """``usable_cpus`` counts the CPUs of the process's affinity mask (``taskset``, a
     container's cpuset), not the machine's cores: a process held to 2 of 64 cores must not
     start 64 FFT threads. Without an affinity mask (not Linux) the machine's count, and
     one CPU when that is unknown. ``GYRODEBLUR_THREADS`` caps the count (several
@@ -317,8 +351,7 @@ def test_the_fft_threads_are_the_cpus_this_process_may_use(monkeypatch):
     warning."""
     import os
 
-    from gyrodeblur.fftutils import FFT_WORKERS, THREADS_ENV, usable_cpus
-    assert FFT_WORKERS == usable_cpus()
+    from gyrodeblur.fftutils import THREADS_ENV, usable_cpus
     monkeypatch.delenv(THREADS_ENV, raising=False)
     monkeypatch.setattr(os, "cpu_count", lambda: 64)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3, 5, 7}, raising=False)
@@ -341,7 +374,7 @@ def test_the_fft_threads_are_the_cpus_this_process_may_use(monkeypatch):
         import subprocess
         import sys
         code = ("import os; os.sched_setaffinity(0, {min(os.sched_getaffinity(0))}); "
-                "from gyrodeblur.fftutils import FFT_WORKERS; print(FFT_WORKERS)")
+                "from gyrodeblur.fftutils import usable_cpus; print(usable_cpus())")
         env = {k: v for k, v in os.environ.items() if k != THREADS_ENV}
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              check=True, env=env)

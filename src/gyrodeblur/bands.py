@@ -12,7 +12,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
-from .fftutils import FFT_WORKERS
+from .fftutils import usable_cpus
 
 __all__ = ["for_row_bands", "MIN_BAND_ROWS"]
 
@@ -32,7 +32,7 @@ def for_row_bands(job: Callable[[int, int], object], rows: int, *,
     rows : int
         Number of rows to cover.
     workers : int, optional
-        Threads (default :data:`gyrodeblur.fftutils.FFT_WORKERS`, one per core). The rows
+        Threads (default :func:`gyrodeblur.fftutils.usable_cpus`, one per core). The rows
         are split into ``workers`` equal bands (fewer when bands would be shorter than
         ``min_rows``); with one band the job runs in the calling thread.
     min_rows : int
@@ -45,7 +45,7 @@ def for_row_bands(job: Callable[[int, int], object], rows: int, *,
     >>> sorted(seen)
     [(0, 5), (5, 10)]
     """
-    workers = FFT_WORKERS if workers is None else max(1, int(workers))
+    workers = usable_cpus() if workers is None else max(1, int(workers))
     n = max(1, min(workers, rows // max(1, min_rows)))
     if n == 1:
         job(0, rows)

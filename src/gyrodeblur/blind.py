@@ -28,7 +28,7 @@ from scipy import ndimage, signal
 
 from .arguments import check_real, is_count, is_whole
 from .errors import InputError
-from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
+from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad, usable_cpus
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, split_alpha
 
 __all__ = ["estimate_kernel", "blind_deconvolve"]
@@ -380,7 +380,7 @@ def _estimate_level(blurred, psf, iterations, lam, lambda_min, lambda_decay, ker
     ksize = psf.shape[0]
     shape = fast_shape((h + ksize + 1, w + ksize + 1))
     g = smooth_periodic_pad(blurred, shape)
-    g_f = sfft.rfft2(g, workers=FFT_WORKERS)
+    g_f = sfft.rfft2(g, workers=usable_cpus())
     dx_otf = psf_to_otf(np.array([[1.0, -1.0, 0.0]], np.float32), shape)
     dy_otf = psf_to_otf(np.array([[1.0], [-1.0], [0.0]], np.float32), shape)
     grad2 = (np.abs(dx_otf) ** 2 + np.abs(dy_otf) ** 2).astype(np.float32)
@@ -428,6 +428,7 @@ def _l0_restore(g, g_f, k_otf, grad2, lam, beta_max=1e5, kappa=None):
     den_k = (np.abs(k_otf) ** 2).astype(np.float32)
     u = g
     beta = 2.0 * lam
+    workers = usable_cpus()
     while beta < beta_max:
         ux, uy = _grad(u)
         mag = ux * ux
@@ -435,11 +436,11 @@ def _l0_restore(g, g_f, k_otf, grad2, lam, beta_max=1e5, kappa=None):
         small = mag < lam / beta
         ux[small] = 0
         uy[small] = 0
-        spec = sfft.rfft2(_grad_adjoint(ux, uy), workers=FFT_WORKERS)
+        spec = sfft.rfft2(_grad_adjoint(ux, uy), workers=workers)
         spec *= np.float32(beta)
         spec += num1
         spec /= den_k + np.float32(beta) * grad2
-        u = sfft.irfft2(spec, s=shape, workers=FFT_WORKERS).astype(np.float32, copy=False)
+        u = sfft.irfft2(spec, s=shape, workers=workers).astype(np.float32, copy=False)
         beta *= kappa
     return u
 
@@ -487,12 +488,13 @@ def _kernel_normal_equations(ux, uy, gx_f, gy_f, r):
     ``-r..r``; ``gx_f``, ``gy_f`` are the ``rfft2`` of the photo's gradients.
     """
     shape = ux.shape
-    ux_f = sfft.rfft2(ux, workers=FFT_WORKERS)
-    uy_f = sfft.rfft2(uy, workers=FFT_WORKERS)
+    workers = usable_cpus()
+    ux_f = sfft.rfft2(ux, workers=workers)
+    uy_f = sfft.rfft2(uy, workers=workers)
     gram_f = ux_f.real ** 2 + ux_f.imag ** 2 + uy_f.real ** 2 + uy_f.imag ** 2
     rhs_f = np.conj(ux_f) * gx_f + np.conj(uy_f) * gy_f
-    auto = _offsets(sfft.irfft2(gram_f, s=shape, workers=FFT_WORKERS), 2 * r)
-    b = _offsets(sfft.irfft2(rhs_f, s=shape, workers=FFT_WORKERS), r)
+    auto = _offsets(sfft.irfft2(gram_f, s=shape, workers=workers), 2 * r)
+    b = _offsets(sfft.irfft2(rhs_f, s=shape, workers=workers), r)
     return auto.astype(np.float64), b.astype(np.float64)
 
 
@@ -607,6 +609,6 @@ def _wiener(image: np.ndarray, psf: np.ndarray, reg: float = 2e-3) -> np.ndarray
     filt = np.conj(k_otf) / (np.abs(k_otf) ** 2 + reg * (np.abs(dx) ** 2 + np.abs(dy) ** 2))
     if img.ndim == 3:
         filt = filt[..., None]
-    spec = sfft.rfft2(padded, axes=(0, 1), workers=FFT_WORKERS) * filt
-    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=FFT_WORKERS)
+    spec = sfft.rfft2(padded, axes=(0, 1), workers=usable_cpus()) * filt
+    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=usable_cpus())
     return np.ascontiguousarray(out[:h, :w], dtype=np.float32)

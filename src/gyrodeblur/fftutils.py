@@ -15,7 +15,6 @@ import numpy as np
 import scipy.fft as sfft
 
 __all__ = [
-    "FFT_WORKERS",
     "THREADS_ENV",
     "usable_cpus",
     "fast_shape",
@@ -34,7 +33,11 @@ def usable_cpus() -> int:
     (``taskset``, a container's cpuset), else every core of the machine, and at most
     ``$GYRODEBLUR_THREADS`` where that is set (a whole number >= 1; anything else is
     ignored, with a warning). ``os.cpu_count`` counts the machine's cores, so a process
-    held to 2 of 64 cores would start 64 threads."""
+    held to 2 of 64 cores would start 64 threads.
+
+    Read at each call (the FFTs' threads, the row bands, the calibration's workers), so a
+    cap or an affinity set after ``import gyrodeblur`` (a process pool's initializer)
+    counts."""
     try:
         n = max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):       # not on Linux
@@ -47,10 +50,6 @@ def usable_cpus() -> int:
             warnings.warn(f"{THREADS_ENV}={cap!r} is not a whole number >= 1: ignored",
                           stacklevel=2)
     return n
-
-
-#: Threads given to ``scipy.fft`` (:func:`usable_cpus` when the module is imported).
-FFT_WORKERS: int = usable_cpus()
 
 
 def fast_shape(shape: tuple[int, int]) -> tuple[int, int]:
@@ -148,9 +147,10 @@ def convolve_fft(image: np.ndarray, psf: np.ndarray) -> np.ndarray:
     image = np.asarray(image, dtype=np.float32)
     shape = image.shape[:2]
     otf = psf_to_otf(psf, shape)
+    workers = usable_cpus()                 # now: a cap or an affinity set after import
     if image.ndim == 2:
-        return sfft.irfft2(sfft.rfft2(image, workers=FFT_WORKERS) * otf, s=shape,
-                           workers=FFT_WORKERS).astype(np.float32, copy=False)
-    spec = sfft.rfft2(image, axes=(0, 1), workers=FFT_WORKERS) * otf[..., None]
-    return sfft.irfft2(spec, s=shape, axes=(0, 1), workers=FFT_WORKERS).astype(np.float32,
-                                                                               copy=False)
+        return sfft.irfft2(sfft.rfft2(image, workers=workers) * otf, s=shape,
+                           workers=workers).astype(np.float32, copy=False)
+    spec = sfft.rfft2(image, axes=(0, 1), workers=workers) * otf[..., None]
+    return sfft.irfft2(spec, s=shape, axes=(0, 1), workers=workers).astype(np.float32,
+                                                                         copy=False)

@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from .arguments import check_real, is_count
-from .fftutils import FFT_WORKERS, fast_shape
+from .fftutils import fast_shape, usable_cpus
 from .psf import psf_extent
 from .sparse import _BETA_MAX as _SPARSE_BETA_MAX
 from .sparse import _dx, _dx_t_set, _dy, _dy_t_add, _shrink_residual
@@ -133,7 +133,7 @@ class InterpolatedBlur:
         self.weights = [np.outer(wy, wx).astype(np.float32) for wy, wx in weights]
         self.extent = max(psf_extent(k) for k in psfs)
         self._buf = np.zeros_like(self.otf)
-        self._threads = max(1, min(FFT_WORKERS, _MAX_THREADS, len(patches)))
+        self._threads = max(1, min(usable_cpus(), _MAX_THREADS, len(patches)))
         self._chunks = [range(t, len(patches), self._threads) for t in range(self._threads)]
         self._pool = ThreadPoolExecutor(self._threads) if self._threads > 1 else None
 

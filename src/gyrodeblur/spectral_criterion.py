@@ -47,7 +47,7 @@ import scipy.fft as sfft
 
 from .calibration_patches import CalibrationPhoto
 from .capture import Capture
-from .fftutils import FFT_WORKERS
+from .fftutils import usable_cpus
 from .orientation import Orientation, quat_conjugate, quat_multiply, quat_to_matrix
 from .psf import offsets_under_rotation
 
@@ -198,7 +198,7 @@ class PatchSpectra:
         self.envelope = envelope
         self.evaluations = 0
         # threads of the OTFs' FFTs (the results do not depend on it)
-        self.fft_threads = min(2, FFT_WORKERS)
+        self.fft_threads = min(2, usable_cpus())
 
     # -- geometry ---------------------------------------------------------------------
     def _orientation(self, i: int, theta: Corrections, lo: float, hi: float) -> Orientation:

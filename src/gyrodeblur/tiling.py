@@ -29,7 +29,7 @@ import numpy as np
 
 from .arguments import is_whole
 from .errors import InputError
-from .fftutils import FFT_WORKERS
+from .fftutils import usable_cpus
 
 __all__ = [
     "Patch",
@@ -310,7 +310,7 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
     if margin is not None and not (is_whole(margin) and margin >= 0):
         raise ValueError(f"margin must be a non-negative integer, got {margin!r}")
     if workers is None:
-        workers = min(FFT_WORKERS, MAX_AUTO_WORKERS)
+        workers = min(usable_cpus(), MAX_AUTO_WORKERS)
     if not (is_whole(workers) and workers >= 1):
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
 

@@ -33,7 +33,7 @@ import scipy.fft as sfft
 
 from .arguments import check_flag
 from .errors import InputError
-from .fftutils import FFT_WORKERS, fast_shape, psf_to_otf, smooth_periodic_pad
+from .fftutils import fast_shape, psf_to_otf, smooth_periodic_pad, usable_cpus
 from .images import check_image, check_psf
 
 __all__ = [
@@ -118,7 +118,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, phi: float = DEFAULT_P
     1 %; setting :math:`W(0) = 1/H(0)` keeps the mean, so a flat image stays flat.
     All channels share one OTF (:func:`~gyrodeblur.fftutils.psf_to_otf`) and go through
     one ``rfft2``/``irfft2`` pair over axes (0, 1), in complex64, with
-    ``workers=FFT_WORKERS``.
+    as many threads as :func:`~gyrodeblur.fftutils.usable_cpus`.
 
     References
     ----------
@@ -219,11 +219,11 @@ def apply_spectral_filter(padded: np.ndarray, filt: np.ndarray,
     shape = padded.shape[:2]
     if filt.shape != (shape[0], shape[1] // 2 + 1):
         raise ValueError(f"filter of shape {filt.shape} does not match an FFT of shape {shape}")
-    spec = sfft.rfft2(padded, axes=(0, 1), workers=FFT_WORKERS)
+    spec = sfft.rfft2(padded, axes=(0, 1), workers=usable_cpus())
     if spec.dtype != np.complex64:
         spec = spec.astype(np.complex64)
     spec *= filt if padded.ndim == 2 else filt[..., None]
-    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=FFT_WORKERS, overwrite_x=True)
+    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=usable_cpus(), overwrite_x=True)
     if crop is not None:
         out = out[:crop[0], :crop[1]]
     return np.ascontiguousarray(out, dtype=np.float32)
