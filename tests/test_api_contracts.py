@@ -437,3 +437,37 @@ def test_render_psf_and_simulate_blur_check_their_options(make_capture):
     for snr in (1e308, -1e308):
         with pytest.raises(ValueError, match="snr_db"):
             simulate_blur(img, cap, snr_db=snr, transfer="linear")
+
+
+def test_every_warning_of_the_library_is_its_own_category(tmp_path):
+    """What the library warns of is a ``GyrodeblurWarning`` (a ``UserWarning``), so a
+    pipeline can escalate this library's warnings alone: a log with a missing sample
+    raises under ``simplefilter("error", GyrodeblurWarning)``. And every
+    ``warnings.warn`` in the package names a category (this one, or DeprecationWarning for
+    an ignored option), so none falls back to a plain UserWarning."""
+    import ast
+    import pathlib
+    import warnings
+
+    import gyrodeblur
+    from gyrodeblur.errors import GyrodeblurWarning
+    from gyrodeblur.gyrolog import read_gyro_log
+
+    assert issubclass(GyrodeblurWarning, UserWarning)
+    log = tmp_path / "g.csv"
+    log.write_text("t_s,wx,wy,wz\n" + "".join(f"{i * 0.005:.3f},0.1,0.2,0.3\n"
+                                             for i in range(40)) + "0.2,0.1,,0.3\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GyrodeblurWarning)
+        with pytest.raises(GyrodeblurWarning, match="g.csv: 1 sample"):
+            read_gyro_log(log)
+    unnamed = []
+    for path in pathlib.Path(gyrodeblur.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr == "warn" and getattr(node.func.value, "id", "") == "warnings"):
+                category = node.args[1] if len(node.args) > 1 else next(
+                    (k.value for k in node.keywords if k.arg == "category"), None)
+                if getattr(category, "id", None) not in ("GyrodeblurWarning", "DeprecationWarning"):
+                    unnamed.append(f"{path.name}:{node.lineno}")
+    assert not unnamed

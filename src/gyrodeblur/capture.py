@@ -36,7 +36,7 @@ import numpy as np
 
 from .axes import axes_to_letters, parse_axes
 from .camera import Camera
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 from .gyrolog import RATE_UNITS, TIME_UNITS, GyroLog, check_coverage, check_format, read_gyro_log
 from .orientation import Orientation
 
@@ -335,7 +335,7 @@ def estimate_bias_outside(log: GyroLog, axes: np.ndarray, t0: float, t1: float,
         warnings.warn(f"{source}: the automatic bias, "
                       f"{', '.join(f'{b:+.3f}' for b in bias)} rad/s, {why}; a phone's bias "
                       f"is rarely above {_AUTO_BIAS_SUSPECT:g} rad/s: give gyro.bias, or "
-                      "leave it to calibrate", stacklevel=3)
+                      "leave it to calibrate", GyrodeblurWarning, stacklevel=3)
     return bias
 
 
@@ -457,7 +457,8 @@ def _warn_unknown_keys(data: dict, source: str) -> None:
                      if not name and k in KNOWN_KEYS[sec]]
             warnings.warn(f"{source}: unknown key(s) {', '.join(where + str(k) for k in unknown)} "
                           f"ignored (known: {', '.join(where + k for k in KNOWN_KEYS[name])}"
-                          + (f"; {', '.join(moved)}" if moved else "") + ")", stacklevel=3)
+                          + (f"; {', '.join(moved)}" if moved else "") + ")",
+                          GyrodeblurWarning, stacklevel=3)
 
 
 #: A description's ``fx`` or ``exposure_time`` this many times the photo's EXIF value, or
@@ -485,14 +486,15 @@ def _warn_where_exif_disagrees(camera: Camera, exposure_time: float, hints: dict
                           f"{camera.width} px wide ({r:.2g} times off): intrinsics for "
                           f"another resolution (give camera.width and height with them), "
                           f"or a digitally zoomed or cropped photo? The blur's length "
-                          f"follows fx", stacklevel=3)
+                          f"follows fx", GyrodeblurWarning, stacklevel=3)
     if exposure_given and "exposure_time" in hints:
         r = ratio(exposure_time, hints["exposure_time"])
         if r > EXIF_DISAGREEMENT:
             warnings.warn(f"{origin(('exposure_time',))}: exposure_time is "
                           f"{exposure_time:.4g} s, but the photo's EXIF ExposureTime is "
                           f"{hints['exposure_time']:.4g} s ({r:.2g} times off): milliseconds "
-                          f"for seconds, or another photo's description?", stacklevel=3)
+                          f"for seconds, or another photo's description?",
+                          GyrodeblurWarning, stacklevel=3)
 
 
 def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bool) -> None:
@@ -522,7 +524,7 @@ def _check_intrinsics(camera: Camera, origin, *, from_exif: bool, size_given: bo
                 else " (right for a crop's own intrinsics, not for a scaled photo)")
         warnings.warn(f"{origin(('cx', 'cy'))}: the principal point ({camera.cx:g}, "
                       f"{camera.cy:g}) px is far from the centre of the {w}x{h} image{hint}",
-                      stacklevel=3)
+                      GyrodeblurWarning, stacklevel=3)
 
 
 def _log_path(given, base: str, capture_path) -> str:
@@ -779,7 +781,7 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       f"(ios-back-camera), its photo in the sensor's layout; "
                       f"android-back-camera-0, -180 or -270 for others; calibrate "
                       f"and deblur --refine try the 8 mappings a phone's own camera can "
-                      f"have)", stacklevel=2)
+                      f"have)", GyrodeblurWarning, stacklevel=2)
     axes = parse_axes(orientation, source=("--orientation" if "orientation" in ov
                                            else f"{src} (gyro.orientation)"))
     offset = _get(gyro_d, "time_offset", src, required=False) or 0.0
@@ -827,7 +829,8 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       "readout_time is applied from the photo's first row down: unless the "
                       "photo was turned so that its rows are read top to bottom "
                       f"(--photo-rotation {'180' if direction == 1 else '90 or 270'}), its "
-                      "rolling shutter is modelled the wrong way", stacklevel=2)
+                      "rolling shutter is modelled the wrong way",
+                      GyrodeblurWarning, stacklevel=2)
     unknown = readout is None
     if unknown and report:
         report("readout_time not given: 0 (a global shutter) unless calibrated (a phone's "

@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 from .gyrolog import FORMATS
 from .images import PHOTO_MAX, join_alpha, split_alpha, to_photo_layout, to_sensor_layout
 from .tiling import DEFAULT_OVERLAP
@@ -365,13 +365,15 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve, zoom: float | None = None,
                       f"half the photo's {side} px shorter side: longer than a hand-held "
                       f"photo's blur usually is, and too long to check against the photo. "
                       f"Check exposure_time and readout_time (seconds, not ms), the focal "
-                      f"length (in this photo's pixels) and the log's rate unit", stacklevel=2)
+                      f"length (in this photo's pixels) and the log's rate unit",
+                      GyrodeblurWarning, stacklevel=2)
         return
     try:                              # a check only: it must not cost the finished deblur
         gain = capture_gain_over_no_blur(image, cap, transfer=curve)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         warnings.warn(f"the check that the photo shows the gyro log's blur could not run "
-                      f"({exc}); the deblurred photo is written", stacklevel=2)
+                      f"({exc}); the deblurred photo is written",
+                      GyrodeblurWarning, stacklevel=2)
         return
     if gain < WRONG_BLUR_MARGIN:
         warnings.warn(f"the blur the gyro log implies does not fit the photo: no blur at all "
@@ -385,7 +387,7 @@ def _warn_if_the_blur_does_not_fit(cap, image, curve, zoom: float | None = None,
                       + ("" if not zoom else
                          f". This photo's EXIF says digital zoom x{zoom:g}: where the focal "
                          f"length leaves the zoom out, it needs multiplying by {zoom:g} "
-                         f"(--fx, --fy)"), stacklevel=2)
+                         f"(--fx, --fy)"), GyrodeblurWarning, stacklevel=2)
 
 
 def cmd_psf(args, say) -> None:

@@ -26,7 +26,7 @@ from scipy import ndimage as ndi
 
 from .arguments import check_callback, check_flag, is_count
 from .capture import Capture, check_capture
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 from .gyrolog import warn_of_saturation, warn_of_steps
 from .images import PHOTO_MAX, PHOTO_MIN, check_image, check_psf, join_alpha, split_alpha
 from .psf import (LANCZOS_A, PSFField, displacement_field, psf_extent, psf_variation,
@@ -309,7 +309,7 @@ def plan_psf_field(capture: Capture, shape: tuple[int, int], *, mode: str = "var
         msg = (f"grid coarsened from {first[0]}x{first[1]} to {rows}x{cols}: PSFs up to "
                f"{worst} px do not fit patches of the finer grid")
         if warn_coarsened and not automatic:     # the grid asked for is not the one used
-            warnings.warn(msg, stacklevel=3)
+            warnings.warn(msg, GyrodeblurWarning, stacklevel=3)
         notes.append(msg)
     return patches, PSFField(pts, psfs, (rows, cols), disp), notes
 
@@ -704,7 +704,7 @@ def deblur(image: np.ndarray, capture: Capture, *, mode: str = "variant",
 
     Warns
     -----
-    UserWarning
+    GyrodeblurWarning
         Where the gyro log steps more than 15 ms between two samples inside the exposure
         (:func:`gyrodeblur.gyrolog.step_warning`: a dropout, or a log that coarse): the
         motion across it is interpolated, and the result less sharp.
@@ -916,7 +916,7 @@ def _shows_no_blur(image, psf, transfer) -> bool:
                       f"the blur, the photo shows little blur, or the kernel size is far "
                       f"larger than the blur (give one a little over the blur's length). "
                       f"Deconvolving with it would add ghost edges. {_RETURNED_AS_IT_IS}",
-                      stacklevel=3)
+                      GyrodeblurWarning, stacklevel=3)
         return True
     side = psf.shape[0]
     why = (f"the photo shows little blur, or its blur is longer than the {side} px kernel "
@@ -930,7 +930,7 @@ def _shows_no_blur(image, psf, transfer) -> bool:
                   f"kernel's (a rolling shutter, a roll or a wide lens make it vary across "
                   f"the frame), or the scene misled the estimate (text, a few straight "
                   f"edges). Deconvolving with it would add ringing. {_RETURNED_AS_IT_IS}",
-                  stacklevel=3)
+                  GyrodeblurWarning, stacklevel=3)
     return True
 
 

@@ -5,6 +5,11 @@ cover the exposure, bad axis mapping...) is raised as :class:`InputError`, whose
 names the file (or argument) and the problem in one line. The CLI prints that line and
 exits with status 2; library users can catch it like any ``ValueError``.
 
+What the library warns of (a blur the photo does not show, a log in a device's axes read
+with a default mapping, clipped highlights...) comes as :class:`GyrodeblurWarning`, a
+``UserWarning``, so a pipeline can filter or escalate this library's warnings alone
+(``warnings.simplefilter("error", GyrodeblurWarning)``).
+
 A bad keyword argument of a public function is named as the caller spelled it
 (``kernel_size: must be odd``); the command line names the option that set it instead
 (``--kernel-size: must be odd``).
@@ -14,7 +19,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["InputError"]
+__all__ = ["InputError", "GyrodeblurWarning"]
 
 
 class InputError(ValueError):
@@ -51,3 +56,9 @@ class InputError(ValueError):
     def reworded(self, problem: str) -> "InputError":
         """The same source (a file, an option or an argument), another problem text."""
         return InputError(self.source, problem, argument=self.argument)
+
+
+class GyrodeblurWarning(UserWarning):
+    """Something the library noticed that may make its result wrong or worse than
+    expected, though it could go on (a ``UserWarning``; the CLI prints it as
+    ``gyrodeblur: warning: ...``)."""

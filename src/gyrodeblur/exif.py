@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING
 
 from PIL import Image
 
+from gyrodeblur.errors import GyrodeblurWarning
+
 if TYPE_CHECKING:
     from gyrodeblur.imageio import Photo
 
@@ -98,11 +100,12 @@ def _exif_for_jpeg(block: bytes, path: str) -> bytes | None:
         names = {0x927C: "MakerNote", 0x9286: "UserComment"}
         warnings.warn(f"{path}: the EXIF block ({len(block)} bytes) is more than a JPEG "
                       f"holds ({_JPEG_MAX_EXIF}); written without its "
-                      f"{' and '.join(names[t] for t in dropped)}", stacklevel=3)
+                      f"{' and '.join(names[t] for t in dropped)}",
+                      GyrodeblurWarning, stacklevel=3)
         return smaller
     warnings.warn(f"{path}: the EXIF block ({len(block)} bytes) is more than a JPEG holds "
                   f"({_JPEG_MAX_EXIF}); written without EXIF (a PNG or TIFF keeps it)",
-                  stacklevel=3)
+                  GyrodeblurWarning, stacklevel=3)
     return None
 
 

@@ -14,6 +14,8 @@ import warnings
 import numpy as np
 import scipy.fft as sfft
 
+from .errors import GyrodeblurWarning
+
 __all__ = [
     "THREADS_ENV",
     "usable_cpus",
@@ -48,7 +50,7 @@ def usable_cpus() -> int:
             n = min(n, int(cap))
         else:
             warnings.warn(f"{THREADS_ENV}={cap!r} is not a whole number >= 1: ignored",
-                          stacklevel=2)
+                          GyrodeblurWarning, stacklevel=2)
     return n
 
 

@@ -51,7 +51,7 @@ from functools import partial
 
 import numpy as np
 
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 from .log_columns import (GUESSED_RATE_RANGE, RATE_UNITS, TIME_UNITS, bracketed_unit,
                           default_rate_columns, default_time_column, implausible_time_unit,
                           is_number, looks_like_time, parse_number, phone_app,
@@ -352,11 +352,11 @@ def step_warning(log: GyroLog, t0: float, t1: float, *, what: str = "exposure",
 
 def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
                   stacklevel: int = 2) -> None:
-    """A :class:`UserWarning`, naming the log, with :func:`step_warning`'s sentence where
+    """A :class:`~gyrodeblur.errors.GyrodeblurWarning`, naming the log, with :func:`step_warning`'s sentence where
     it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
     said = step_warning(log, t0, t1, cost=cost)
     if said is not None:
-        warnings.warn(naming_log(log, said), stacklevel=stacklevel + 1)
+        warnings.warn(naming_log(log, said), GyrodeblurWarning, stacklevel=stacklevel + 1)
 
 
 def naming_log(log: GyroLog, sentence: str) -> str:
@@ -445,11 +445,11 @@ def _clipped_run(v: np.ndarray, i0: int, i1: int, quantum: float) -> tuple[float
 
 
 def warn_of_saturation(log: GyroLog, t0: float, t1: float, *, stacklevel: int = 2) -> None:
-    """A :class:`UserWarning`, naming the log, with :func:`saturation_warning`'s sentence
+    """A :class:`~gyrodeblur.errors.GyrodeblurWarning`, naming the log, with :func:`saturation_warning`'s sentence
     where it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
     said = saturation_warning(log, t0, t1)
     if said is not None:
-        warnings.warn(naming_log(log, said), stacklevel=stacklevel + 1)
+        warnings.warn(naming_log(log, said), GyrodeblurWarning, stacklevel=stacklevel + 1)
 
 
 def _secs(t: float) -> str:
@@ -548,7 +548,7 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if options and format not in _TABLE_FORMATS:
         verb = "applies" if len(options) == 1 else "apply"
         warnings.warn(f"{path}: {', '.join(sorted(options))} {verb} to CSV and JSON logs "
-                      f"only; this log is {format}: ignored", stacklevel=2)
+                      f"only; this log is {format}: ignored", GyrodeblurWarning, stacklevel=2)
     if format == "gcsv":
         return read_gcsv(path)
     if format == "csv":
@@ -556,7 +556,7 @@ def read_gyro_log(path: str | os.PathLike, format: str | None = None, **options)
     if format == "json":
         if options.pop("delimiter", None) is not None:
             warnings.warn(f"{path}: delimiter applies to CSV logs only; this log is json: "
-                          "ignored", stacklevel=2)
+                          "ignored", GyrodeblurWarning, stacklevel=2)
         return read_json_log(path, **options)
     return read_android_events(path)
 
@@ -685,7 +685,8 @@ def _complete_rows(path: str, rows: np.ndarray) -> np.ndarray:
         if len(rows) == 0:
             raise InputError(path, "no data row holds a time and three rates")
         warnings.warn(f"{path}: {int(missing.sum())} sample(s) with a missing or NaN value "
-                      "skipped; an exposure they fall in sees a gap in the log", stacklevel=5)
+                      "skipped; an exposure they fall in sees a gap in the log",
+                      GyrodeblurWarning, stacklevel=5)
     return _without_repeats(rows)
 
 
@@ -940,7 +941,7 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
                                         ("rate unit", rate_unit, named_ru, header[ri[0]])):
         if given is not None and stated is not None and given != stated:
             warnings.warn(f"{path}: the {name} given, {given}, overrides the {stated} that "
-                          f"column {column!r} states", stacklevel=4)
+                          f"column {column!r} states", GyrodeblurWarning, stacklevel=4)
     rows = read_rows([ti] + ri)                                          # time, x, y, z
     meta = {}
     app = phone_app(header, ri)
@@ -981,7 +982,7 @@ def _log_from_table(path: str, header: list[str], first_row: list[str], read_row
             warnings.warn(f"{path}: rates read as rad/s (the column names state no unit), "
                           f"and their median over the whole log, {med:.2f} rad/s, is a fast "
                           "pan throughout; if they are deg/s, give --rate-unit deg/s "
-                          "(gyro.rate_unit)", stacklevel=4)
+                          "(gyro.rate_unit)", GyrodeblurWarning, stacklevel=4)
     return log
 
 
@@ -1090,7 +1091,8 @@ def _gyroscope_samples(path: str, numbered: list) -> list:
     if unnamed:
         name = min(n for n in as_written if n.lower() == gyro[0])
         warnings.warn(f"{path}: {unnamed} sample(s) name no sensor, where the others do: "
-                      f"left out (only the {name} samples are read)", stacklevel=4)
+                      f"left out (only the {name} samples are read)",
+                      GyrodeblurWarning, stacklevel=4)
     return [(n, r) for n, r in numbered if sensor(r).lower() == gyro[0]]
 
 

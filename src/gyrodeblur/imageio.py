@@ -73,7 +73,7 @@ from PIL import Image, TiffImagePlugin, UnidentifiedImageError
 
 from gyrodeblur.arguments import is_whole
 from gyrodeblur.atomicfile import atomic_write, check_folder_of, check_writable
-from gyrodeblur.errors import InputError
+from gyrodeblur.errors import GyrodeblurWarning, InputError
 from gyrodeblur.exif import (_EXIF_ERRORS, _EXIF_IFD, _GPS_IFD, _IFD0_ASCII, _JPEG_MAX_EXIF,
                              _ORIENTATION, _exif_for_jpeg, _load_exif, _normalise_exif,
                              _pillow_exif, _sub_ifds, _tiff_exif, _without_thumbnail,
@@ -287,7 +287,7 @@ def _decode(p: str) -> tuple[str, np.ndarray, bytes | None, bytes | None, dict |
             frames = int(getattr(im, "n_frames", 1))
             if fmt == "PNG" and frames > 1:
                 warnings.warn(f"{p}: an animated PNG; only the first of its {frames} frames "
-                              "is read", stacklevel=2)
+                              "is read", GyrodeblurWarning, stacklevel=2)
             ints = _read_pillow_pixels(p, im)
             exif, icc = _pillow_exif(im), im.info.get("icc_profile")
         try:
@@ -740,7 +740,7 @@ def _read_tiff_tifffile(path: str) -> tuple[np.ndarray, bytes | None, dict]:
     with _tifffile_quiet(), tifffile.TiffFile(path) as tif:
         if len(tif.pages) > 1:
             warnings.warn(f"{path}: only the first of its {len(tif.pages)} pages is read",
-                          stacklevel=2)
+                          GyrodeblurWarning, stacklevel=2)
         page = tif.pages.first
         _refuse_raw_or_preview(path, {t.code: t.value for t in page.tags.values()})
         _refuse_too_many_pixels(path, int(page.imagewidth), int(page.imagelength))
@@ -825,7 +825,8 @@ def _to_float(path: str, arr: np.ndarray, keep_bright: bool = False) -> tuple[np
             if bad:
                 what.append(f"{bad} NaN or infinite samples are read as 0 (+inf as 1)")
             advice = "" if keep_bright else ": scale a scene-linear or HDR image to [0, 1] first"
-            warnings.warn(f"{path}: " + "; ".join(what) + advice, stacklevel=2)
+            warnings.warn(f"{path}: " + "; ".join(what) + advice,
+                          GyrodeblurWarning, stacklevel=2)
         out = np.nan_to_num(a, nan=0.0, posinf=1.0, neginf=0.0)
         return np.clip(out, 0.0, top), 16
     kind = {"i": "signed integers", "u": "unsigned integers"}.get(arr.dtype.kind, str(arr.dtype))
@@ -928,7 +929,7 @@ def write_photo(
     check_destination(p, like, overwrite)
     if fmt == "JPEG" and bit_depth is None and like is not None and like.bit_depth == 16:
         warnings.warn(f"{p}: JPEG stores 8 bits per sample: the 16-bit photo is written at 8 "
-                      "(.png or .tif keep 16)", stacklevel=2)
+                      "(.png or .tif keep 16)", GyrodeblurWarning, stacklevel=2)
 
     if like is not None and like.grey_alpha and channels == 4:   # grey + alpha again
         pixels = np.stack([pixels[..., :3].mean(axis=2), pixels[..., 3]], axis=2)
@@ -939,7 +940,7 @@ def write_photo(
     damage = profile_damage(icc) if icc else None
     if damage:
         warnings.warn(f"{p}: the photo's ICC profile is damaged ({damage}): left out",
-                      stacklevel=2)
+                      GyrodeblurWarning, stacklevel=2)
         icc = None
     if icc and not _icc_fits(icc, channels):
         icc = None
@@ -954,7 +955,8 @@ def write_photo(
             packet = _xmp_text(xmp)
             if packet is None:
                 warnings.warn(f"{p}: the photo's XMP is not UTF-8 or UTF-16/32 text, as a "
-                              "PNG's must be: left out (.jpg or .tif keep it)", stacklevel=2)
+                              "PNG's must be: left out (.jpg or .tif keep it)",
+                              GyrodeblurWarning, stacklevel=2)
             else:
                 text[_PNG_XMP_KEY] = packet
         atomic_write(p, lambda f: _write_png(f, ints, exif=exif, icc=icc, gamma=gamma,
@@ -964,7 +966,8 @@ def write_photo(
         xmp = (like.png_text.get(_PNG_XMP_KEY) or "").encode("utf-8") or None
     if fmt == "JPEG" and xmp and len(xmp) > _JPEG_MAX_XMP:
         warnings.warn(f"{p}: the photo's XMP ({len(xmp)} bytes) is longer than one JPEG "
-                      "segment holds: left out (.png or .tif keep it)", stacklevel=2)
+                      "segment holds: left out (.png or .tif keep it)",
+                      GyrodeblurWarning, stacklevel=2)
         xmp = None
     writer = {"JPEG": _write_jpeg, "TIFF": _write_tiff}[fmt]
     atomic_write(p, lambda f: writer(f, ints, exif=exif, icc=icc, quality=int(quality),

@@ -41,7 +41,7 @@ import numpy as np
 
 from .arguments import check_flag, is_count, is_whole
 from .capture import Capture, check_capture
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 
 __all__ = ["trace", "landing_pixel", "render_psf", "splat", "lanczos_splat", "PSFField",
            "psf_field", "psf_extent", "psf_variation", "displacement_field", "check_blur_span",
@@ -432,7 +432,8 @@ def render_psf(capture: Capture, x: float, y: float, *, max_step: float = MAX_ST
         if kept < 0.5:     # what is left is not the blur, and may not even sum to 1
             raise InputError(None, f"{where}: leave radius out for the whole trace")
         warnings.warn(f"{where}: the PSF is cut there and renormalised, and is no longer the "
-                      "blur (leave radius out for the whole trace)", stacklevel=2)
+                      "blur (leave radius out for the whole trace)",
+                      GyrodeblurWarning, stacklevel=2)
     return lanczos_splat(offsets, radius=radius)
 
 

@@ -236,7 +236,7 @@ def simulate_blur(sharp: np.ndarray, capture: Capture, *, snr_db: float | None =
 
     Warns
     -----
-    UserWarning
+    GyrodeblurWarning
         Where the gyro log steps more than 15 ms between two samples inside the exposure
         (:func:`gyrodeblur.gyrolog.step_warning`): the blur is made from the motion
         interpolated across it.

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arguments import is_whole
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 from .fftutils import usable_cpus
 
 __all__ = [
@@ -267,7 +267,7 @@ def deconvolve_patchwise(image: np.ndarray, patches: Sequence[Patch],
 
     Warns
     -----
-    UserWarning
+    GyrodeblurWarning
         When a PSF's blur extent (:func:`gyrodeblur.psf.psf_extent`, its offset from the
         centre left out) exceeds the smaller side of its window. The patch is still
         processed: the margin of real neighbours (:func:`patch_margin` on every side) gives
@@ -503,4 +503,4 @@ def _warn_large_psfs(patches: Sequence[Patch], psfs: Sequence[np.ndarray]) -> No
             f"PSF extent up to {extent} px exceeds the patch window "
             f"({patch.shape[0]}x{patch.shape[1]} px) in {len(bad)} of {len(patches)} patches: "
             f"deblurring will be poor there; {advice}",
-            UserWarning, stacklevel=3)
+            GyrodeblurWarning, stacklevel=3)
