@@ -1662,6 +1662,19 @@ def test_a_gcsv_read_bottom_to_top_is_warned_of_unless_the_photo_is_turned(captu
         assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
                      "-o", str(d / f"s{turn}.png"), "--photo-rotation", turn]) == 0
         assert ("frame_readout_direction" in capsys.readouterr().err) == warned, turn
+    # a pipeline that makes the library's warnings errors gets a one-line error, exit
+    # status 3 and nothing written, not a traceback
+    import warnings
+
+    from gyrodeblur.errors import GyrodeblurWarning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GyrodeblurWarning)
+        assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                     "-o", str(d / "strict.png")]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("gyrodeblur: error: ") and err[0].endswith(
+        "(a warning made an error by the warnings filter)")
+    assert not (d / "strict.png").exists()
 
 
 def test_the_progress_bar_is_drawn_on_a_terminal_only_and_never_with_quiet(monkeypatch,

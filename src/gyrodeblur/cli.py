@@ -1271,6 +1271,10 @@ def main(argv: list[str] | None = None) -> int:
         exc = as_option(exc)
         _write(sys.stderr, f"gyrodeblur: error: {exc}{_written_before(args)}\n")
         return 2
+    except GyrodeblurWarning as exc:   # made an error: -W or PYTHONWARNINGS=error::...
+        _write(sys.stderr, f"gyrodeblur: error: {exc} (a warning made an error by the "
+                           f"warnings filter){_written_before(args)}\n")
+        return 3
     except KeyboardInterrupt:
         _write(sys.stderr, f"gyrodeblur: interrupted; {_written_before(args, 'nothing')}\n")
         return 130
