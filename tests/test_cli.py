@@ -812,6 +812,42 @@ def _blurred_a_png(d, cap: str) -> np.ndarray:
     return read_photo(d / "a.png").pixels
 
 
+def test_calibrations_warnings_are_the_commands_warnings(capture_dir, capsys, monkeypatch):
+    """On the command line, calibration's notes that are warnings ("warning: ...": an
+    uncertain mapping, a clipped log) are printed as every other warning, on the error
+    stream, and a filter that makes warnings errors stops ``calibrate`` and ``deblur
+    --refine`` there (exit status 3); its other notes stay on the output."""
+    import warnings
+
+    from gyrodeblur.errors import GyrodeblurWarning
+
+    def doubtful(images, captures, say=None, **kwargs):
+        say("searched 24 mappings")
+        say("warning: the axis mapping is uncertain: a test's")
+        raise _StopCalibration
+
+    import gyrodeblur.calibrate
+    import gyrodeblur.calibrate_cli
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "calibrate", doubtful)
+    monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", doubtful)
+    d = capture_dir
+    runs = (["calibrate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "-o",
+             str(d / "c.json")],
+            ["deblur", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"), "--refine",
+             "-o", str(d / "o.png")])
+    for argv in runs:
+        with pytest.raises(_StopCalibration):
+            main(argv)
+        got = capsys.readouterr()
+        assert "searched 24 mappings" in got.out and "uncertain" not in got.out
+        assert "gyrodeblur: warning: the axis mapping is uncertain: a test's" in got.err
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", GyrodeblurWarning)
+            assert main(argv) == 3
+        assert "error: the axis mapping is uncertain" in capsys.readouterr().err
+    assert not (d / "c.json").exists() and not (d / "o.png").exists()
+
+
 def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir, capsys,
                                                                     monkeypatch):
     """``calibrate`` takes each photo's curve from its profile (or ``--transfer``), and

@@ -6,12 +6,13 @@ from __future__ import annotations
 import argparse
 import os
 import stat
+import warnings
 from dataclasses import replace
 
 import numpy as np
 
 from .calibrate import AXES_CONFIDENT_NATS, calibrate, checked_fix, repeated_photo
-from .errors import InputError
+from .errors import GyrodeblurWarning, InputError
 from .images import split_alpha, to_sensor_layout
 
 __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_captures",
@@ -22,6 +23,19 @@ __all__ = ["format_estimates", "fixed_parameters", "calibrate_command", "save_ca
 #: Photos are not shrunk by their digital zoom below this many pixels on their shorter
 #: side (:func:`calibration_downscale`; ``calibrate`` refuses fewer than 64).
 _ZOOM_MIN_SIDE = 96
+
+
+def warning_notes(say):
+    """``say`` for :func:`~gyrodeblur.calibrate.calibrate` on the command line: its notes
+    that are warnings (``"warning: ..."``: an uncertain mapping, an ambiguous offset, a
+    clipped log) become :class:`~gyrodeblur.errors.GyrodeblurWarning` s, printed as the
+    command's other warnings are and made errors by the same filter; the rest is said."""
+    def said(msg: str) -> None:
+        if msg.startswith("warning: "):
+            warnings.warn(msg[len("warning: "):], GyrodeblurWarning, stacklevel=2)
+        else:
+            say(msg)
+    return said
 
 
 def format_estimates(est: dict, kept_given: bool = False) -> list[str]:
@@ -191,7 +205,8 @@ def calibrate_command(args, say, load_capture) -> None:
         refuse_non_json(out)
     from .icc import said_transfer_curve
     curves = [said_transfer_curve(ph, args.transfer, say) for ph in photos]
-    res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix, say=say,
+    res = calibrate([split_alpha(p.pixels)[0] for p in photos], caps, fix=fix,
+                    say=warning_notes(say),
                     transfer=curves, **calibration_options(args, photos, say))
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")

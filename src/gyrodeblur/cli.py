@@ -654,12 +654,12 @@ def _deblur_session(runs, say) -> None:
     (:func:`gyrodeblur.calibrate.calibrate`), then each photo deblurred with its own
     corrected capture."""
     from .calibrate import calibrate
-    from .calibrate_cli import calibration_options, format_estimates
+    from .calibrate_cli import calibration_options, format_estimates, warning_notes
     args = runs[0].args
     for run in runs:
         run.load()
     res = calibrate([r.colour for r in runs], [r.cap for r in runs], fix=runs[0].fix,
-                    say=say, transfer=[r.curve for r in runs],
+                    say=warning_notes(say), transfer=[r.curve for r in runs],
                     **calibration_options(args, [r.photo for r in runs], say))
     say(f"calibration of {len(runs)} photos in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
@@ -817,10 +817,10 @@ class _PhotoDeblur:
     def calibrate_alone(self) -> None:
         """``--refine`` for this photo alone: its capture replaced by the calibrated one."""
         from .calibrate import calibrate
-        from .calibrate_cli import calibration_options, format_estimates
+        from .calibrate_cli import calibration_options, format_estimates, warning_notes
         options = calibration_options(self.args, [self.photo], self.say)
         with _this_photo(self.args):
-            res = calibrate([self.colour], self.cap, fix=self.fix, say=self.say,
+            res = calibrate([self.colour], self.cap, fix=self.fix, say=warning_notes(self.say),
                             transfer=self.curve, **options)
         for line in format_estimates(res.estimates, res.kept_given):
             self.say(line)
