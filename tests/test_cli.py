@@ -823,7 +823,7 @@ def test_calibrations_warnings_are_the_commands_warnings(capture_dir, capsys, mo
 
     def doubtful(images, captures, say=None, **kwargs):
         say("searched 24 mappings")
-        say("warning: the axis mapping is uncertain: a test's")
+        say("  warning: the axis mapping is uncertain: a test's")   # as calibrate indents it
         raise _StopCalibration
 
     import gyrodeblur.calibrate
@@ -846,6 +846,39 @@ def test_calibrations_warnings_are_the_commands_warnings(capture_dir, capsys, mo
             assert main(argv) == 3
         assert "error: the axis mapping is uncertain" in capsys.readouterr().err
     assert not (d / "c.json").exists() and not (d / "o.png").exists()
+
+
+def test_a_warning_said_twice_is_shown_once_and_one_made_an_error_names_its_photo(
+        capture_dir, capsys, monkeypatch):
+    """The same words warned from two places in one command (deblur --refine: a gap in
+    the log, from its calibration and from its deblur) are shown once; among several
+    photos, a warning made an error by the filter names the photo it came from."""
+    import warnings
+
+    import gyrodeblur.cli as cli
+    from gyrodeblur.errors import GyrodeblurWarning
+
+    def twice(args, say):
+        warnings.warn("gap of 30.0 ms in the gyro log", GyrodeblurWarning)
+        warnings.warn("gap of 30.0 ms in the gyro log", GyrodeblurWarning)
+        warnings.warn("another", GyrodeblurWarning)
+
+    monkeypatch.setattr(cli, "cmd_psf", twice)
+    d = capture_dir
+    assert main(["psf", "--capture", str(d / "cap.json"), "--at", "5,5", "-o",
+                 str(d / "p.npy")]) == 0
+    assert capsys.readouterr().err.count("gap of 30.0 ms") == 1
+    monkeypatch.undo()
+    # two photos: a blurred one, then the sharp one, whose blur check warns
+    _blurred_a_png(d, str(d / "cap.json"))
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GyrodeblurWarning)
+        assert main(["deblur", str(d / "a.png"), str(d / "sharp.jpg"), "--capture",
+                     str(d / "cap.json"), "-o", f"{d / 'oa.png'},{d / 'os.png'}"]) == 3
+    err = capsys.readouterr().err
+    assert f"error: {d / 'sharp.jpg'}: the blur the gyro log implies" in err, err
+    assert (d / "oa.png").exists() and not (d / "os.png").exists()
 
 
 def test_calibrate_and_refine_read_each_photo_through_its_own_curve(capture_dir, capsys,
@@ -1674,11 +1707,15 @@ def test_psf_takes_a_photos_size_and_exif_but_not_its_exif_time(capture_dir, cap
     (d / "nostart.json").write_text(json.dumps(doc))
     err = _run_error(["psf", "--capture", str(d / "nostart.json"), "--at", "30,40", "--photo",
                       str(d / "p.jpg"), "-o", str(d / "r.npy")], capsys)
-    assert "exposure_start" in err and not (d / "r.npy").exists()
-    before = (d / "p.jpg").read_bytes()
-    err = _run_error(base + ["--photo", str(d / "p.jpg"), "-o", str(d / "p.jpg"), "--overwrite"],
+    assert err.endswith("missing 'exposure_start' (give --exposure-start: psf does not take "
+                        "the photo's EXIF time, known to tens of ms at best)")
+    assert not (d / "r.npy").exists()
+    Image.fromarray(pixels).save(d / "p.png", exif=exif.tobytes())   # an output's suffix
+    before = (d / "p.png").read_bytes()
+    err = _run_error(base + ["--photo", str(d / "p.png"), "-o", str(d / "p.png"), "--overwrite"],
                      capsys)
-    assert "p.jpg" in err and (d / "p.jpg").read_bytes() == before
+    assert "p.png: is one of the command's inputs" in err
+    assert (d / "p.png").read_bytes() == before
     err = _run_error(["psf", "--capture", str(d / "cap.json"), "--at", "30,40", "--photo",
                       str(d / "upright.jpg"), "-o", str(d / "u.png")], capsys)  # 256 x 192
     assert "give the photo as the camera stored it" in err and "--photo-rotation" not in err
@@ -1698,6 +1735,11 @@ def test_a_gcsv_read_bottom_to_top_is_warned_of_unless_the_photo_is_turned(captu
         assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
                      "-o", str(d / f"s{turn}.png"), "--photo-rotation", turn]) == 0
         assert ("frame_readout_direction" in capsys.readouterr().err) == warned, turn
+    # read along the rows: turning the photo by 180 degrees does not make its rows run down
+    g.write_text(g.read_text().replace("frame_readout_direction,1", "frame_readout_direction,2"))
+    assert main(["simulate", str(d / "sharp.jpg"), "--capture", str(d / "cap.json"),
+                 "-o", str(d / "s2.png"), "--photo-rotation", "180"]) == 0
+    assert "frame_readout_direction is 2 (along the rows)" in capsys.readouterr().err
     # a pipeline that makes the library's warnings errors gets a one-line error, exit
     # status 3 and nothing written, not a traceback
     import warnings

@@ -418,6 +418,13 @@ def test_only_the_first_page_of_a_stack_is_read_with_a_warning(tmp_path):
     with pytest.warns(UserWarning, match="only the first of its 2 pages"):
         photo = read_photo(tmp_path / "s.tif")
     assert photo.pixels.shape == (4, 5) and np.allclose(photo.pixels, 10 / 255)
+    import warnings
+
+    from gyrodeblur.errors import GyrodeblurWarning
+    with warnings.catch_warnings():       # made an error: raised, not taken for a failed
+        warnings.simplefilter("error", GyrodeblurWarning)  # decode that Pillow then reads
+        with pytest.raises(GyrodeblurWarning, match="only the first of its 2 pages"):
+            read_photo(tmp_path / "s.tif")
     # the stack's layout note ({"shape": [2, 4, 5]}) is not carried to a one-page output
     write_photo(tmp_path / "o.tif", photo.pixels, like=photo)
     with tifffile.TiffFile(tmp_path / "o.tif") as tif:

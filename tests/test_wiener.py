@@ -360,9 +360,16 @@ def test_the_fft_threads_are_the_cpus_this_process_may_use(monkeypatch):
     assert usable_cpus() == 2
     monkeypatch.setenv(THREADS_ENV, "8")
     assert usable_cpus() == 3                       # a cap, not a count
+    import warnings
+
+    import gyrodeblur.fftutils as fftutils
+    monkeypatch.setattr(fftutils, "_SAID_BAD_CAPS", set())
     for bad in ("0", "two", "-1", "1.5"):
         monkeypatch.setenv(THREADS_ENV, bad)
         with pytest.warns(UserWarning, match=f"GYRODEBLUR_THREADS={bad!r} is not a whole"):
+            assert usable_cpus() == 3
+        with warnings.catch_warnings():     # read at every call, said once a value
+            warnings.simplefilter("error")
             assert usable_cpus() == 3
     monkeypatch.delenv(THREADS_ENV)
     monkeypatch.delattr(os, "sched_getaffinity")

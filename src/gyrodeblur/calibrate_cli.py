@@ -26,13 +26,25 @@ _ZOOM_MIN_SIDE = 96
 
 
 def warning_notes(say):
-    """``say`` for :func:`~gyrodeblur.calibrate.calibrate` on the command line: its notes
-    that are warnings (``"warning: ..."``: an uncertain mapping, an ambiguous offset, a
-    clipped log) become :class:`~gyrodeblur.errors.GyrodeblurWarning` s, printed as the
-    command's other warnings are and made errors by the same filter; the rest is said."""
+    """The ``say`` to give :func:`~gyrodeblur.calibrate.calibrate` on the command line.
+
+    Parameters
+    ----------
+    say : callable
+        Prints one message (the command's own output).
+
+    Returns
+    -------
+    callable
+        Says calibration's messages with ``say``, except its notes that are warnings
+        (``"warning: ..."``, indented or not: an uncertain mapping, an ambiguous offset, a
+        clipped log), which it issues as a :class:`~gyrodeblur.errors.GyrodeblurWarning`:
+        printed as the command's other warnings are, and made errors by the same filter.
+    """
     def said(msg: str) -> None:
-        if msg.startswith("warning: "):
-            warnings.warn(msg[len("warning: "):], GyrodeblurWarning, stacklevel=2)
+        text = msg.lstrip()
+        if text.startswith("warning: "):
+            warnings.warn(text[len("warning: "):], GyrodeblurWarning, stacklevel=2)
         else:
             say(msg)
     return said

@@ -182,12 +182,12 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
         from .imageio import exif_capture_hints
         size = (photo.pixels.shape[1], photo.pixels.shape[0])
         hints = exif_capture_hints(photo)
-    turns = getattr(args, "photo_rotation", 0) or 0   # calibrate's: lists, one per option
-    turned = any(any(t) if isinstance(t, list) else t for t in
-                 (turns if isinstance(turns, list) else [turns]))
+    turned = getattr(args, "photo_rotation", 0)    # this photo's (psf: none)
     with warnings.catch_warnings():
-        if turned:                                   # so that its rows run down, presumably
-            warnings.filterwarnings("ignore", ".*: the gcsv header's frame_readout_direction")
+        if turned:       # turned so that the rows a gcsv header says are read run down
+            read = "1" if turned == 180 else "[23]"
+            warnings.filterwarnings("ignore", f".*: the gcsv header's frame_readout_direction "
+                                              f"is {read} ")
         cap = load_capture(args.capture, overrides=overrides, image_size=size,
                            exif_hints=hints, report=say, logs=getattr(args, "logs", None),
                            exif_start=exif_start)
@@ -412,7 +412,13 @@ def cmd_psf(args, say) -> None:
         photo = read_photo(args.photo)
     # reads the log: after the cheap checks; the photo's EXIF time is no exposure start
     # here (known to tens of ms, where deblur searches it with --refine)
-    cap = _load_capture(args, photo, say=say, exif_start=False)
+    try:
+        cap = _load_capture(args, photo, say=say, exif_start=False)
+    except InputError as exc:
+        if photo is None or exc.problem != "missing 'exposure_start'":
+            raise
+        raise exc.reworded(exc.problem + " (give --exposure-start: psf does not take the "
+                           "photo's EXIF time, known to tens of ms at best)") from None
     _check_not_over_capture(cap, args.overwrite, args.output)
     if at is not None:
         x, y = at
@@ -641,6 +647,8 @@ def _this_photo(args):
         if exc.source != args.photo and args.photo not in exc.problem:
             raise exc.reworded(f"{exc.problem} (for {args.photo})") from None
         raise
+    except GyrodeblurWarning as exc:          # a warning made an error: named as shown
+        raise GyrodeblurWarning(f"{args.photo}: {exc}") from None
 
 
 def _naming(photo: str, say):
@@ -1250,7 +1258,12 @@ def main(argv: list[str] | None = None) -> int:
     def say(msg: str) -> None:
         _write(sys.stdout, f"{msg}\n")
 
+    shown = set()
+
     def warn(message, category, filename, lineno, file=None, line=None):
+        if str(message) in shown:    # the same words from two places: deblur --refine's
+            return                   # calibration and its deblur (a gap in the log)
+        shown.add(str(message))
         _write(sys.stderr, f"gyrodeblur: warning: {message}\n")
 
     previous = _on_sigterm(_terminate)

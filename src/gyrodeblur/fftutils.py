@@ -30,6 +30,10 @@ __all__ = [
 THREADS_ENV = "GYRODEBLUR_THREADS"
 
 
+#: The ``GYRODEBLUR_THREADS`` values that were not whole numbers >= 1, warned of once each.
+_SAID_BAD_CAPS: set = set()
+
+
 def usable_cpus() -> int:
     """The CPUs this process may run on: its affinity mask where the system has one
     (``taskset``, a container's cpuset), else every core of the machine, and at most
@@ -48,7 +52,8 @@ def usable_cpus() -> int:
     if cap:
         if cap.isdecimal() and int(cap) >= 1:
             n = min(n, int(cap))
-        else:
+        elif cap not in _SAID_BAD_CAPS:        # read at every call: said once
+            _SAID_BAD_CAPS.add(cap)
             warnings.warn(f"{THREADS_ENV}={cap!r} is not a whole number >= 1: ignored",
                           GyrodeblurWarning, stacklevel=2)
     return n

@@ -352,8 +352,9 @@ def step_warning(log: GyroLog, t0: float, t1: float, *, what: str = "exposure",
 
 def warn_of_steps(log: GyroLog, t0: float, t1: float, *, cost: str = LESS_SHARP,
                   stacklevel: int = 2) -> None:
-    """A :class:`~gyrodeblur.errors.GyrodeblurWarning`, naming the log, with :func:`step_warning`'s sentence where
-    it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
+    """A :class:`~gyrodeblur.errors.GyrodeblurWarning`, naming the log, with
+    :func:`step_warning`'s sentence where it has one (``stacklevel`` as
+    :func:`warnings.warn`'s, counted from the caller)."""
     said = step_warning(log, t0, t1, cost=cost)
     if said is not None:
         warnings.warn(naming_log(log, said), GyrodeblurWarning, stacklevel=stacklevel + 1)
@@ -445,8 +446,9 @@ def _clipped_run(v: np.ndarray, i0: int, i1: int, quantum: float) -> tuple[float
 
 
 def warn_of_saturation(log: GyroLog, t0: float, t1: float, *, stacklevel: int = 2) -> None:
-    """A :class:`~gyrodeblur.errors.GyrodeblurWarning`, naming the log, with :func:`saturation_warning`'s sentence
-    where it has one (``stacklevel`` as :func:`warnings.warn`'s, counted from the caller)."""
+    """A :class:`~gyrodeblur.errors.GyrodeblurWarning`, naming the log, with
+    :func:`saturation_warning`'s sentence where it has one (``stacklevel`` as
+    :func:`warnings.warn`'s, counted from the caller)."""
     said = saturation_warning(log, t0, t1)
     if said is not None:
         warnings.warn(naming_log(log, said), GyrodeblurWarning, stacklevel=stacklevel + 1)

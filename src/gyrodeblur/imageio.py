@@ -606,6 +606,8 @@ def _read_tiff_pixels(path: str, im: Image.Image) -> np.ndarray:
     """
     try:
         return _read_tiff_tifffile(path)[0]
+    except GyrodeblurWarning:            # a warning made an error: not a decoder's failure
+        raise
     except Exception as exc:
         tifffile_error = exc
     try:
