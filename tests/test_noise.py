@@ -218,6 +218,9 @@ def test_clipped_highlights_and_crushed_blacks_do_not_read_as_noiseless(bits):
     page = np.ones((64, 64), np.float32)                 # a grey band on a clipped page
     page[20:32] = 0.5 + rng.normal(0, 0.02, (12, 64))
     assert estimate_noise_sigma(page) == pytest.approx(0.02, rel=0.2)
+    big = np.ones((512, 512), np.float32)                # a 40 px patch on a large page:
+    big[200:240, 300:340] = 0.5 + rng.normal(0, 0.02, (40, 40))    # 1444 responses
+    assert estimate_noise_sigma(big) == pytest.approx(0.02, rel=0.25)
     page[20:32] = 1.0                                    # nothing left but a thin line:
     page[30:32, 10:50] = 0.2 + rng.normal(0, 0.02, (2, 40))   # measured as a whole
     assert np.isfinite(estimate_noise_sigma(page))
