@@ -609,6 +609,7 @@ def _wiener(image: np.ndarray, psf: np.ndarray, reg: float = 2e-3) -> np.ndarray
     filt = np.conj(k_otf) / (np.abs(k_otf) ** 2 + reg * (np.abs(dx) ** 2 + np.abs(dy) ** 2))
     if img.ndim == 3:
         filt = filt[..., None]
-    spec = sfft.rfft2(padded, axes=(0, 1), workers=usable_cpus()) * filt
-    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=usable_cpus())
+    workers = usable_cpus()
+    spec = sfft.rfft2(padded, axes=(0, 1), workers=workers) * filt
+    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=workers)
     return np.ascontiguousarray(out[:h, :w], dtype=np.float32)

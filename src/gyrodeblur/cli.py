@@ -195,8 +195,7 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
         # psf has no --photo-rotation: it takes the photo's pixels as stored
         turn = ("give --photo-rotation (90 on most phones)" if hasattr(args, "photo_rotation")
                 else "give the photo as the camera stored it")
-        if size[1] > size[0] and not getattr(args, "photo_rotation", 0) \
-                and cap.log.in_device_axes:
+        if size[1] > size[0] and not turned and cap.log.in_device_axes:
             say(f"note: {photo.path}: taller than wide, while a phone's sensor is wider than "
                 f"tall: if an app or an export turned the photo upright, {turn}, or the "
                 "rows are not the sensor's readout rows")
@@ -208,7 +207,6 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
                 raise exc.reworded(exc.problem.split(" (turned")[0] + " (turned by 90 "
                                    "degrees? the rows must be the sensor's readout rows: "
                                    "give the photo as the camera stored it)") from None
-            turned = getattr(args, "photo_rotation", 0)
             if turned and "turned by 90 degrees" in exc.problem:     # by the option itself
                 raise exc.reworded(exc.problem.split(" (turned")[0] + f", after "
                                    f"--photo-rotation {turned}; as stored the photo fits, so "

@@ -231,7 +231,8 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         raise InputError(source, f"gyro sample {i + 1}'s time {float(t[i]):.6g} s is beyond "
                                  f"{MAX_TIME:.3g} s (136 years), where seconds are too coarse "
                                  "for an exposure: microseconds or nanoseconds read as "
-                                 "seconds? (a CSV or JSON log's unit: --time-unit, or gyro.time_unit)")
+                                 "seconds? (a CSV or JSON log's unit: --time-unit, or "
+                                 "gyro.time_unit)")
     _check_increasing(t, source, w=w)
     med = float(np.median(np.linalg.norm(w, axis=1)))
     peak = np.max(np.abs(w), axis=1)

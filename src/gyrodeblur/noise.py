@@ -86,9 +86,10 @@ def estimate_noise_sigma(image: np.ndarray, *, edge_quantile: float = 0.15,
     left out: clipped highlights are flat and carry no noise, and taken as the least
     textured pixels they had read a low-light photo 12.6 % clipped at a quarter of its
     noise (1.6 levels for 6.0); unless fewer than 400 responses (or half the channel's,
-    in a small image) are left, as on a page clipped nearly everywhere. Crushed blacks stay: a photo whose noise was added in light and then
-    encoded has its largest noise beside them, and leaving them out too read the demo's
-    photo 20 % low and the benchmark's dark saturated photos 1.5-2x high. A first
+    in a small image) are left, as on a page clipped nearly everywhere. Crushed blacks
+    stay: a photo whose noise was added in light and then encoded has its largest noise
+    beside them, and leaving them out too read the demo's photo 20 % low and the
+    benchmark's dark saturated photos 1.5-2x high. A first
     estimate is the median absolute deviation,
     :math:`\sigma_0 = 1.4826\,\mathrm{median}|r|`; the answer is the RMS of the responses
     within :math:`\pm 3\sigma_0`, divided by the RMS of a unit Gaussian truncated there

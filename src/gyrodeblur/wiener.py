@@ -219,11 +219,12 @@ def apply_spectral_filter(padded: np.ndarray, filt: np.ndarray,
     shape = padded.shape[:2]
     if filt.shape != (shape[0], shape[1] // 2 + 1):
         raise ValueError(f"filter of shape {filt.shape} does not match an FFT of shape {shape}")
-    spec = sfft.rfft2(padded, axes=(0, 1), workers=usable_cpus())
+    workers = usable_cpus()
+    spec = sfft.rfft2(padded, axes=(0, 1), workers=workers)
     if spec.dtype != np.complex64:
         spec = spec.astype(np.complex64)
     spec *= filt if padded.ndim == 2 else filt[..., None]
-    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=usable_cpus(), overwrite_x=True)
+    out = sfft.irfft2(spec, s=shape, axes=(0, 1), workers=workers, overwrite_x=True)
     if crop is not None:
         out = out[:crop[0], :crop[1]]
     return np.ascontiguousarray(out, dtype=np.float32)
