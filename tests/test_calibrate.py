@@ -1356,6 +1356,25 @@ def test_noisy_gyro_keeps_a_correct_capture_but_still_fixes_an_offset(case):
     assert abs(off.time_offset - true.time_offset) < 0.003
 
 
+def test_a_capture_the_photo_rejects_is_not_kept_whatever_the_margin(case, monkeypatch):
+    """The keep margin protects a right capture from a fit that follows noise; it must not
+    keep one whose PSFs explain the photo worse than no blur at all (a held-out audit: a
+    noisy 100 Hz log 12 ms off, kept under a margin of 22 though the best found was 0.6 ms
+    off, deblurred below its input). With the margin made endless, a right capture is
+    still kept and one 15 ms off is still corrected."""
+    import gyrodeblur.calibrate as cal
+    _, true, blurred = case
+    monkeypatch.setattr(cal, "_keep_margin", lambda noise, n_free=6: 1e9)
+    res = calibrate([blurred], true)
+    assert any("kept the given parameters" in n for n in res.notes), res.notes
+    assert res.capture.time_offset == true.time_offset
+    off = true.replace(time_offset=true.time_offset + 0.015)
+    res = calibrate([blurred], off)
+    said = [n for n in res.notes if "the given parameters are not kept" in n]
+    assert said and "no blur at all explains the photo better" in said[0], res.notes
+    assert abs(res.capture.time_offset - true.time_offset) < 0.003
+
+
 def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):
     d = cli_dir
     rc = main(["calibrate", str(d / "blurred.png"), str(d / "blurred.png"),
