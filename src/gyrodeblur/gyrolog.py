@@ -461,19 +461,23 @@ def _secs(t: float) -> str:
 
 
 def rate_noise(log: GyroLog) -> float:
-    """White-noise level of a log's rates, rad/s per sample (``nan`` under 5 samples).
+    """White-noise level of a log's rates, rad/s per sample (``nan`` under 9 samples).
 
-    The median absolute fourth difference of each axis, scaled to the standard deviation
-    of white noise (its fourth difference has variance ``70 sigma^2``; median absolute
-    value ``0.6745`` sigma for a Gaussian), then the median over the three axes. Hand
-    motion is smooth at gyro rates and barely enters a fourth difference (a 10 Hz,
-    0.5 rad/s shake sampled at 200 Hz adds about 5e-4 rad/s); a phone gyro logged at
-    210 Hz measures 0.001-0.003 rad/s here, the chapter's typical figure is 0.007.
+    The median absolute eighth difference of each axis, scaled to the standard deviation
+    of white noise (its eighth difference has variance ``C(16, 8) sigma^2 = 12870
+    sigma^2``; median absolute value ``0.6745`` sigma for a Gaussian), then the median over
+    the three axes. A difference of order ``k`` passes a rate of frequency ``f`` sampled
+    at ``fs`` by ``(2 sin(pi f / fs))^k``, white noise by ``sqrt(C(2k, k))``: hand motion,
+    smooth at a gyro's rates, barely enters it. A 10 Hz, 0.5 rad/s shake adds about 4e-7
+    rad/s at 200 Hz, and at 50 Hz 0.016 (a fourth difference, as before session 65: 6e-4
+    and 0.11, which made a 50 Hz log with 0.003 rad/s of noise read 0.11 and calibration
+    keep wrong parameters). A phone gyro logged at 210 Hz measures 0.001 rad/s here, the
+    chapter's typical figure is 0.007.
     """
-    if len(log.t) < 5:
+    if len(log.t) < 9:
         return float("nan")
-    d4 = np.diff(np.asarray(log.omega, np.float64), n=4, axis=0)
-    return float(np.median(np.median(np.abs(d4), axis=0)) / (0.6745 * np.sqrt(70.0)))
+    d8 = np.diff(np.asarray(log.omega, np.float64), n=8, axis=0)
+    return float(np.median(np.median(np.abs(d8), axis=0)) / (0.6745 * np.sqrt(12870.0)))
 
 
 def median_rate(log: GyroLog, *, block: float = 1.0) -> tuple[np.ndarray, np.ndarray, float]:
