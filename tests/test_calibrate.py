@@ -1352,6 +1352,10 @@ def test_noisy_gyro_keeps_a_correct_capture_but_still_fixes_an_offset(case):
     assert level and level[0] == pytest.approx(0.03, rel=0.15)
     assert any("kept the given parameters" in n for n in res.notes)
     assert res.capture.time_offset == noisy.time_offset
+    # kept by the raised margin where a quiet gyro's would have moved it: said
+    raised = [n for n in res.notes if "kept only because the gyro log reads as noisy" in n]
+    gain = float(next(n for n in res.notes if "kept the given" in n).split("by only ")[1].split()[0])
+    assert bool(raised) == (gain >= 10), res.notes
     off = calibrate([blurred], noisy.replace(time_offset=noisy.time_offset + 0.012)).capture
     assert abs(off.time_offset - true.time_offset) < 0.003
 
@@ -1373,6 +1377,22 @@ def test_a_capture_the_photo_rejects_is_not_kept_whatever_the_margin(case, monke
     said = [n for n in res.notes if "the given parameters are not kept" in n]
     assert said and "no blur at all explains the photo better" in said[0], res.notes
     assert abs(res.capture.time_offset - true.time_offset) < 0.003
+
+
+def test_parameters_kept_only_for_a_noisy_gyro_are_warned_of(case, monkeypatch):
+    """Given parameters that a quiet gyro's margin would have moved, kept only because the
+    log reads as noisy (a 50-100 Hz log's own motion can read so), get a warning naming
+    the offset found; a gain a quiet gyro's margin would not take either gets none."""
+    import gyrodeblur.calibrate as cal
+    _, true, blurred = case
+    monkeypatch.setattr(cal, "_gyro_noise_level", lambda captures: 0.2)
+    res = calibrate([blurred], true.replace(time_offset=true.time_offset + 0.006))
+    assert res.capture.time_offset == pytest.approx(true.time_offset + 0.006)
+    said = [n for n in res.notes if "kept only because the gyro log reads as noisy" in n]
+    assert said and said[0].startswith("warning:") and "--time-offset" in said[0], res.notes
+    res = calibrate([blurred], true.replace(time_offset=true.time_offset + 0.003))
+    gain = float(next(n for n in res.notes if "kept the given" in n).split("by only ")[1].split()[0])
+    assert gain < 10 and not any("reads as noisy" in n for n in res.notes), res.notes
 
 
 def test_cli_capture_may_be_repeated_per_photo(cli_dir, capsys):

@@ -545,6 +545,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     if np.isfinite(gap) and gap < 0:        # a runner-up's refinement was cut short
         gap = 0.0
 
+    # what the warnings advise: more photos of the session than were given
+    more_photos = ("several photos of the session" if len(images) == 1 else
+                   f"more photos of the session than these {len(images)}")
     # the given parameters (with a long log, its bias) stay unless the photo(s) clearly
     # prefer others
     kept = False
@@ -552,8 +555,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         f_given, x0 = fit.given_objective(c0.axes)
         if np.allclose(M, c0.axes):
             margin = _keep_margin(noise, len(fit.idx))
+            quiet = _keep_margin(float("nan"), len(fit.idx))     # the margin unraised
         else:           # another mapping: the odds of 7 to 1, however many are free
-            margin = mapping_margin
+            margin, quiet = mapping_margin, _KEEP_MAPPING_NATS
         if np.isfinite(noise) and noise > _TYPICAL_GYRO_NOISE:
             note(f"gyro noise {noise:.4f} rad/s per sample, scaled to a {_TYPICAL_GYRO_RATE:g} "
                  f"Hz log: the given parameters are kept unless the objective improves by "
@@ -564,18 +568,27 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
         elif f_given - fx < margin:
             from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
             found = c0.time_offset + search.theta_of(x, M, fit.ubar).offset
-            msg = (f"kept the given parameters{from_log}: the best found "
-                   f"({axes_to_letters(M) or 'given'}, time offset {found * 1e3:+.1f} ms) "
-                   f"improves the objective by only {f_given - fx:.1f} (< {margin:.3g})")
+            best_found = f"{axes_to_letters(M) or 'given'}, time offset {found * 1e3:+.1f} ms"
+            gain = f_given - fx
+            msg = (f"kept the given parameters{from_log}: the best found ({best_found}) "
+                   f"improves the objective by only {gain:.1f} (< {margin:.3g})")
             x, M, fx = x0, c0.axes, f_given
             _, _, Fm, sc = fit.refine(M, x, 0)
             kept = True
             note(msg, "  ")
             gap = _gap_to_other_mappings(results, M, fx)
+            if gain >= quiet:      # kept only for the margin the noise raised
+                prefer = "the photo prefers" if len(images) == 1 else "the photos prefer"
+                note(f"warning: the given parameters were kept only because the gyro log "
+                     f"reads as noisy ({noise:.4f} rad/s per sample at "
+                     f"{_TYPICAL_GYRO_RATE:g} Hz): {prefer} the best found ({best_found}) "
+                     f"by {gain:.1f}, more than the "
+                     f"{quiet:.3g} that takes it under a quiet gyro, less than the "
+                     f"{margin:.3g} that this noise can give by chance. A log of 50-100 Hz "
+                     f"can read its own motion as noise: if the gyro is quieter, deblur "
+                     f"with the offset found (--time-offset {found:.4f}) or calibrate on "
+                     f"{more_photos}", "  ")
 
-    # what the warnings below advise: more photos of the session than were given
-    more_photos = ("several photos of the session" if len(images) == 1 else
-                   f"more photos of the session than these {len(images)}")
     these_photos = "this photo's" if len(images) == 1 else "these photos'"
 
     # other offsets the photo(s) cannot tell from the chosen one: the winner's refinements
