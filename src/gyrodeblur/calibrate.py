@@ -128,7 +128,8 @@ them in order and decides what to keep (5) and what to report.
    kept readout errors of up to 8 ms that the photo itself preferred to correct. Given
    parameters that explain a photo worse than no blur at all are not kept, whatever the
    margin, where the best found explains every photo better than no blur
-   (:func:`_rejected_by_photos`).
+   (:func:`_rejected_by_photos`); parameters kept only for the margin the noise raised
+   (the best found gains more than the unraised margin) are warned of.
 
 The independent steps (the coarse mappings, the candidates, the winner's other starts and
 scans) run side by side in worker processes (:mod:`gyrodeblur.calibration_workers`), each
