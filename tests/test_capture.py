@@ -158,8 +158,9 @@ def test_readout_time_from_the_gcsv_header(capture_files):
     # a readout given with that header: used, and warned of (the rows run the other way)
     with pytest.warns(UserWarning, match=r"gyro.gcsv: the gcsv header's frame_readout_"
                                          r"direction is 1 \(bottom to top\).*turned by 180 "
-                                         r"degrees .*\(deblur's --photo-rotation\), its rolling "
-                                         r"shutter is modelled the wrong way"):
+                                         r"degrees .*\(--photo-rotation of deblur, calibrate and "
+                                         r"simulate\), its rolling shutter is modelled the "
+                                         r"wrong way"):
         assert load_capture(d / "cap.json", overrides={"readout_time": 0.02}).readout_time == 0.02
     import warnings
     with warnings.catch_warnings():              # a global shutter has no direction

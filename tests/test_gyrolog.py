@@ -531,7 +531,7 @@ def test_rate_noise_measures_white_noise_not_hand_motion():
                       + 0.3 * np.sin(2 * np.pi * 7.7 * t + 2)], 1)
     for sigma in (0.005, 0.02):
         noisy = GyroLog(t, shake + rng.normal(0, sigma, shake.shape))
-        assert rate_noise(noisy) == pytest.approx(sigma, rel=0.35)
+        assert rate_noise(noisy) == pytest.approx(sigma, rel=0.5)
 
 
 def test_median_rate_finds_a_bias_under_hand_motion_with_an_honest_error():

@@ -126,9 +126,11 @@ them in order and decides what to keep (5) and what to report.
    chi-square with as many degrees of freedom as are free): 4.5 with one free, 7.0 with
    three. On the benchmark with one parameter free and the rest right (session 13), 10
    kept readout errors of up to 8 ms that the photo itself preferred to correct. Given
-   parameters that explain a photo worse than no blur at all are not kept, whatever the
-   margin, where the best found explains every photo better than no blur
-   (:func:`_rejected_by_photos`); parameters kept only for the margin the noise raised
+   parameters that explain a photo worse than no blur at all (by more than
+   :data:`~gyrodeblur.blur_evidence.WRONG_BLUR_MARGIN`) are not kept, whatever the
+   margin, where the best found explains every photo better than no blur (by
+   :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`; :func:`_rejected_by_photos`);
+   parameters kept only for the margin the noise raised
    (the best found gains more than the unraised margin) are warned of.
 
 The independent steps (the coarse mappings, the candidates, the winner's other starts and
@@ -563,7 +565,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             note(f"gyro noise {noise:.4f} rad/s per sample, scaled to a {_TYPICAL_GYRO_RATE:g} "
                  f"Hz log: the given parameters are kept unless the objective improves by "
                  f"{margin:.0f}", "  ")
-        rejected = _rejected_by_photos(fit, search, x0, c0.axes, x, M, len(images))
+        rejected = (_rejected_by_photos(fit, search, x0, c0.axes, x, M, len(images))
+                    if f_given - fx < margin else "")
         if rejected:
             note(rejected, "  ")
         elif f_given - fx < margin:
@@ -586,9 +589,9 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
                      f"by {gain:.1f}, more than the "
                      f"{quiet:.3g} that takes it under a quiet gyro, less than the "
                      f"{margin:.3g} that this noise can give by chance. A log of 50-100 Hz "
-                     f"can read its own motion as noise: if the gyro is quieter, deblur "
-                     f"with the offset found (--time-offset {found:.4f}) or calibrate on "
-                     f"{more_photos}", "  ")
+                     f"can read its own motion as noise: if the gyro is quieter, give what "
+                     f"you know (--time-offset, --bias, --readout-time, --fx, --orientation) "
+                     f"or calibrate on {more_photos}", "  ")
 
     these_photos = "this photo's" if len(images) == 1 else "these photos'"
 
@@ -847,9 +850,10 @@ def _rejected_by_photos(fit, search, x_given, M_given, x, M, n_photos: int) -> s
     worst, least = float(np.nanmin(given)), float(np.nanmin(found))
     if worst >= WRONG_BLUR_MARGIN or least < NO_BLUR_MARGIN:
         return ""
-    return (f"the given parameters are not kept: no blur at all explains "
-            f"{'the photo' if n_photos == 1 else 'a photo'} better than their PSFs (they "
-            f"gain {worst:+.1f} nats over none, the best found's {least:+.1f})")
+    which = "the photo" if n_photos == 1 else f"photo {int(np.nanargmin(given)) + 1}"
+    return (f"the given parameters are not kept: no blur at all explains {which} better "
+            f"than their PSFs (they gain {worst:+.1f} nats over none; the best found gains "
+            f"at least {least:+.1f} on every photo)")
 
 
 def _gains_per_photo(spectra, theta, n_photos: int) -> np.ndarray:

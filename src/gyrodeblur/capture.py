@@ -828,8 +828,9 @@ def load_capture(path: str | os.PathLike | None = None, *, overrides: dict | Non
                       f"{'bottom to top' if direction == 1 else 'along the rows'}), while "
                       "readout_time is applied from the photo's first row down: unless the "
                       f"photo was turned by {'180' if direction == 1 else '90 or 270'} "
-                      "degrees so that its rows are read top to bottom (deblur's "
-                      "--photo-rotation), its rolling shutter is modelled the wrong way",
+                      "degrees so that its rows are read top to bottom (--photo-rotation "
+                      "of deblur, calibrate and simulate), its rolling shutter is modelled "
+                      "the wrong way",
                       GyrodeblurWarning, stacklevel=2)
     unknown = readout is None
     if unknown and report:
