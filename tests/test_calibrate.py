@@ -1380,6 +1380,30 @@ def test_a_capture_the_photo_rejects_is_not_kept_whatever_the_margin(case, monke
     assert abs(res.capture.time_offset - true.time_offset) < 0.003
 
 
+def test_the_rejection_needs_a_bad_given_capture_and_a_good_found_one(monkeypatch):
+    """The thresholds of the rule, per photo of a session: the given parameters are let go
+    only where some photo scores them below WRONG_BLUR_MARGIN against no blur and the
+    best found scores at least NO_BLUR_MARGIN on every photo; the note names that photo."""
+    from types import SimpleNamespace
+
+    import gyrodeblur.calibrate as cal
+    from gyrodeblur.blur_evidence import NO_BLUR_MARGIN, WRONG_BLUR_MARGIN
+    monkeypatch.setattr(cal, "_gains_per_photo", lambda spectra, theta, n: np.asarray(theta))
+    fit = SimpleNamespace(fine=None, ubar=0.5)
+    search = SimpleNamespace(theta_of=lambda x, M, ubar: x)
+    bad, good = WRONG_BLUR_MARGIN - 0.1, NO_BLUR_MARGIN + 0.1
+
+    def rule(given, found):
+        return cal._rejected_by_photos(fit, search, given, None, found, None, len(given))
+
+    assert "photo 2 better" in rule([3.0, bad], [good, 9.0])
+    assert "explains the photo better" in rule([bad], [good])
+    assert rule([3.0, WRONG_BLUR_MARGIN + 0.1], [good, 9.0]) == ""    # not bad enough
+    assert rule([3.0, bad], [NO_BLUR_MARGIN - 0.1, 9.0]) == ""        # found not good enough
+    assert rule([np.nan, bad], [np.nan, good]) != ""                   # a photo without patches
+    assert rule([np.nan], [np.nan]) == ""
+
+
 def test_parameters_kept_only_for_a_noisy_gyro_are_warned_of(case, monkeypatch):
     """Given parameters that a quiet gyro's margin would have moved, kept only because the
     log reads as noisy (a 50-100 Hz log's own motion can read so), get a warning naming
