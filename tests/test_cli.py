@@ -1424,6 +1424,18 @@ def test_a_phone_photo_taller_than_wide_is_said_to_need_its_rotation(tmp_path, m
                   "-o", str(tmp_path / "o.json"), *extra])
         assert (said in capsys.readouterr().out) == told, (name, extra)
     assert len(seen) == 3
+    # stored as the sensor read it, with an EXIF orientation tag for display (as phones
+    # save them): --photo-rotation contradicts the tag, and is warned of
+    from PIL import Image
+    tag = Image.Exif()
+    tag[274] = 6
+    Image.fromarray(np.full((48, 64, 3), 128, np.uint8)).save(tmp_path / "tagged.jpg", exif=tag)
+    for extra, told in (([], False), (["--photo-rotation", "90"], True)):
+        with pytest.raises(_StopCalibration):
+            main(["calibrate", str(tmp_path / "tagged.jpg"), "--capture",
+                  str(tmp_path / "c.json"), "-o", str(tmp_path / "o.json"), *extra])
+        err = capsys.readouterr().err
+        assert ("tagged.jpg: its EXIF orientation tag (6) says" in err) == told, (extra, err)
 
 
 def test_a_sensor_logger_json_export_serves_as_its_csv(tmp_path, capsys):
