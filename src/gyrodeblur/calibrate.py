@@ -565,11 +565,13 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
             note(f"gyro noise {noise:.4f} rad/s per sample, scaled to a {_TYPICAL_GYRO_RATE:g} "
                  f"Hz log: the given parameters are kept unless the objective improves by "
                  f"{margin:.0f}", "  ")
-        rejected = (_rejected_by_photos(fit, search, x0, c0.axes, x, M, len(images))
-                    if f_given - fx < margin else "")
-        if rejected:
-            note(rejected, "  ")
-        elif f_given - fx < margin:
+        keep = f_given - fx < margin
+        if keep:                      # unless the photos reject the given parameters
+            rejected = _rejected_by_photos(fit, search, x0, c0.axes, x, M, len(images))
+            if rejected:
+                note(rejected, "  ")
+                keep = False
+        if keep:
             from_log = " (the bias from the log)" if np.any(np.abs(x0[3:6]) > 1e-4) else ""
             found = c0.time_offset + search.theta_of(x, M, fit.ubar).offset
             best_found = f"{axes_to_letters(M) or 'given'}, time offset {found * 1e3:+.1f} ms"
