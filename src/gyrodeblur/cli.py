@@ -158,19 +158,6 @@ def _ignored_options(args) -> None:
         raise InputError("--mappings", "applies with --refine only")
 
 
-def _orientation_tag(photo) -> int:
-    """The photo's EXIF orientation tag (1, the pixels shown as stored, where it has none
-    or its EXIF cannot be read)."""
-    if not photo.exif:
-        return 1
-    from .exif import _EXIF_ERRORS, _ORIENTATION, _load_exif
-    try:
-        tag = _load_exif(photo.exif).get(_ORIENTATION, 1)
-    except _EXIF_ERRORS:
-        return 1
-    return tag if isinstance(tag, int) and 1 <= tag <= 8 else 1
-
-
 def _load_capture(args, photo=None, say=None, exif_start: bool = True):
     """The capture the options and ``--capture`` describe, fitted to ``photo``; its EXIF
     fills what they leave out (the capture time as the exposure start only where
@@ -212,8 +199,9 @@ def _load_capture(args, photo=None, say=None, exif_start: bool = True):
             say(f"note: {photo.path}: taller than wide, while a phone's sensor is wider than "
                 f"tall: if an app or an export turned the photo upright, {turn}, or the "
                 "rows are not the sensor's readout rows")
-        tag = _orientation_tag(photo)
-        if turned and tag != 1:
+        from .exif import orientation_tag
+        tag = orientation_tag(photo) if turned else 1
+        if tag != 1:
             warnings.warn(f"{photo.path}: its EXIF orientation tag ({tag}) says a viewer turns "
                           f"it for display, its pixels as the camera read them, yet "
                           f"--photo-rotation {turned} says they were turned: a phone's photo "

@@ -24,7 +24,7 @@ from gyrodeblur.errors import GyrodeblurWarning
 if TYPE_CHECKING:
     from gyrodeblur.imageio import Photo
 
-__all__ = ["exif_capture_hints"]
+__all__ = ["exif_capture_hints", "orientation_tag"]
 
 _EXIF_HEADER = b"Exif\x00\x00"
 _EXIF_IFD, _GPS_IFD, _INTEROP_IFD = 0x8769, 0x8825, 0xA005
@@ -163,6 +163,19 @@ def _load_exif(block: bytes) -> Image.Exif:
     exif = Image.Exif()
     exif.load(block)
     return exif
+
+
+def orientation_tag(photo: Photo) -> int:
+    """The photo's EXIF orientation tag, 1-8 (1, the pixels shown as stored, where it has
+    none or its EXIF cannot be read). Any other value says the pixels are stored as the
+    sensor read them, and a viewer turns them for display."""
+    if not photo.exif:
+        return 1
+    try:
+        tag = _load_exif(photo.exif).get(_ORIENTATION, 1)
+    except _EXIF_ERRORS:
+        return 1
+    return tag if isinstance(tag, int) and 1 <= tag <= 8 else 1
 
 
 def exif_capture_hints(photo: Photo) -> dict:
