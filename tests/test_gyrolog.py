@@ -271,7 +271,7 @@ def test_shared_android_log(shared_data):
     ("time,x,y,z\n1.0,0,0,0\n1.0,0,0,0\n1.0,0,0,0\n", r"only 1 gyro sample\(s\)"),
     ("t_s,x,y,z\n0,50,50,50\n0.01,50,50,50\n0.02,50,50,50\n",
      r"are the rates in deg/s\? \(a CSV or JSON log's unit: --rate-unit deg/s, or "
-     r"gyro.rate_unit\)"),
+     r"gyro.rate_unit; a CSV's column names can state it: gx_deg_s, gx \[deg/s\]\)"),
     # epoch microseconds said to be seconds: rounding would eat the exposure
     ("t_s,x,y,z\n1700000000000000,0,0,0\n1700000000005000,0,0,0\n",
      r"time column 't_s' read in s, as its name states: .* 5000 s, .* in us it is a 200 Hz"),

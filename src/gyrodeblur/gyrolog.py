@@ -83,6 +83,12 @@ __all__ = [
 ]
 
 FORMATS = ("gcsv", "csv", "android", "json")
+#: How a log's units are given, for the errors that suspect them: the options and capture
+#: fields, and column names, which also serve where no option reaches (a benchmark's --gyro)
+_SAY_RATE_UNIT = ("(a CSV or JSON log's unit: --rate-unit deg/s, or gyro.rate_unit; a CSV's "
+                  "column names can state it: gx_deg_s, gx [deg/s])")
+_SAY_TIME_UNIT = ("(a CSV or JSON log's unit: --time-unit, or gyro.time_unit; a CSV's time "
+                  "column name can state it: t_us, t [ns])")
 #: A median rate above this (rad/s) almost surely means deg/s read as rad/s.
 IMPLAUSIBLE_MEDIAN_RATE = 35.0
 #: No gyro measures a rate above this (rad/s, about 11500 deg/s, well over the widest
@@ -231,8 +237,7 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         raise InputError(source, f"gyro sample {i + 1}'s time {float(t[i]):.6g} s is beyond "
                                  f"{MAX_TIME:.3g} s (136 years), where seconds are too coarse "
                                  "for an exposure: microseconds or nanoseconds read as "
-                                 "seconds? (a CSV or JSON log's unit: --time-unit, or "
-                                 "gyro.time_unit)")
+                                 f"seconds? {_SAY_TIME_UNIT}")
     _check_increasing(t, source, w=w)
     med = float(np.median(np.linalg.norm(w, axis=1)))
     peak = np.max(np.abs(w), axis=1)
@@ -241,12 +246,11 @@ def _validate(t: np.ndarray, w: np.ndarray, source: str | None) -> None:
         raise InputError(source, f"gyro sample {i + 1} (t = {float(t[i]):.6f} s) has a rate of "
                                  f"{float(peak[i]):.4g} rad/s, beyond any gyro's range "
                                  f"({MAX_GYRO_RATE:g} rad/s): a corrupt sample, or rates in "
-                                 "deg/s read as rad/s? (a CSV or JSON log's unit: --rate-unit "
-                                 "deg/s, or gyro.rate_unit)")
+                                 f"deg/s read as rad/s? {_SAY_RATE_UNIT}")
     if med > IMPLAUSIBLE_MEDIAN_RATE:
         raise InputError(source, f"median angular rate {med:.1f} rad/s is implausible for a "
-                                 "hand-held camera; are the rates in deg/s? (a CSV or JSON "
-                                 "log's unit: --rate-unit deg/s, or gyro.rate_unit)")
+                                 "hand-held camera; are the rates in deg/s? "
+                                 f"{_SAY_RATE_UNIT}")
 
 
 #: s: times that differ by less are equal (a 20 Hz log's 0.05 s steps read from text)
