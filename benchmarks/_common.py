@@ -339,7 +339,10 @@ def field_registered_psnr(reference: np.ndarray, estimate: np.ndarray, border: i
     bicubic interpolation. It forgives any smooth geometric difference (a global shift, a
     rolling shutter's skew and wobble, a small rotation), which a method that does not
     know the exposure-start orientation (a blind one) cannot avoid, and keeps what
-    deblurring is judged on."""
+    deblurring is judged on. It is no upper bound of the global shift's PSNR: each
+    block's shift is measured on its own, so on a small photo (few blocks) or a blurred
+    one (flat correlation peaks) the field can be noisier than one shift, and score below
+    it (a held-out audit: a 320 px blurred input, 28.62 dB against 28.76)."""
     import cv2
     from scipy import ndimage
     from skimage.registration import phase_cross_correlation

@@ -249,6 +249,8 @@ def main(argv: list[str] | None = None) -> int:
     png = args.out.with_suffix(".png")
     plot(result, png)
     figure = args.figure or (None if args.quick else _common.FIGURES / "noise_sensitivity.png")
+    if figure is not None and Path(figure).resolve() == png.resolve():
+        figure = None                    # the report's own figure, asked for by name
     if figure is not None:
         plot(result, Path(figure), dpi=80)
     _common.say(f"blurred {blurred_psnr:.2f} dB, exact gyro {exact_psnr:.2f} dB; "
