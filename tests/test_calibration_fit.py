@@ -636,6 +636,17 @@ def test_the_given_parameters_of_a_readout_not_given_have_their_best_readout(rea
             assert f < f0
         else:                   # x[0] = -ubar readout must stay within the offset bounds
             assert fit.lo[0] <= x[0] <= fit.hi[0] and theta.readout > 0.005
+        # judged against the best found: the best readout within JUDGED_READOUT_REACH of
+        # its (here 27 ms), the offset held, as near as the bounds allow
+        f27, x27 = fit.given_objective(cap.axes, readout=0.027)
+        theta = fit.theta_of(cap.axes)(x27)
+        assert theta.offset == pytest.approx(0.0, abs=1e-12) and fit.lo[0] <= x27[0] <= fit.hi[0]
+        if offset_range == 0.04:        # the true readout, or the window's nearer end
+            assert abs(theta.readout - np.clip(readout, 0.021, 0.033)) < 0.002, theta.readout
+            assert f27 >= f - 1e-6 * abs(f)
+        else:
+            top = -fit.lo[0] / fit.ubar        # the readout that puts x[0] at its bound
+            assert 0.021 - 1e-9 <= theta.readout <= top + 1e-9 < 0.033
     given = _textured_fit(cap, fix={"axes"}, img=blurred)
     _, x = given.given_objective(cap.axes)
     assert x[0] == 0.0 and x[1] == 0.0
