@@ -1865,8 +1865,8 @@ def test_a_readout_not_given_does_not_hide_an_offset_error(case, offset):
     """With no readout given, the given time offset held and a readout of the scan's ends
     keep the middle rows' times right, and explained the photo nearly as well as the true
     capture (a held-out audit: 12 ms off, kept with a readout of 45 ms for a true 25,
-    19.9 dB against 30.1). The given parameters are judged at the best found's readout:
-    offsets 12 ms early or 8 ms late are found (they were kept with readouts of 12 and 44
+    19.9 dB against 30.1). The given parameters are judged at their best readout within
+    6 ms of the best found's: offsets 12 ms early or 8 ms late are found (they were kept with readouts of 12 and 44
     ms for the true 30); a right one stays right."""
     _, true, blurred = case
     bad = _corrupt(true, offset=offset, readout=0.0, focal=1.0, bias=(0.0, 0.0, 0.0),

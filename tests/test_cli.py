@@ -2009,7 +2009,11 @@ def test_the_estimates_report_gives_each_uncertainty_in_its_unit_or_says_fixed()
     lines = format_estimates(kept, kept_given=True)
     assert lines[4].endswith("(another mapping: objective 2.4 lower, within the given one's "
                              "margin: uncertain)"), lines[4]
-    assert lines[5].startswith("  (the given values kept") and len(lines) == 6
+    assert lines[5].startswith("  (the given values kept, with the readout that suits them "
+                               "(none was given): ") and len(lines) == 6, lines[5]
+    held = dict(kept, readout=(0.02, 0.02, 0.5e-3))     # a readout given is kept as given
+    assert format_estimates(held, kept_given=True)[5].startswith(
+        "  (the given values kept: the photo preferred no others")
     assert len(format_estimates(est)) == 5
 
 

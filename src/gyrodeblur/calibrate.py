@@ -132,12 +132,13 @@ them in order and decides what to keep (5) and what to report.
    :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`; :func:`_rejected_by_photos`);
    parameters kept only for the margin the noise raised
    (the best found gains more than the unraised margin) are warned of. A readout that was
-   not given is no given parameter: the given ones are judged at the best found's readout
-   (their offset held), and kept with the readout that suits them best. Judged at that
-   one, an offset error hid in it: a long or short readout keeps the middle rows' times
-   right while the top and bottom rows are off, and scored nearly as well as the truth (a
-   held-out audit, session 66: a 12 ms offset error kept with 45 ms for a true 25, 19.9
-   dB against 30.1).
+   not given is no given parameter: the given ones are judged at their best readout
+   within :data:`~gyrodeblur.calibration_fit.JUDGED_READOUT_REACH` (6 ms) of the best
+   found's (their offset held), and kept with the readout that suits them best. Judged
+   at that one, an offset error hid in it: a long or short readout keeps the middle
+   rows' times right while the top and bottom rows are off, and scored nearly as well as
+   the truth (a held-out audit, session 66: a 12 ms offset error kept with 45 ms for a
+   true 25, 19.9 dB against 30.1).
 
 The independent steps (the coarse mappings, the candidates, the winner's other starts and
 scans) run side by side in worker processes (:mod:`gyrodeblur.calibration_workers`), each
@@ -562,8 +563,8 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     kept = False
     if (fit.idx or len(cand) > 1) and given_searched:
         f_given, x0 = fit.given_objective(c0.axes)
-        # a readout not given is no given parameter: the given ones are judged at the
-        # best found's (at their own, an offset error hides in it); kept, at their best
+        # a readout not given is no given parameter: the given ones are judged near the
+        # best found's (at their own best, an offset error hides in it); kept, at their best
         f_judged = (fit.given_objective(c0.axes, readout=x[1])[0]
                     if search.readout_unknown else f_given)
         if np.allclose(M, c0.axes):

@@ -53,7 +53,8 @@ def warning_notes(say):
 def format_estimates(est: dict, kept_given: bool = False) -> list[str]:
     """Human-readable lines: each parameter before -> after (+- uncertainty, or fixed);
     with ``kept_given`` (:attr:`~gyrodeblur.calibrate.CalibrationResult.kept_given`), a
-    last line saying that the "after" values are the given ones, kept."""
+    last line saying that the "after" values are the given ones, kept (and the readout,
+    where it moved, the one that suits them: none was given)."""
     lines = []
     b, a, u = est["offset"]
     change = f", a change of {(a - b) * 1e3:+.2f} ms" if abs(b) >= 1.0 else ""   # clock epochs
@@ -78,9 +79,12 @@ def format_estimates(est: dict, kept_given: bool = False) -> list[str]:
         if gap < AXES_CONFIDENT_NATS:
             conf += ": uncertain"
     lines.append(f"  axes         {b} -> {a}  ({conf})")
-    if kept_given:
-        lines.append("  (the given values kept: the photo preferred no others by the keep "
-                     "margin; the uncertainties say how loosely it pins them)")
+    if kept_given:              # a readout kept given stays; one moved was not given
+        fitted = est["readout"][0] != est["readout"][1]
+        lines.append("  (the given values kept" + (", with the readout that suits them (none "
+                                                   "was given)" if fitted else "")
+                     + ": the photo preferred no others by the keep margin; the "
+                     "uncertainties say how loosely it pins them)")
     return lines
 
 
