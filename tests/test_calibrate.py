@@ -1156,7 +1156,7 @@ def test_cli_save_capture_failing_leaves_the_other_outputs_as_they_were(cli_dir,
     given = load_capture(d / "cap.json")
     fake = types.SimpleNamespace(capture=given, estimates=None, seconds=0.0, kept_given=False)
     monkeypatch.setattr(gyrodeblur.calibrate, "calibrate", lambda *a, **k: fake)
-    monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est, kept=False: [])
+    monkeypatch.setattr(gyrodeblur.calibrate_cli, "format_estimates", lambda est, *kept: [])
 
     def refused(self, path, gyro_path=None):     # the disk fills as it is written
         def write(f):
@@ -1862,16 +1862,18 @@ def test_a_readout_not_given_is_searched_not_held_at_a_global_shutter(case):
 
 @pytest.mark.parametrize("offset", [-0.012, 0.0, 0.008])
 def test_a_readout_not_given_does_not_hide_an_offset_error(case, offset):
-    """With no readout given, the given time offset held and a readout of the scan's ends
-    keep the middle rows' times right, and explained the photo nearly as well as the true
-    capture (a held-out audit: 12 ms off, kept with a readout of 45 ms for a true 25,
+    """With no readout given, the given time offset held with a longer or shorter readout
+    keeps the middle rows' times right, and explained the photo nearly as well as the
+    true capture (a held-out audit: 12 ms off, kept with a readout of 45 ms for a true 25,
     19.9 dB against 30.1). The given parameters are judged at their best readout within
-    6 ms of the best found's: offsets 12 ms early or 8 ms late are found (they were kept with readouts of 12 and 44
-    ms for the true 30); a right one stays right."""
+    6 ms of the best found's: offsets 12 ms early or 8 ms late are found, not kept (they
+    were kept with readouts of 12 and 44 ms for the true 30); a right one is kept."""
     _, true, blurred = case
     bad = _corrupt(true, offset=offset, readout=0.0, focal=1.0, bias=(0.0, 0.0, 0.0),
                    axes=TRUE_AXES).replace(readout_time_unknown=True)
-    got = calibrate([blurred], bad, fix={"axes"}).capture
+    res = calibrate([blurred], bad, fix={"axes"})
+    got = res.capture
+    assert res.kept_given == (offset == 0.0)
     assert abs(got.time_offset - true.time_offset) < 0.003, got.time_offset - true.time_offset
     assert abs(got.readout_time - true.readout_time) < 0.008, got.readout_time
 

@@ -132,13 +132,15 @@ them in order and decides what to keep (5) and what to report.
    :data:`~gyrodeblur.blur_evidence.NO_BLUR_MARGIN`; :func:`_rejected_by_photos`);
    parameters kept only for the margin the noise raised
    (the best found gains more than the unraised margin) are warned of. A readout that was
-   not given is no given parameter: the given ones are judged at their best readout
-   within :data:`~gyrodeblur.calibration_fit.JUDGED_READOUT_REACH` (6 ms) of the best
-   found's (their offset held), and kept with the readout that suits them best. Judged
-   at that one, an offset error hid in it: a long or short readout keeps the middle
-   rows' times right while the top and bottom rows are off, and scored nearly as well as
-   the truth (a held-out audit, session 66: a 12 ms offset error kept with 45 ms for a
-   true 25, 19.9 dB against 30.1).
+   not given is no given parameter: where the best found has the given mapping, the
+   given parameters (their offset held) are judged at their best readout within
+   :data:`~gyrodeblur.calibration_fit.JUDGED_READOUT_REACH` (6 ms) of the best found's,
+   and kept with the readout that suits them best anywhere in 0-45 ms. Until session 66
+   they were judged at that one too, and an offset error hid in it: a longer readout
+   with a later offset (or a shorter with an earlier) keeps the middle rows' times right
+   while the top and bottom rows are off, and scored nearly as well as the truth (a
+   held-out audit: a 12 ms offset error kept with 45 ms for a true 25, 19.9 dB against
+   30.1).
 
 The independent steps (the coarse mappings, the candidates, the winner's other starts and
 scans) run side by side in worker processes (:mod:`gyrodeblur.calibration_workers`), each
@@ -246,8 +248,9 @@ class CalibrationResult:
     kept_given : bool
         The given parameters were kept (step 5 of :func:`calibrate`): the best found
         improved the objective by less than the keep margin, so the "after" values are
-        the given ones (the bias the log's, where it was taken from the log), not
-        estimates the photo pinned down.
+        the given ones (the bias the log's, where it was taken from the log; the readout,
+        where none was given, the one that suits them), not estimates the photo pinned
+        down.
     """
 
     captures: list
@@ -563,10 +566,14 @@ def calibrate(images, captures, *, fix=(), offset_range: float | None = None,
     kept = False
     if (fit.idx or len(cand) > 1) and given_searched:
         f_given, x0 = fit.given_objective(c0.axes)
-        # a readout not given is no given parameter: the given ones are judged near the
-        # best found's (at their own best, an offset error hides in it); kept, at their best
-        f_judged = (fit.given_objective(c0.axes, readout=x[1])[0]
-                    if search.readout_unknown else f_given)
+        # a readout not given is no given parameter: under the best found's mapping the
+        # given ones are judged near its readout (at their best anywhere, an offset error
+        # hid in it); kept, at their best (the better of the two scans)
+        f_judged = f_given
+        if search.readout_unknown and np.allclose(M, c0.axes):
+            f_judged, x_judged = fit.given_objective(c0.axes, readout=x[1])
+            if f_judged < f_given:
+                f_given, x0 = f_judged, x_judged
         if np.allclose(M, c0.axes):
             margin = _keep_margin(noise, len(fit.idx))
             quiet = _keep_margin(float("nan"), len(fit.idx))     # the margin unraised

@@ -50,11 +50,12 @@ def warning_notes(say):
     return said
 
 
-def format_estimates(est: dict, kept_given: bool = False) -> list[str]:
+def format_estimates(est: dict, kept_given: bool = False,
+                     readout_given: bool = True) -> list[str]:
     """Human-readable lines: each parameter before -> after (+- uncertainty, or fixed);
     with ``kept_given`` (:attr:`~gyrodeblur.calibrate.CalibrationResult.kept_given`), a
     last line saying that the "after" values are the given ones, kept (and the readout,
-    where it moved, the one that suits them: none was given)."""
+    where none was given, ``readout_given`` false, the one that suits them)."""
     lines = []
     b, a, u = est["offset"]
     change = f", a change of {(a - b) * 1e3:+.2f} ms" if abs(b) >= 1.0 else ""   # clock epochs
@@ -79,10 +80,10 @@ def format_estimates(est: dict, kept_given: bool = False) -> list[str]:
         if gap < AXES_CONFIDENT_NATS:
             conf += ": uncertain"
     lines.append(f"  axes         {b} -> {a}  ({conf})")
-    if kept_given:              # a readout kept given stays; one moved was not given
-        fitted = est["readout"][0] != est["readout"][1]
-        lines.append("  (the given values kept" + (", with the readout that suits them (none "
-                                                   "was given)" if fitted else "")
+    if kept_given:
+        lines.append("  (the given values kept" + ("" if readout_given else
+                                                   ", with the readout that suits them (none "
+                                                   "was given)")
                      + ": the photo preferred no others by the keep margin; the "
                      "uncertainties say how loosely it pins them)")
     return lines
@@ -226,7 +227,8 @@ def calibrate_command(args, say, load_capture) -> None:
                     transfer=curves, **calibration_options(args, photos, say))
     say(f"calibration of {len(photos)} photo(s) in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
-    for line in format_estimates(res.estimates, res.kept_given):
+    for line in format_estimates(res.estimates, res.kept_given,
+                                 not caps[0].readout_time_unknown):
         say(line)
     save_captures(res.captures[:len(outputs)], outputs)
     say(f"wrote {', '.join(outputs)}")

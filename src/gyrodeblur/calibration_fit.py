@@ -58,10 +58,10 @@ _READOUT_SCAN = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 #: :data:`~gyrodeblur.capture.UNKNOWN_READOUT_MAX`).
 _UNKNOWN_READOUT_SCAN = (0.0, 0.006, 0.012, 0.018, 0.024, 0.03, 0.036, 0.045)
 #: s: where no readout was given, the given parameters are judged against the best found
-#: at their best readout within this of the best found's (the given offset held). At
-#: their best readout anywhere, an offset error hid in it: a shorter readout with an
-#: earlier offset keeps the middle rows' times, and the photo tells the two apart only
-#: weakly (session 66: a held-out audit's 12 ms error kept with 45 ms for a true 25, 19.9
+#: (of the given mapping) at their best readout within this of the best found's (the
+#: given offset held). At their best readout anywhere, an offset error hid in it: a
+#: shorter readout with an earlier offset (or a longer with a later) keeps the middle
+#: rows' times, and the photo tells the two apart only weakly (session 66: a held-out audit's 12 ms error kept with 45 ms for a true 25, 19.9
 #: dB against 30.1; 3 of 24 benchmark photos given 9-18 ms errors kept). Exactly at the
 #: best found's, a right capture was moved where the best found had slid along that
 #: ridge (1 of 24: 1.4 ms and 2.1 ms off, -4.7 dB). 6 ms, the scan's step, is about twice

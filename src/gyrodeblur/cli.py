@@ -678,7 +678,8 @@ def _deblur_session(runs, say) -> None:
                     **calibration_options(args, [r.photo for r in runs], say))
     say(f"calibration of {len(runs)} photos in {res.seconds:.1f} s (before -> after, "
         f"one-sigma uncertainty):")
-    for line in format_estimates(res.estimates, res.kept_given):
+    for line in format_estimates(res.estimates, res.kept_given,
+                                 not runs[0].cap.readout_time_unknown):
         say(line)
     for run, cap in zip(runs, res.captures):
         run.cap, run.t0 = cap, time.perf_counter()
@@ -837,7 +838,8 @@ class _PhotoDeblur:
         with _this_photo(self.args):
             res = calibrate([self.colour], self.cap, fix=self.fix, say=warning_notes(self.say),
                             transfer=self.curve, **options)
-        for line in format_estimates(res.estimates, res.kept_given):
+        for line in format_estimates(res.estimates, res.kept_given,
+                                     not self.cap.readout_time_unknown):
             self.say(line)
         self.cap = res.capture
         self.calibrated_here = f" (the calibration's {res.seconds:.1f} s included)"
